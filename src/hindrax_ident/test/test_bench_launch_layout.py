@@ -10,7 +10,7 @@ from hindrax_drivers.pca9685 import protocol as p
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.i2c import I2CDevice
-from hindrax_ident.tools.benchmarks.launch_layout import I2CSocketServer, SocketI2CBus
+from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
 
 def test_socket_bus_serves_the_emulated_bus(tmp_path):
@@ -77,14 +77,15 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     write, written = _values(tmp_path)
     assert (esc.label, esc.module) == ("esc", "hindrax_drivers.pca9685.node:main")
     # the remap reaches the process (the bench's former reader of its own dropped it)
-    assert esc.ros_args(write) == ["--ros-args", "-r", "__node:=esc", "--params-file",
+    assert esc.process.ros_arguments(write) == ["--ros-args", "-r", "__node:=esc", "--params-file",
                                    str(package_share("hindrax_drivers") / "config/hindrax.yaml"),
                                    "-r", "wrench:=pilot/wrench"]
-    args = rec.ros_args(write)
+    args = rec.process.ros_arguments(write)
     assert args[:4] == ["--ros-args", "-r", "__node:=recorder", "--params-file"]
     assert written == [{"output_dir": "/data/bags"}]
     # a composed process has no name: its nodes keep theirs; its row is the executable without _node
-    assert (group.name, group.label, group.module) == (None, "sensors", "hindrax_drivers.composition:sensors_main")
+    assert (group.process.name, group.label, group.module) == (
+        None, "sensors", "hindrax_drivers.composition:sensors_main")
     with pytest.raises(ValueError, match="outt"):
         launch_processes(outer, {"outt": "/data"})
     outer.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
@@ -104,7 +105,7 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
     controller = next(p for p in procs if p.module == "hindrax_ident.composition:ident_record_main")
     assert controller.process.node_names == ("identification", "controller", "recorder")
     write, written = _values(tmp_path)
-    controller.ros_args(write)
+    controller.process.ros_arguments(write)
     # the empty default stays the empty string (not None, not "''"); output_dir is the root of the recorder's
     # timestamped bags (recording/bag_dir.py)
     assert {"model_file": "", "recording.output_root": "/tmp/b", "autostart": True, "all_topics": True} in written

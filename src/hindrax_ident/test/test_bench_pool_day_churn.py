@@ -1,7 +1,7 @@
-"""The pool day's churn rows (hindrax_ident.tools.benchmarks.pool_day_churn) listen where they claim
-and measure each
-heartbeat: the topside subscriber's topics are ones the gateway publishes, with their types; the internal one's are
-/diagnostics and the three heartbeats; the gap of each heartbeat is its own, and a silent one is infinite."""
+"""The pool day's churn rows (hindrax_ident.tools.benchmarks.participant_churn.pool_day_rows)
+listen where they claim and measure each heartbeat: the topside subscriber's topics are ones the
+gateway publishes, with their types; the internal one's are /diagnostics and the three heartbeats;
+the gap of each heartbeat is its own, and a silent one is infinite."""
 from __future__ import annotations
 
 import pytest
@@ -9,8 +9,7 @@ from hindrax_drivers.gateway.interface import INTERFACE
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 
 from hindrax_ident.tools.benchmarks.participant_churn import (INTERNAL_TOPICS, _Watch,
-                                                              subscriber_argv)
-from hindrax_ident.tools.benchmarks.pool_day_churn import topside_topics
+                                                              subscriber_argv, topside_topics)
 
 
 def _spec(topic_spec: str) -> tuple[str, str]:

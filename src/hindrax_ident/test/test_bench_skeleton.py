@@ -36,8 +36,9 @@ def launch_topology(tmp_path_factory):
     launch_node = [python_executable(), "-m", "hindrax_ident.tools.benchmarks.launch_node"]
     with contextlib.ExitStack() as stack_:
         procs = {lp.label: stack_.enter_context(child_process(
-            [*launch_node, lp.module, *lp.ros_args(values)], env=dict(env, **dict(lp.process.env)),
-            stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT))
+            [*launch_node, lp.module, *lp.process.ros_arguments(values)],
+            env=dict(env, **dict(lp.process.env)), stdout=subprocess.DEVNULL,
+            stderr=subprocess.STDOUT))
             for lp in layout}
         # signalled only once both are on the graph (SIGUSR1 ends a process without the handler),
         # then read until two reads agree (the nodes made every endpoint)

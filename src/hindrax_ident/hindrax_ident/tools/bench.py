@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import importlib
-import inspect
 import json
 import os
 import platform
@@ -27,27 +26,12 @@ from hindrax_drivers.dds_transport import loopback_transport
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
-#: benchmark name -> module, or modules whose rows form one section (each module has ``run(quick)``)
-BENCHMARKS: dict[str, str | tuple[str, ...]] = {
-    "stack": "hindrax_ident.tools.benchmarks.stack",
-    "actuation": "hindrax_ident.tools.benchmarks.actuation",
-    "heartbeats": "hindrax_ident.tools.benchmarks.heartbeats",
-    "safety": ("hindrax_ident.tools.benchmarks.safety",
-               "hindrax_ident.tools.benchmarks.participant_churn",
-               "hindrax_ident.tools.benchmarks.busy_neighbours",
-               "hindrax_ident.tools.benchmarks.pool_day_churn",
-               "hindrax_ident.tools.benchmarks.sealed_authority"),
-    "simulator": "hindrax_ident.tools.benchmarks.simulator",
-    "i2c_drivers": "hindrax_ident.tools.benchmarks.i2c_drivers",
-    "i2c_socket": "hindrax_ident.tools.benchmarks.i2c_socket",
-    "identification": "hindrax_ident.tools.benchmarks.identification",
-    "ident_fit": "hindrax_ident.tools.benchmarks.ident_fit",
-    "scenarios": "hindrax_ident.tools.benchmarks.scenarios",
-    "recorder": "hindrax_ident.tools.benchmarks.recorder",
-    "serial_drivers": "hindrax_ident.tools.benchmarks.serial_drivers",
-    "robustness": "hindrax_ident.tools.benchmarks.robustness",
-    "cli": "hindrax_ident.tools.benchmarks.cli",
-}
+#: benchmark name -> the modules of :mod:`hindrax_ident.tools.benchmarks` whose rows form its
+#: section, each with ``run(quick)``; a section's first module is named like it
+BENCHMARKS: dict[str, tuple[str, ...]] = {name: (name,) for name in (
+    "stack", "actuation", "heartbeats", "safety", "simulator", "i2c_drivers", "i2c_socket",
+    "identification", "ident_fit", "scenarios", "recorder", "serial_drivers", "robustness", "cli")}
+BENCHMARKS["safety"] += ("participant_churn", "sealed_authority")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,13 +55,11 @@ def main(argv: list[str] | None = None) -> int:
     wall_s: dict[str, float] = {}
     start = time.monotonic()
     for name in names:
-        modules = BENCHMARKS[name]
         print(f"== {name}", flush=True)
         t0 = time.monotonic()
-        for module in (modules,) if isinstance(modules, str) else modules:
-            run = importlib.import_module(module).run
-            extra = {"baseline": args.baseline} if args.baseline and "baseline" in inspect.signature(run).parameters \
-                else {}
+        for module in BENCHMARKS[name]:
+            run = importlib.import_module(f"hindrax_ident.tools.benchmarks.{module}").run
+            extra = {"baseline": args.baseline} if args.baseline and module == "stack" else {}
             for row in run(quick=args.quick, **extra):
                 rows.append({"benchmark": name, **row})
         wall_s[name] = round(time.monotonic() - t0, 1)

@@ -1,16 +1,22 @@
-"""The ``make bench`` benchmarks: one module per concern, each with a ``run(quick)`` function."""
+"""The ``make bench`` benchmarks: one module per concern, each with a ``run(quick)`` function.
+
+A module that ends in :func:`run_alone` runs alone: ``python -m
+hindrax_ident.tools.benchmarks.<module> [--quick]`` prints its rows as JSON."""
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import subprocess
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
+import rclpy
 from hindrax_drivers.dds_transport import loopback_transport
-from hindrax_drivers.testing import wait_until
+from hindrax_drivers.testing import ros_context, wait_until
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 
@@ -33,6 +39,17 @@ def spinning(ctx, *nodes, events: bool = False,
             node.destroy_node()
 
 
+@contextmanager
+def probe_spinning(domain: int | None, name: str = "bench_probe",
+                   timeout_s: float = 0.05) -> Iterator[tuple[Any, Any, Callable[[], None]]]:
+    """A node ``name`` in an rclpy context of its own on ROS domain ``domain`` (None: this
+    process's), spun as by :func:`spinning`; yields (node, executor, spin)."""
+    with ros_context(domain_id=domain) as ctx:
+        node = rclpy.create_node(name, context=ctx)
+        with spinning(ctx, node, timeout_s=timeout_s) as (ex, spin):
+            yield node, ex, spin
+
+
 def spin_for(duration_s: float, spin: Callable[[], None] | None = None) -> tuple[float, float]:
     """Call ``spin`` (None: wait) for ``duration_s`` of wall time (a measurement window, a warm-up);
     returns (this process's CPU seconds, wall seconds) over it."""
@@ -49,6 +66,14 @@ def call(client: Any, request: Any, spin: Callable[[], None] | None = None,
     fut = client.call_async(request)
     wait_until(fut.done, timeout_s, spin, f"{client.srv_name} answer")
     return fut.result()
+
+
+def start_logged(log: Path, argv: Sequence[str], mode: str = "w",
+                 **popen_kwargs: Any) -> subprocess.Popen:
+    """``argv`` started (:class:`subprocess.Popen` with ``popen_kwargs``), its output and errors
+    written to the file ``log`` (opened with ``mode``: ``"a"`` keeps an earlier run's lines)."""
+    with open(log, mode) as out:
+        return subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, **popen_kwargs)
 
 
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:

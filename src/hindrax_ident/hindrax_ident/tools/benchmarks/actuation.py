@@ -9,8 +9,8 @@ I2C bus. Wrenches alternate two surge levels so T1's pulse width changes with ev
 is from ``publish()`` to the I2C write after which the emulator decodes T1's new pulse width. The
 ESC node writes a command when its subscription callback takes it (event-driven; the output tick is
 the watchdog), so this is two deliveries inside the process (the wrench, the command), the
-allocation and one I2C block write (waiting for the next 50 Hz output tick instead: 16.6 ms p99).
-CPU per command is the process CPU time (three nodes and DDS) over the commands sent.
+allocation and one I2C block write. CPU per command is the process CPU time (three nodes and DDS)
+over the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
 wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,
@@ -25,6 +25,7 @@ import numpy as np
 import rclpy
 from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
+from std_msgs.msg import Header
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
@@ -135,11 +136,9 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
             state = {"sent": 0}
 
             def send() -> None:
-                w = levels[state["sent"] % 2]
-                m = WrenchStamped()
-                m.header.frame_id = "base_link"
-                m.header.stamp = driver.get_clock().now().to_msg()
-                m.wrench.force.x = float(w[0])
+                stamp = driver.get_clock().now().to_msg()
+                m = WrenchStamped(header=Header(frame_id="base_link", stamp=stamp))
+                m.wrench.force.x = float(levels[state["sent"] % 2][0])
                 pending.clear()
                 pending.update(t0=time.monotonic(), cpu0=time.process_time(),
                                target=expected[state["sent"] % 2])

@@ -22,12 +22,6 @@ from hindrax_drivers.config import default_config_path
 TARGET_S = 0.3
 
 
-def hindrax_command() -> list[str]:
-    """argv prefix that starts the ``hindrax`` entry point of this environment."""
-    script = Path(sys.executable).with_name("hindrax")
-    return [str(script)] if script.is_file() else [sys.executable, "-m", "hindrax_ident.tools.cli"]
-
-
 def wall_times_s(argv: list[str], runs: int, check: bool = True) -> list[float]:
     """Wall time (s) of ``runs`` fresh processes of ``argv`` after one warm-up run. Raises
     ``subprocess.CalledProcessError`` when ``check`` and the command exits non-zero."""
@@ -44,7 +38,8 @@ def wall_times_s(argv: list[str], runs: int, check: bool = True) -> list[float]:
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     runs = 3 if quick else 11
-    base = hindrax_command()
+    script = Path(sys.executable).with_name("hindrax")  # else the module of the console script
+    base = [str(script)] if script.is_file() else [sys.executable, "-m", "hindrax_ident.tools.cli"]
     help_s = wall_times_s(base + ["--help"], runs)
     rows = [{"name": "hindrax_help_wall_s", "value": statistics.median(help_s), "unit": "s",
              "target": f"< {TARGET_S:g}",

@@ -99,8 +99,7 @@ def cycle_rows(n: int) -> list[dict]:
                     t0 = time.process_time()
                     for i in range(1, n + 1):
                         pub.publish(build[kind](i))
-                        target = i
-                        while got["n"] < target:
+                        while got["n"] < i:
                             ex.spin_once(timeout_sec=1.0)
                     per[kind].append((time.process_time() - t0) / n * 1e6)
         tx.destroy_node()

@@ -140,8 +140,7 @@ def _ms5837(duration_s: float, idle: float) -> list[dict]:
         "pressure/fluid_pressure", duration_s)
     latencies, ages = [], []
     for t_rx, stamp in receipts:
-        # The D2 read is the last ADC read before the receipt. (The stamp is the middle of the D1 conversion, so
-        # the first ADC read after it is D1's, one conversion earlier: matching on it measured the D2 conversion.)
+        # the D2 read is the last ADC read before the receipt (the stamp: mid D1 conversion)
         i = bisect.bisect_right(adc_reads_ns, t_rx) - 1
         if i >= 1 and adc_reads_ns[i - 1] > stamp:  # D1's read lies between the stamp and D2's read
             latencies.append((t_rx - adc_reads_ns[i]) * 1e-6)

@@ -103,8 +103,7 @@ def table_rows(res: dict) -> list[list]:
             gb = x.get("gray_box", math.nan)
             met = "yes" if x["fit"] <= gb + NESTED_MARGIN else "no" if math.isfinite(gb) else "-"
             rows.append([name, dof, _f(x["fit"]), _f(gb), met, _f(x["ls"]), _f(x["hold"]), _f(x.get("floor")),
-                         _f(x.get("cv")),
-                         _f(x.get("cv_hold")), x.get("verdict", x["status"]),
+                         _f(x.get("cv")), _f(x.get("cv_hold")), x.get("verdict", x["status"]),
                          x.get("model", "") + (" (delay at its bound)" if x.get("at_edge") else "")])
     return rows
 

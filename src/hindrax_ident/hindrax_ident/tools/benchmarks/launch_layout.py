@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Mapping
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -36,7 +36,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.launch_xml import NodeProcess, read_launch
-from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus  # noqa: F401 (tests' import)
+from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 from hindrax_ident.sim.hardware import VirtualHardware
 from hindrax_ident.sim.node import SimulatorNode
 from hindrax_ident.sim.simulator import Simulator
@@ -61,19 +61,10 @@ class LaunchProcess:
     module: str
 
     @property
-    def name(self) -> str | None:
-        """The node name (``-r __node:=``), None for a composed process (its nodes keep their own names)."""
-        return self.process.name
-
-    @property
     def label(self) -> str:
-        """The process's name in the benchmark's rows: the node name, else the executable without ``_node``."""
-        return self.name or re.sub(r"_node$", "", self.process.executable)
-
-    def ros_args(self, write_values: Callable[[Mapping], Path]) -> list[str]:
-        """``--ros-args`` as ``ros2 launch`` passes them (:meth:`NodeProcess.ros_arguments`): ``write_values``
-        writes one mapping of ``<param name value>`` values to a parameter file and returns its path."""
-        return self.process.ros_arguments(write_values)
+        """The process's name in the benchmark's rows: the node name (``-r __node:=``), else, for a
+        composed process, the executable without ``_node``."""
+        return self.process.name or re.sub(r"_node$", "", self.process.executable)
 
 
 def package_share(package: str) -> Path:

@@ -4,7 +4,7 @@ installed.
 ``python -m hindrax_ident.tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs
 ``MODULE.FUNCTION()`` (default ``main``, e.g. ``hindrax_drivers.composition:i2c_sensors_main``) as
 the installed console script does. The I2C drivers reach the virtual pool's emulated bus through
-their own ``open_smbus`` (:data:`SOCKET_ENV`, :mod:`hindrax_drivers.transport.socket_i2c`), so
+their own ``open_smbus`` (:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so
 nothing of the node is replaced. This module imports no simulator, emulator or benchmark code, so a
 benchmarked process holds the modules and memory the vehicle's holds
 (``test_bench_launch_layout.py`` checks it).
@@ -44,10 +44,6 @@ from rclpy.serialization import serialize_message
 from hindrax_drivers.gateway.internal import interface_type
 from hindrax_drivers.node_common import run_nodes
 from hindrax_drivers.ros_process import BEFORE_PROCESS_END
-from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
-
-__all__ = ["PROFILE_ENV", "SOCKET_ENV", "TOPOLOGY_ENV", "main", "name_os_threads", "skeleton_main",
-           "topology"]
 
 #: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
 PROFILE_ENV = "HINDRAX_BENCH_PROFILE"

@@ -21,9 +21,6 @@ import os
 import threading
 import time
 
-__all__ = ["NBODY_STEPS", "REFERENCE_NBODY_CPU_S", "nbody_cpu_s", "nbody_energy", "proc_cpu_s",
-           "thread_cpu_s"]
-
 #: Steps of the published timings (Benchmarks Game n-body, argument 5000000).
 NBODY_STEPS = 5_000_000
 #: :func:`nbody_cpu_s` on the reference machine, s (the least of 12 quiet runs: 26.8 s).

@@ -1,20 +1,35 @@
-"""Safety benchmark rows ``participant_churn_*``: ROS 2 processes started while the vehicle is armed and commanded.
+"""Safety benchmark rows of the armed vehicle while other processes start and run beside it.
 
-The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process
-on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as the vehicle launch file starts them;
-the layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes`) are armed and commanded at 1700 us.
-Then a new ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s
-subscriber to ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health
---quiet``), each exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a
-safety process on such a start; the rows say whether it does:
+The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its
+own process on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as
+``vehicle.launch.xml`` starts them:
+:func:`~hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`; the layout of
+:func:`hindrax_ident.tools.benchmarks.safety.running_layout`) are armed and commanded at 1700 us.
+This process stands for the hardware (it serves the emulated PCA9685 and its /OE line) and watches
+the heartbeats; hardware is never starved by a CPU load, so it takes ``SCHED_FIFO`` at
+:data:`HARDWARE_STAND_IN_PRIORITY`, above the safety processes (:func:`hardware_priority`; without
+the right to, the rows say so). Each run gives the rows of :meth:`_Watch.rows` (disarms, target 0;
+heartbeat gaps as received, with a target, and between send stamps; tick gaps) under its prefix:
 
-* ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
-* ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three
-  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
-  ``participant_churn_heartbeat_sent_gap_max_ms`` between their send stamps (the sender late, not the delivery).
-
-Run alone: ``python -m hindrax_ident.tools.benchmarks.participant_churn [--quick]`` (prints the rows
-as JSON).
+* ``participant_churn_*``: a new ROS 2 process starts every :data:`PERIOD_S` seconds for
+  :data:`DURATION_S` seconds (alternately a 3 s subscriber to ``/diagnostics`` and the three
+  heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each exiting on its
+  own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a safety process on
+  such a start; gap target :data:`GAP_TARGET_MS` (the heartbeat timeouts are 200 ms).
+* ``busy_neighbours_*``: :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a
+  session of their own (as another service or a terminal on the Pi), run for :data:`DURATION_S`
+  seconds (:func:`cpu_bound_neighbours`; these rows are not measured without ``SCHED_FIFO``);
+  ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's
+  nice -5 only), no target: what the priority buys here (docs/deployment.md §1).
+* ``pool_day_churn_*``: the same processes with the gateway beside them
+  (:func:`~hindrax_ident.tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz
+  beside :data:`NEIGHBOURS` CPU-bound processes; each of :data:`TRIALS` trials starts three
+  processes together and waits for them to exit, as an operator and a curious user do on the pool
+  day: a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three heartbeats on the Pi's
+  internal domain with Fast DDS's default transports (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``,
+  no profile: shared memory + UDP), one to the gateway's topside topics on the topside domain, and
+  ``hindrax health --quiet`` on the internal domain (the Pi's shell); gap target
+  :data:`POOL_DAY_GAP_TARGET_MS`.
 """
 from __future__ import annotations
 
@@ -25,6 +40,8 @@ from contextlib import ExitStack, contextmanager
 from typing import Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
+from domain_coordinator import domain_id
+from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
 from hindrax_drivers.testing import child_process, python_executable, wait_until
@@ -33,10 +50,16 @@ from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 
 from . import run_alone
 from .safety import _Layout, running_layout
+from .sealed_authority import gateway_running
 
-#: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
-PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
+#: a new participant every PERIOD_S seconds, and how long the participants start or the neighbours
+#: run (QUICK_DURATION_S with --quick), s; CPU-bound neighbours
+PERIOD_S, DURATION_S, QUICK_DURATION_S, NEIGHBOURS = 2.0, 60.0, 20.0, 2
 GAP_TARGET_MS = 100.0
+#: pool-day trials (QUICK_TRIALS with --quick), each subscriber's life (s), its gap target (ms)
+TRIALS, QUICK_TRIALS, SUBSCRIBER_S, POOL_DAY_GAP_TARGET_MS = 15, 3, 1.0, 150.0
+#: how long one trial's three processes may take to exit under the load before the bench stops, s
+TRIAL_TIMEOUT_S = 60.0
 
 #: a subscriber process, as ``ros2 topic echo`` would be: ``-c _SUBSCRIBER NAME SECONDS MODULE:TYPE=TOPIC...``
 _SUBSCRIBER = r"""
@@ -89,6 +112,12 @@ class _VehicleLayout(_Layout):
     launched process is."""
 
     new_session = True
+
+
+class _NiceOnlyLayout(_VehicleLayout):
+    """The vehicle layout with the real-time priority withheld: the launch file's nice -5 only."""
+
+    realtime = False
 
 
 class _Watch:
@@ -183,8 +212,8 @@ class _Watch:
         return rows + [self.tick_gap_row(prefix + "tick_gap_max_ms")]
 
 
-def run(quick: bool = False) -> list[dict]:
-    """The ``participant_churn_*`` rows of the ``safety`` section (module docstring)."""
+def churn_rows(quick: bool = False) -> list[dict]:
+    """The ``participant_churn_*`` rows (module docstring)."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
         watch = _Watch(lay.probe)
@@ -215,6 +244,101 @@ def run(quick: bool = False) -> list[dict]:
             f"loopback transport; emulated hardware "
             f"{'not real-time: ' + refused if refused else 'real-time, above them'}")
     return watch.rows("participant_churn_", what, GAP_TARGET_MS, n=k)
+
+
+@contextmanager
+def cpu_bound_neighbours(n: int = NEIGHBOURS) -> Iterator[list[subprocess.Popen]]:
+    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of
+    its own (another service or a terminal on the Pi), for the block; killed on the way out. Raises
+    RuntimeError if one inherited this process's real-time priority (it would starve the vehicle's
+    processes, not stand beside them)."""
+    with ExitStack() as stack:
+        neighbours = [stack.enter_context(child_process(
+            [python_executable(), "-c", "while True: pass"], start_new_session=True,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)) for _ in range(n)]
+        if any(os.sched_getscheduler(p.pid) != os.SCHED_OTHER for p in neighbours):
+            raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
+        yield neighbours
+
+
+def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
+    """The ``busy_neighbours_*`` rows (module docstring); ``realtime`` False: the nice-only run."""
+    duration_s = QUICK_DURATION_S if quick else DURATION_S
+    prefix = "busy_neighbours_" if realtime else "busy_neighbours_nice_only_"
+    layout = _VehicleLayout if realtime else _NiceOnlyLayout
+    with running_layout("hindrax-bench-busy-", layout=layout) as lay:
+        watch = _Watch(lay.probe)
+        lay.armed_at_1700()
+        # real-time from here on: every thread of this process, the emulation's serving threads
+        # included (one per node process, started when it connected: a thread started under
+        # SCHED_RESET_ON_FORK would not be)
+        with hardware_priority() as refused:
+            if refused:  # the same rows, not measured
+                return [{**r, "value": None, "note": f"not measured: {refused}"}
+                        for r in watch.rows(prefix, "", GAP_TARGET_MS)]
+            watch.start()
+            with cpu_bound_neighbours(NEIGHBOURS):
+                # the measurement window itself (the probe spins in the layout's thread)
+                time.sleep(duration_s)
+            watch.active = False
+            load = os.getloadavg()[0]
+    what = (f"armed at 1700 us for {duration_s:g} s beside {NEIGHBOURS} CPU-bound processes of "
+            f"another session (1-minute load {load:.1f} at the end); safety processes "
+            + ("real-time as vehicle.launch.xml starts them" if realtime else "at nice -5 only"))
+    rows = watch.rows(prefix, what, GAP_TARGET_MS)
+    return rows if realtime else [{k: v for k, v in r.items() if k != "target"} for r in rows]
+
+
+def topside_topics(vehicle: str) -> tuple[str, ...]:
+    """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics
+    and odometry."""
+    return (f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/supervisor/status",
+            f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status",
+            f"nav_msgs.msg:Odometry=/{vehicle}/odom")
+
+
+def pool_day_rows(quick: bool = False) -> list[dict]:
+    """The ``pool_day_churn_*`` rows (module docstring); ``quick``: :data:`QUICK_TRIALS` trials."""
+    trials = QUICK_TRIALS if quick else TRIALS
+    exits: list[int] = []
+    with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, \
+            domain_id() as topside:
+        watch = _Watch(lay.probe)
+        lay.ensure()
+        internal_default = ({k: v for k, v in lay.env.items() if k != PROFILE_ENV}
+                            | {RANGE_ENV: "LOCALHOST"})
+        topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
+        health = [lay.py, "-m", "hindrax_ident.tools.cli", "health", "--quiet", "--timeout", "3"]
+        topics = topside_topics(lay.vehicle)
+        quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+        with gateway_running(lay, topside):
+            lay.armed_at_1700()
+            with hardware_priority() as refused, cpu_bound_neighbours(NEIGHBOURS):
+                watch.start()
+                for k in range(trials):
+                    specs = ((subscriber_argv(f"internal_{k}", SUBSCRIBER_S), internal_default),
+                             (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env),
+                             (health, lay.env))
+                    with ExitStack() as stack:
+                        procs = [stack.enter_context(child_process(argv, env=env, **quiet))
+                                 for argv, env in specs]
+                        exits += [p.wait(TRIAL_TIMEOUT_S) for p in procs]
+                watch.active = False
+                load = os.getloadavg()[0]
+    hardware = "not real-time: " + refused if refused else "real-time, above them"
+    what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with "
+            f"default transports, one on the topside and `hindrax health` started together (exit "
+            f"codes {sorted(set(exits))}), armed and commanded at 1700 us, 50 Hz, beside "
+            f"{NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the end); emulated "
+            f"hardware {hardware}")
+    return watch.rows("pool_day_churn_", what, POOL_DAY_GAP_TARGET_MS, n=trials)
+
+
+def run(quick: bool = False) -> list[dict]:
+    """This module's rows of the ``safety`` section (``make bench``,
+    :mod:`hindrax_ident.tools.bench`), in the order of the module docstring."""
+    return (churn_rows(quick) + busy_rows(quick) + busy_rows(quick, realtime=False)
+            + pool_day_rows(quick))
 
 
 if __name__ == "__main__":

@@ -25,19 +25,17 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
 from hindrax_drivers.recording.make_test_bags import STREAMS
 from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.recording.msgtypes import message_class
 from hindrax_drivers.testing import (child_env, child_process, interrupt, python_executable,
-                                     ros_context, wait_until)
-from rclpy.executors import SingleThreadedExecutor
+                                     wait_until)
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 
-from . import run_alone
+from . import probe_spinning, run_alone
 from .machine import proc_cpu_s
 
 NOMINAL = (  # topic suffix, stream in make_test_bags.STREAMS (for the message), rate Hz, best effort
@@ -72,12 +70,8 @@ def run(quick: bool = False) -> list[dict]:
                  "-p", "discovery_period_s:=0.2", "-p", "status_period_s:=0.2"],
                 env=child_env(ROS_DOMAIN_ID=str(did)), stdout=subprocess.DEVNULL,
                 stderr=subprocess.PIPE) as proc:
-            with ros_context(domain_id=did) as ctx:
-                node = rclpy.create_node("recorder_bench", context=ctx)
-                ex = SingleThreadedExecutor(context=ctx)
-                ex.add_node(node)
+            with probe_spinning(did, "recorder_bench", 0.01) as (node, ex, spin):
                 counts, lock = subscribe_recorder_counts(node, 10)
-                spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
 
                 def publishers(spec):
                     out = []
@@ -154,8 +148,6 @@ def run(quick: bool = False) -> list[dict]:
                         break
                 rows.append({"name": "max sustained rate, zero drops", "value": round(best, 0), "unit": "msg/s",
                              "target": ">= 1180 (2x nominal)", "note": "; ".join(ramp_note)})
-                ex.shutdown()
-                node.destroy_node()
             interrupt(proc, 30)
             meta = read_metadata(bag)
             size = sum(p.stat().st_size for p in bag.glob("*.mcap"))
@@ -163,7 +155,6 @@ def run(quick: bool = False) -> list[dict]:
                          "unit": "B", "note": f"{meta.message_count} messages, zstd chunks (repeated payloads compress "
                                                     "far better than real data)"})
     return rows
-
 
 
 def subscribe_recorder_counts(node, depth: int) -> tuple[dict[str, int], "threading.Lock"]:

@@ -40,8 +40,6 @@ I2C devices on the emulated bus, each node in its own rclpy context, polled ever
 - magnetometer NACK (AK09916 behind the ICM's I2C master): detect = NACK onset -> ERROR ``magnetometer``;
   recover = the AK09916 answers again (right after the failed re-initialisation) -> first ``imu/mag`` (the
   node retries every ``sensors.icm20948.mag_retry_interval_s``).
-
-Run alone: ``python -m hindrax_ident.tools.benchmarks.robustness [--quick]``.
 """
 from __future__ import annotations
 
@@ -166,7 +164,6 @@ def _flips(st, frame: bytes):
 
 
 def _dvl_strategy():
-
     numbers = st.one_of(st.integers(-10**12, 10**12).map(str),
                         st.floats(allow_nan=False, allow_infinity=False, width=32).map(lambda v: f"{v:.6g}"),
                         st.floats(allow_nan=False, allow_infinity=False).map(repr),  # up to 1.8e308
@@ -195,7 +192,6 @@ def _dvl_strategy():
 
 
 def _dvl_check_factory():
-
     s = load_config(default_config_path()).sensors.dvl75
     builder = DvlReportBuilder(max_speed_m_s=s.max_speed_m_s, min_interval_s=s.min_interval_s,
                                max_interval_s=s.max_interval_s)
@@ -216,7 +212,6 @@ def _dvl_check_factory():
 
 
 def _ping_strategy():
-
     ids = st.sampled_from([1, 2, 3, 4, 5, 6, 1200, 1201, 1202, 1203, 1204, 1205, 1206, 1207, 1208, 1210, 1211,
                            1212, 1213, 1300, 1400, 1401, 2000, 65535])
     valid_checksum = st.tuples(ids, st.binary(max_size=260)).map(lambda t: encode_frame(t[0], t[1]))
@@ -226,12 +221,10 @@ def _ping_strategy():
 
 
 def _ping_check(data: bytes) -> bool:
-
     return bool(Ping1dStreamDecoder().feed(data))
 
 
 def _ms5837_strategy():
-
     datasheet = ms5837_protocol.prom_with_crc(ms5837_protocol.EXAMPLE_WORD0_30BA,
                                               ms5837_protocol.EXAMPLE_COEFFICIENTS_30BA)
 
@@ -283,7 +276,6 @@ def _ms5837_check(item) -> bool:
 
 
 def _icm_strategy():
-
     return st.tuples(st.binary(min_size=14, max_size=14), st.binary(min_size=9, max_size=9),
                      st.lists(st.integers(0, 255), min_size=5, max_size=5))
 
@@ -302,7 +294,6 @@ def _icm_mutate(item, rnd):
 
 
 def _icm_check(item) -> bool:
-
     block, mag_block, regs = item
     config = icm_protocol.ImuConfig.from_registers(*regs)
     sample = icm_protocol.parse_sensor_block(block, config)
@@ -335,7 +326,6 @@ def _until(predicate: Callable[[], Any], spin: Callable[[], None], timeout_s: fl
 
 
 def _dvl_faults() -> list[dict]:
-
     def truth(t):
         return DvlTruth(velocity_frd_m_s=(0.3 + 0.1 * math.sin(2 * t), 0.05 * math.cos(3 * t), 0.0),
                         altitude_m=3.0 + 0.2 * math.sin(t))
@@ -377,7 +367,6 @@ def _fault_row(name: str, detect_s: float, recover_s: float, note: str) -> dict:
 
 
 def _icm_faults() -> list[dict]:
-
     def truth(t):
         s = math.sin(7.0 * t)
         return (0.5 + 0.5 * s, -1.2 + 0.5 * s, 9.6 + 0.5 * s), (0.1 * s, -0.2, 0.05), \
@@ -439,7 +428,6 @@ def _icm_faults() -> list[dict]:
 
 
 def _ms5837_faults() -> list[dict]:
-
     emu = Ms5837Emulator(lambda t: (110000.0 + 500.0 * math.sin(t), 18.0), variant="30BA")
     bus = EmulatedI2CBus({0x76: emu}, seed=2)
     with ros_context() as ctx:
@@ -459,11 +447,6 @@ def _ms5837_faults() -> list[dict]:
                        f"pressure (resets sent: {emu.resets})")]
 
 
-def fault_timings() -> list[dict]:
-    """One row per injected fault: detect_s, recover_s, note."""
-    return _dvl_faults() + _icm_faults() + _ms5837_faults()
-
-
 # ---------------------------------------------------------------------------------------------- bench rows
 def run(quick: bool = False) -> list[dict]:
     """Benchmark rows (see the module docstring). ``quick``: 10k fuzzed inputs per parser."""
@@ -472,7 +455,7 @@ def run(quick: bool = False) -> list[dict]:
         rows.append({"name": f"fuzz {r['name']}: crashes", "value": r["crashes"], "unit": "crashes",
                      "target": "0", "note": f"{r['inputs']} inputs ({r['accepted']} decoded) in {r['seconds']:.1f} s"
                                             + (f"; first: {r['first']}" if r["first"] else "")})
-    for f in fault_timings():
+    for f in _dvl_faults() + _icm_faults() + _ms5837_faults():
         rows.append({"name": f"{f['name']}: time to detect", "value": f["detect_s"] * 1e3, "unit": "ms",
                      "note": f["note"]})
         rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3,

@@ -44,8 +44,7 @@ supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
   second heartbeat publisher is a fault), with the time from the replay process's start in the note.
 
 The same layout serves the section's other modules (their rows in their own docstrings):
-:mod:`.participant_churn`, :mod:`.busy_neighbours`, :mod:`.pool_day_churn` and
-:mod:`.sealed_authority`.
+:mod:`.participant_churn` and :mod:`.sealed_authority`.
 
 The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench's layout has it fitted
 (the emulated monostable ORed into /OE, ``esc.output_enable_feed_timeout_s`` 0.33 s, fed by the guard at 10 Hz):
@@ -102,6 +101,7 @@ from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, W
 from hindrax_drivers.transport.shared_emulation import SOCKET_ENV, EmulationServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
@@ -109,7 +109,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from . import call, spin_for
+from . import call, spin_for, start_logged
 from .launch_layout import launch_processes, package_share
 from .machine import proc_cpu_s
 
@@ -129,7 +129,6 @@ TICK_US = 1.3  # one PCA9685 count at 200 Hz is 1.24 us (docs/devices.md §5.1)
 
 
 def _rig(ctx, sim_time: bool = False):
-
     class TimedEmulator(Pca9685Emulator):
         """Records the monotonic time of the first transaction that leaves every thruster channel at neutral."""
 
@@ -167,9 +166,7 @@ def _rig(ctx, sim_time: bool = False):
     def spin(timeout_s: float = 0.002) -> None:
         if sim_time:
             r["ns"] += 2_000_000
-            c = Clock()
-            c.clock.sec, c.clock.nanosec = divmod(r["ns"], 1_000_000_000)
-            r["clock"].publish(c)
+            r["clock"].publish(Clock(clock=Time(nanoseconds=r["ns"]).to_msg()))
         ex.spin_once(timeout_sec=timeout_s)
 
     def command(width: float = 1700.0) -> None:
@@ -292,7 +289,6 @@ def run(quick: bool = False) -> list[dict]:
     rows = [_ms_row(f"{'' if name.startswith(plain) else 'neutral_after_'}{name}_ms", values,
                     **({"note": notes[name]} if name in notes else {}))
             for name, values in times.items()]
-    # The participant-churn rows join this section from their own module (bench.BENCHMARKS): it imports _Layout.
     return (rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + partial_freeze_rows(quick)
             + gc_rows(quick))
 
@@ -381,7 +377,6 @@ class _Hardware:
     holds it)."""
 
     def __init__(self, sock: str, feed: bool = True) -> None:
-
         hw = self
         self.line_busy = False
 
@@ -438,13 +433,6 @@ class _Hardware:
         times = [t for t in (self.stopped_at, self.feed.expires_at() if ran_out else None) if t is not None]
         return min(times) if times else time.monotonic()
 
-    def arm_watch(self) -> None:
-        self.stopped_at = self.oe_at = None
-        self.watch = True
-
-    def close(self) -> None:
-        self.server.close()
-
 
 def _config_file(tmp, feed: bool = True) -> str:
     """The shipped vehicle file with /OE wired, no sensors watched, no arming hold (the bench's own file); ``feed``:
@@ -472,7 +460,6 @@ class _Layout:
     """The three node processes, restartable, with a probe (commands at 50 Hz, arm/disarm, state) in this one."""
 
     def __init__(self, ctx, did: int, tmp, hw: _Hardware) -> None:
-
         self.ctx, self.tmp, self.hw = ctx, tmp, hw
         self.config = _config_file(tmp, feed=self.feed)
         self.vehicle = load_config(self.config).vehicle.name  # validated like any vehicle file
@@ -545,16 +532,15 @@ class _Layout:
     new_session = False
 
     def start(self, name: str, extra: tuple = ()) -> None:
-
-        log = open(self.tmp / f"{name}.log", "a")
         # scheduled as vehicle.launch.xml starts the safety processes (real-time, nice -5 where refused;
         # docs/deployment.md §1): on a machine shared with other jobs a 0.33 s gap in the guard's feed would be the
         # machine's load, not the failure measured
         prefix, env = vehicle_scheduling()[name]
-        self.procs[name] = subprocess.Popen([*prefix, self.py, "-m", PROCESSES[name], "--ros-args",
-                                             "--params-file", self.config, *extra],
-                                            env=dict(self.env, **(env if self.realtime else {})), stdout=log,
-                                            stderr=subprocess.STDOUT, start_new_session=self.new_session)
+        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config,
+                *extra]
+        self.procs[name] = start_logged(self.tmp / f"{name}.log", argv, "a",
+                                        env=dict(self.env, **(env if self.realtime else {})),
+                                        start_new_session=self.new_session)
 
     def ensure(self) -> None:
         for name in PROCESSES:
@@ -566,13 +552,11 @@ class _Layout:
         self.procs[name].send_signal(sig)
 
     def kill(self, name: str) -> None:
-
         p = self.procs.pop(name)
         p.send_signal(_signal.SIGKILL)
         p.wait(10)
 
     def close(self) -> None:
-
         self.commanding = False
         for name in list(self.procs):
             p = self.procs.pop(name)
@@ -653,7 +637,8 @@ class _Layout:
         else:
             raise RuntimeError(f"the ESC disarmed itself after each of {ARM_ATTEMPTS} arms: {self.rearms[-3:]}")
         self.unknown_at = None
-        self.hw.arm_watch()
+        self.hw.stopped_at = self.hw.oe_at = None
+        self.hw.watch = True
 
 
 @contextmanager
@@ -676,7 +661,7 @@ def running_layout(prefix: str, did: int | None = None, layout: type[_Layout] = 
             raise
         finally:
             lay.close()
-            hw.close()
+            hw.server.close()
 
 
 #: the bare-metal unit's WatchdogSec (docker/hindrax-bare-metal.service), s
@@ -818,10 +803,10 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
     each topic as it discovers it): replayed from there, every pass carries them without a gap until its end."""
     bag = tmp / "vehicle_bag"
     lay.armed_at_1700()
-    with open(tmp / "recorder.log", "w") as log:
-        rec = subprocess.Popen([lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file",
-                                lay.config, "-p", "all_topics:=true", "-p", "autostart:=true", "-p",
-                                f"output_dir:={bag}"], env=lay.env, stdout=log, stderr=subprocess.STDOUT)
+    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file",
+            lay.config, "-p", "all_topics:=true", "-p", "autostart:=true", "-p",
+            f"output_dir:={bag}"]
+    rec = start_logged(tmp / "recorder.log", argv, env=lay.env)
     try:
         wait_until(lambda: (bag / "metadata.yaml").exists() or any(bag.glob("*.mcap")), 30, None, "recorder started")
         spin_for(REPLAY_RECORD_S)
@@ -958,14 +943,7 @@ def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, flo
     return refused, attempts, answer, granted_s
 
 
-def _cpu_share(pid: int, window_s: float) -> float:
-    """CPU time of process ``pid`` (user + system, /proc) over ``window_s`` of wall time, in % of one core."""
-    c0 = proc_cpu_s(pid)
-    _, wall = spin_for(window_s)
-    return 100.0 * (proc_cpu_s(pid) - c0) / wall
-
-
-def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
+def _clock_rows(lay: _Layout, repeats: int) -> list[float]:
     """A supervisor on use_sim_time; this process publishes /clock at 100 Hz and steps it back 100 s."""
     lay.kill("supervisor")
     lay.start("supervisor", ("-p", "use_sim_time:=true"))
@@ -974,9 +952,7 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
 
     def clock() -> None:
         state["ns"] += 10_000_000
-        m = Clock()
-        m.clock.sec, m.clock.nanosec = divmod(state["ns"], 1_000_000_000)
-        pub.publish(m)
+        pub.publish(Clock(clock=Time(nanoseconds=state["ns"]).to_msg()))
     timer = lay.probe.create_timer(0.01, clock)  # the layout's thread spins the probe
     out = []
     try:
@@ -1012,7 +988,9 @@ def run_processes(quick: bool = False) -> list[dict]:
         hw = lay.hw
         # the guard's cost while armed and commanded (50 Hz ESC state, 20 Hz heartbeats)
         lay.armed_at_1700()
-        guard_cpu = _cpu_share(lay.procs["guard"].pid, 5.0 if quick else 10.0)
+        cpu0 = proc_cpu_s(lay.procs["guard"].pid)
+        _, wall = spin_for(5.0 if quick else 10.0)
+        guard_cpu = 100.0 * (proc_cpu_s(lay.procs["guard"].pid) - cpu0) / wall
         for _ in range(repeats):
             # the supervisor killed / hung until the outputs stop, then the ESC until /OE is high
             for who, what, at in (("supervisor", "outputs_stopped", lambda: hw.stopped_at),
@@ -1035,7 +1013,7 @@ def run_processes(quick: bool = False) -> list[dict]:
             times["i2c_outage_state_unknown"].append(lay.unknown_at - t0)
             hw.bus.disconnected = False
         lay.commanding = False
-        times["clock_step_back_detected"] = _clock_rows(lay, lay.ctx, repeats)
+        times["clock_step_back_detected"] = _clock_rows(lay, repeats)
         rearms = lay.rearms
     rows = [{"name": "guard_cpu_percent", "value": guard_cpu, "unit": "% of a core",
              "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz "

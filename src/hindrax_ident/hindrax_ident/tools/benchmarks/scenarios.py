@@ -1,13 +1,11 @@
 """Scenario-suite benchmark: a short subset of ``hindrax ident scenarios`` in ``make bench``.
 
 quick: scenario ``thrust_0.90`` only, surge, 2 levels, seed 1; full: ``none``, ``thrust_0.90`` and
-``reverse_weak``, surge, 2 levels, seed 1 (about 15 s each here; surge and heave at 3 levels took about 80 s
-each, too long for ``make bench``'s 6 minutes; the full table, 13 scenarios x seeds x 4 DOFs, is written
-by the command into docs/results.md, section ``scenarios``). Rows: wall time per campaign, and per scenario the
-fraction of parameters whose 95 % interval covers the truth, the fraction marked suspect and the fraction
-covered-or-suspect (target 100 %:
-a parameter that misses the truth must be suspect), plus the no-disturbance scenario's suspect fraction (target
-<= 10 %).
+``reverse_weak``, surge, 2 levels, seed 1 (the full table is written by the command into
+docs/results.md, section ``scenarios``). Rows: wall time per campaign, and per scenario the fraction
+of parameters whose 95 % interval covers the truth, the fraction marked suspect and the fraction
+covered-or-suspect (target 100 %: a parameter that misses the truth must be suspect), plus the
+no-disturbance scenario's suspect fraction (target <= 10 %).
 """
 from __future__ import annotations
 

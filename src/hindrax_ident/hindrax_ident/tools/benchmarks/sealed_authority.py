@@ -2,10 +2,9 @@
 operator requests.
 
 The layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes` (the ESC node, the
-supervisor and the output
-guard, each in its own process on the vehicle's transport) with the gateway beside them, started as
-``python -m hindrax_drivers.gateway.node`` on the layout's internal domain and a topside domain of its own, with an
-operator key for the vehicle (``HINDRAX_KEYS_DIR``):
+supervisor and the output guard, each in its own process on the vehicle's transport) with the
+gateway beside them, started as ``python -m hindrax_drivers.gateway.node`` on the layout's internal
+domain and a topside domain of its own, with an operator key for the vehicle (``HINDRAX_KEYS_DIR``):
 
 * ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_drivers.proc_sockets`) of the ESC,
   supervisor, guard and the gateway's internal process bound outside 127.0.0.1 and the multicast groups (target
@@ -14,9 +13,6 @@ operator key for the vehicle (``HINDRAX_KEYS_DIR``):
   requests sent to ``/<vehicle>/arm`` from the topside domain, each unsigned, signed with another key, or a copy of
   an arm the gateway had accepted (the ESC disarmed again in between), those answered with success (target 0). A
   freshly signed arm before and after them is answered armed (the path works; otherwise the bench stops).
-
-Run alone: ``python -m hindrax_ident.tools.benchmarks.sealed_authority [--quick]`` (prints the rows
-as JSON).
 """
 from __future__ import annotations
 
@@ -26,17 +22,15 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-import rclpy
 from domain_coordinator import domain_id
 from hindrax_drivers.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
 from hindrax_drivers.proc_sockets import child_pids, exposed, udp_sockets
-from hindrax_drivers.testing import ros_context, wait_until
-from rclpy.executors import SingleThreadedExecutor
+from hindrax_drivers.testing import wait_until
 
 from hindrax_msgs.srv import SetArmed, SignedTrigger
 from std_srvs.srv import Trigger
 
-from . import call, run_alone
+from . import call, probe_spinning, run_alone, start_logged
 from .safety import running_layout
 
 #: arm requests of each kind (unsigned, wrong key, replayed); with ``--quick``
@@ -70,14 +64,13 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
 def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
     """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
     (:func:`~hindrax_ident.tools.benchmarks.safety.running_layout`), on its internal domain and the
-    topside domain
-    ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
-    request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
-    log = open(lay.tmp / "gateway.log", "w")
+    topside domain ``topside`` (LOCALHOST, the shipped file's range), with operator keys from
+    ``keys_dir`` (none: every operator request refused); yields its process once its internal
+    participant has sockets, and stops it on the way out."""
     env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
-    gateway = subprocess.Popen([lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
-                                lay.config, "-p", f"topside_domain_id:={topside}"],
-                               env=env, stdout=log, stderr=subprocess.STDOUT)
+    argv = [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config,
+            "-p", f"topside_domain_id:={topside}"]
+    gateway = start_logged(lay.tmp / "gateway.log", argv, env=env)
     try:
         wait_until(lambda: "internal domain" in (lay.tmp / "gateway.log").read_text(), WAIT_S, None,
                    "gateway started")
@@ -87,7 +80,6 @@ def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[
     finally:
         gateway.terminate()
         gateway.wait(30)
-        log.close()
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -103,11 +95,7 @@ def run(quick: bool = False) -> list[dict]:
             pids["gateway internal"] = child_pids(gateway.pid)[0]
             wait_until(lambda: all(udp_sockets(pid) for pid in pids.values()), WAIT_S, None, "every participant")
             rows = [exposure_row({name: udp_sockets(pid) for name, pid in pids.items()})]
-            with ros_context(domain_id=topside) as ctx:
-                node = rclpy.create_node("bench_operator", context=ctx)
-                executor = SingleThreadedExecutor(context=ctx)
-                executor.add_node(node)
-                spin = lambda: executor.spin_once(timeout_sec=0.05)  # noqa: E731
+            with probe_spinning(topside, "bench_operator") as (node, _ex, spin):
                 client = node.create_client(SignedTrigger, f"/{vehicle}/arm")
                 wait_until(client.service_is_ready, WAIT_S, spin,
                            f"/{vehicle}/arm on the topside")
@@ -142,8 +130,6 @@ def run(quick: bool = False) -> list[dict]:
                     if any(v[-1] for v in answers.values()):
                         lay.call(lay.arm_client, SetArmed.Request(arm=False))
                 signed_arm()  # the path still worked after them
-                executor.shutdown()
-                node.destroy_node()
             return rows + signing_rows(answers)
 
 

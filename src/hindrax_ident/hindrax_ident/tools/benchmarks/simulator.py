@@ -26,7 +26,6 @@ from . import spinning
 
 
 def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
-
     cfg = load_config(default_config_path())
     sim = Simulator(cfg)
     sim.reset(position_ned_m=[5.0, 3.0, 0.9])
@@ -62,12 +61,12 @@ def _node_rate(wall_s: float) -> float:
 def run(quick: bool = False) -> list[dict]:
     """Rows {name, value, unit, target?, note} (see module docstring)."""
     steps, rtf, samples = _simulator_rate(5.0 if quick else 15.0)
-    rows = [
+    return [
         {"name": "steps_per_s", "value": round(steps), "unit": "steps/s",
          "note": f"RK4, default step, all 7 sensor models on ({samples} samples)"},
         {"name": "real_time_factor", "value": round(rtf, 1), "unit": "x", "target": ">= 20",
          "note": "simulated s per wall s, Simulator.step without ROS"},
+        {"name": "node_real_time_factor", "value": round(_node_rate(1.0 if quick else 5.0), 1),
+         "unit": "x",
+         "note": "ROS node, real_time_factor 0, /clock 100 Hz, with a use_sim_time probe"},
     ]
-    rows.append({"name": "node_real_time_factor", "value": round(_node_rate(1.0 if quick else 5.0), 1), "unit": "x",
-                 "note": "ROS node, real_time_factor 0, /clock 100 Hz, with a use_sim_time probe"})
-    return rows

@@ -51,9 +51,10 @@ from typing import Any, Callable
 
 import rclpy
 from domain_coordinator import domain_id
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
 from rclpy.action import ActionClient
-from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.executors import ShutdownException, TimeoutException
+from std_msgs.msg import Header
 
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path
@@ -63,18 +64,18 @@ from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
 from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
+from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
 from hindrax_ident.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import launch_processes, package_share, read_ports_file
 from .actuation import wrench_to_registers
-from .launch_node import SOCKET_ENV, TOPOLOGY_ENV
-from . import call, spin_for
+from .launch_node import TOPOLOGY_ENV
+from . import call, probe_spinning, spin_for, start_logged
 from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s, thread_cpu_s
 from .recorder import subscribe_recorder_counts
 
-_CLK = os.sysconf("SC_CLK_TCK")
 #: not recorded in either layout: the simulator's ground truth and /clock (they do not exist on the vehicle)
 EXCLUDE_REGEX = r"^/(sim/|clock$)"
 #: the processes / nodes of the stack, in launch order
@@ -99,7 +100,7 @@ def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int], dict[str, float]]
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
             text = (task / "status").read_text()
-            stat = (task / "stat").read_text().rsplit(")", 1)[1].split()
+            thread_cpu = proc_cpu_s(f"{pid}/task/{task.name}")
         except OSError:  # the thread ended meanwhile
             continue
         fields = dict(ln.split(":", 1) for ln in text.splitlines() if ":" in ln)
@@ -108,7 +109,7 @@ def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int], dict[str, float]]
         main += n if task.name == str(pid) else 0
         name = "main" if task.name == str(pid) else fields["Name"].strip()
         named[name] += n
-        cpu[name] += (int(stat[11]) + int(stat[12])) / _CLK
+        cpu[name] += thread_cpu
     return total, main, named, cpu
 
 
@@ -135,12 +136,8 @@ def _proc_mb(pid: int, key: str) -> float:
 
 
 def _wrench_msg(stamp: Any) -> Any:
-    m = WrenchStamped()
-    m.header.frame_id = "base_link"
-    m.header.stamp = stamp
-    m.wrench.force.x = 6.0
-    m.wrench.torque.z = 0.5
-    return m
+    return WrenchStamped(header=Header(frame_id="base_link", stamp=stamp),
+                         wrench=Wrench(force=Vector3(x=6.0), torque=Vector3(z=0.5)))
 
 
 def _wrench_stream(probe: Any) -> Callable[[bool], None]:
@@ -187,11 +184,22 @@ def _running_then_idle(probe: Any, action: Any, switch: Callable[[bool], None], 
 
 
 # ---------------------------------------------------------------------------------------------- one process
+def _timed(fn: Callable, spent: dict[str, float], key: Callable[[], str]) -> Callable:
+    """``fn``, each call's thread CPU time added to ``spent[key()]``."""
+    def timed(*a: Any) -> Any:
+        t0 = time.thread_time()
+        try:
+            return fn(*a)
+        finally:
+            spent[key()] += time.thread_time() - t0
+    return timed
+
+
 def _in_process(duration_s: float, tmp: Path) -> dict:
     cpu: dict[str, float] = collections.defaultdict(float)  # callbacks by node name
-    emu: dict[str, float] = collections.defaultdict(float)  # emulator time inside callbacks, by node name
+    # emulator time inside callbacks by node name, and the simulator's time under "(simulator)"
+    emu: dict[str, float] = collections.defaultdict(float)
     current: list[str | None] = [None]
-    sim_cpu = [0.0]
     out: dict = {"phases": {}}
     with ros_context() as ctx:
         graph = build_graph(default_config_path(), sim=True, record=True, record_dir=str(tmp / "unused-bag"),
@@ -227,24 +235,11 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
         ex.spin_once = spin_once
         sim_node = graph.nodes["simulator"]
         advance = sim_node.advance_clock_period
-
-        def timed_advance() -> bool:
-            t0 = time.thread_time()
-            try:
-                return advance()
-            finally:
-                sim_cpu[0] += time.thread_time() - t0
-
-        sim_node.advance_clock_period = timed_advance
+        sim_node.advance_clock_period = _timed(advance, emu, lambda: "(simulator)")
         for device in (hw.emulators[n] for n in ("ms5837", "icm20948", "pca9685")):
             for meth in ("i2c_read", "i2c_write"):
-                def timed(*a: Any, _orig: Any = getattr(device, meth)) -> Any:
-                    t0 = time.thread_time()
-                    try:
-                        return _orig(*a)
-                    finally:
-                        emu[current[0] or "(outside callbacks)"] += time.thread_time() - t0
-                setattr(device, meth, timed)
+                setattr(device, meth, _timed(getattr(device, meth), emu,
+                                             lambda: current[0] or "(outside callbacks)"))
 
         recorder = graph.nodes["recorder"]
         recorder.stop_recording()
@@ -283,21 +278,18 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             counts0 = writer.topic_counts()
             cpu.clear()
             emu.clear()
-            sim_cpu[0] = 0.0
             threads0 = thread_cpu_s()
             sim_t0 = sim_node.simulator.t_s
             proc, wall = spin_for(duration_s, spin_with_wrench)
             threads1 = thread_cpu_s()
             counts1 = writer.topic_counts()
             thr = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
-            per: dict[str, float] = {}
-            for name in NODES:
-                if name in graph.nodes:
-                    per[name] = cpu.get(name, 0.0) - emu.get(name, 0.0)
+            per = {name: cpu.get(name, 0.0) - emu.get(name, 0.0)
+                   for name in NODES if name in graph.nodes}
             for name, port in hw.ports.items():
-                per[name] += sum(v for k, v in thr.items() if k == f"SerialTransport({port})")
+                per[name] += thr.get(f"SerialTransport({port})", 0.0)
             per["recorder"] += sum(v for k, v in thr.items() if k.startswith("bag-writer"))
-            stack = proc - sim_cpu[0] - sum(emu.values()) - cpu.get("bench_probe", 0.0)
+            stack = proc - sum(emu.values()) - cpu.get("bench_probe", 0.0)
             per["executor+dds"] = stack - sum(per.values())
             rates = {t: (counts1.get(t, 0) - counts0.get(t, 0)) / wall for t in counts1}
             out["phases"][phase] = {"per_node": {k: v / wall for k, v in per.items()},
@@ -336,7 +328,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
         try:
             pool = ["-m", "hindrax_ident.tools.benchmarks.launch_layout", "pool", "--socket", sock,
                     "--ports-file", str(ports_file)]
-            procs["pool"] = _start(tmp, "pool", [py, *pool], env)
+            procs["pool"] = start_logged(tmp / "pool.log", [py, *pool], env=env)
             ports = wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and read_ports_file(ports_file), 60,
                                None, "pool process ready")
             # the bench's devices: the serial emulators' pseudo-terminals, a short arming time, and the emulated
@@ -352,28 +344,23 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
                 # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
-                argv = [*lp.process.launch_prefix, py, *wrap, lp.module, *lp.ros_args(values_file),
-                        *bench]
+                argv = [*lp.process.launch_prefix, py, *wrap, lp.module,
+                        *lp.process.ros_arguments(values_file), *bench]
                 own = {**dict(lp.process.env), SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}
-                procs[lp.label] = _start(tmp, lp.label, argv, {**env, **own})
+                procs[lp.label] = start_logged(tmp / f"{lp.label}.log", argv, env={**env, **own})
             (tmp / "probes.json").write_text(json.dumps({"processes": {  # no publishers
                 name: _one_node(name, [], [_endpoint(t, ty, raw=True) for t, ty in topics])
                 for name, topics in PARTICIPANT_PROBES.items()}}))
             for name in PARTICIPANT_PROBES:  # what one more process costs (not in the totals)
-                extra[name] = _start(tmp, name, _skeleton_argv(tmp / "probes.json", name), env)
-            with ros_context(domain_id=did) as ctx:
-                probe = rclpy.create_node("bench_probe", context=ctx)
+                argv = _skeleton_argv(tmp / "probes.json", name)
+                extra[name] = start_logged(tmp / f"{name}.log", argv, env=env)
+            with probe_spinning(did) as (probe, _ex, spin):
                 counts, lock = subscribe_recorder_counts(probe, 50)
                 arm = probe.create_client(SetArmed, "esc/set_armed")
                 action = ActionClient(probe, RunIdentification, "run_identification")
                 switch = _wrench_stream(probe)
-                ex = SingleThreadedExecutor(context=ctx)
-                ex.add_node(probe)
-                spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
 
-                def alive() -> bool:
-                    return _check_alive(procs, tmp)
-
+                alive = functools.partial(_check_alive, procs, tmp)
                 sensors = ("/dvl/data", "/imu/data_raw", "/pressure/fluid_pressure", "/ping/altitude")
                 wait_until(lambda: alive() and all(counts.get(t, 0) > 5 for t in sensors), 120, spin,
                            "every sensor topic recorded")
@@ -434,8 +421,6 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 # each node's declared endpoints, recorder subscriptions made: the skeleton's plan
                 declared = {n: p for n, p in procs.items() if n != "pool"}
                 out["topology"] = read_topologies(declared, tmp)
-                ex.shutdown()
-                probe.destroy_node()
         finally:
             _stop([*reversed(procs.values()), *extra.values()])
     bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
@@ -444,12 +429,6 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
     out["bag"] = str(bags[0])
     _bag_rates(out)
     return out
-
-
-def _start(tmp: Path, label: str, argv: list[str], env: dict) -> subprocess.Popen:
-    """``argv`` started with ``env``, its output in ``tmp/<label>.log``."""
-    with open(tmp / f"{label}.log", "w") as log:
-        return subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT)
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
@@ -608,13 +587,9 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
             for label in spec:
                 prefix, extra = (envs or {}).get(label, ([], {}))
                 argv = [*prefix, *_skeleton_argv(tmp / "spec.json", label)]
-                procs[label] = _start(tmp, label, argv, dict(env, **extra))
-            with ros_context(domain_id=did) as ctx:
-                probe = rclpy.create_node("bench_probe", context=ctx)
+                procs[label] = start_logged(tmp / f"{label}.log", argv, env=dict(env, **extra))
+            with probe_spinning(did) as (probe, _ex, spin):
                 switch = _wrench_stream(probe)
-                ex = SingleThreadedExecutor(context=ctx)
-                ex.add_node(probe)
-                spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
                 settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S,
                                        min_nodes=sum(len(t["nodes"]) for t in spec.values()))
                 wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin,
@@ -638,8 +613,6 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                         wins.append({"wall_s": wall, "per_process": cpu})
                     _check_alive(procs, tmp)
                     out["phases"][phase] = {"windows": wins}
-                ex.shutdown()
-                probe.destroy_node()
         finally:
             _stop(list(procs.values()))
     return out
@@ -708,10 +681,6 @@ def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
                       "note": f"launch {la[n] / pool:.3f} - skeleton {sk[n] / pool:.3f} = "
                       f"{(la[n] - sk[n]) / pool:.3f} pool units above the skeleton (logic)"}]
     return rows
-
-
-def _spec(rates: dict[str, float], types: dict[str, str]) -> list:
-    return [(t, types[t], r) for t, r in sorted(rates.items()) if r > 0.05 and t in types]
 
 
 # ---------------------------------------------------------------------------------------------- rows
@@ -917,12 +886,6 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         if "launch" in layouts:
             launch = _launch(duration_s, tmp, windows=windows)
             launch["types"] = BagReader(launch["bag"]).topics
-    types = dict(launch["types"]) if launch else {}
-    if inproc:
-        types.update(inproc["types"])
-    types.setdefault("/rosout", "rcl_interfaces/msg/Log")
-    types.setdefault("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
-
     nbody_after = nbody_cpu_s()
     nbody_s = (nbody_before + nbody_after) / 2
     rows: list[dict] = [
@@ -948,7 +911,12 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                 rows.append({"name": "inproc_running_cpu_stack", "value": 100 * ph["stack"], "unit": "% of a core",
                              "note": "one process, identification running surge, recorder on"})
         if baselines:
-            idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
+            # the topics' types: the launch layout's bag, the graph's publishers, and two of rcl's
+            types = {"/rosout": "rcl_interfaces/msg/Log",
+                     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+                     **(launch["types"] if launch else {}), **inproc["types"]}
+            idle_rates = sorted(inproc["phases"]["idle"]["rates"].items())
+            idle_spec = [(t, types[t], r) for t, r in idle_rates if r > 0.05 and t in types]
             bare_pub = _bare(idle_spec, base_s)
             idle_msgs = sum(r for *_, r in idle_spec)
             rows += [
