@@ -1,18 +1,12 @@
 """The virtual pool's truth: what the water, the thrusters and the sensors really do, apart from the vehicle file.
 
-A *truth file* (``ros_ws/config/truth/*.yaml``) is a partial overlay of the vehicle configuration: any key of the
-vehicle schema (``ros_ws/config/hindrax.yaml``, nested the same way but without the ``/**: ros__parameters:``
-wrapper, which would let a node load it) replaces the vehicle file's value for the simulator only, plus two
-sections no node reads:
-
-* ``simulation.sensors.<device>.*``: the simulated sensors' noise, bias, rate, dropouts (:mod:`.sensors`);
-* ``disturbances.*``: effects the vehicle file does not model (:class:`Disturbances`, every one off by default).
-
-The simulator and the device emulators read the truth (:attr:`Truth.config`); every node and estimator reads the
-vehicle file only (``test_truth.py`` checks that no module outside ``sim/`` names a truth-only key). The shipped
-``default.yaml`` holds the default sensor noise levels and no disturbance. The simulator always fills the keys the
-vehicle configuration lacks from ``default.yaml``; a truth file given with ``--truth`` then overrides any key (it
-states only what differs).
+A *truth file* (``ros_ws/config/truth/*.yaml``, docs/virtual_pool.md §2) overlays the vehicle
+configuration for the simulator and the device emulators only (:attr:`Truth.config`): any key of the
+vehicle schema, nested as in ``hindrax.yaml`` without the ``/**: ros__parameters:`` wrapper, plus
+``simulation.sensors.<device>.*`` (the simulated sensors' noise, bias, rate, dropouts:
+:mod:`.sensors`) and ``disturbances.*`` (:class:`Disturbances`, every one off by default). The
+shipped ``default.yaml`` (default sensor noise, no disturbance) fills the keys the vehicle
+configuration lacks; a truth file given with ``--truth`` then overrides any key.
 
 Disturbances (``disturbances:`` section; the physical source of each; all default off):
 
