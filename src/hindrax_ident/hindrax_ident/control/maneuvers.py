@@ -31,7 +31,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from .law import ControlInput, ControlSettings, Controller
-from .model import ControlModel, model_from_config
+from .model import ControlModel, model_from_config, prior_inertia
 from ..vehicle.state import SensorState, rotation_ned_from_body
 
 __all__ = ["DOF_INDEX", "SURFACE_CLEARANCE_M", "dof_authority",
@@ -80,13 +80,6 @@ def tilt_test_angle_rad(cfg: VehicleConfig, dof: str) -> float:
     rad ([Hindrax-Drag] §4.2). Raises KeyError for another DOF."""
     ident = cfg.identification
     return {"roll": ident.roll_test_angle_rad, "pitch": ident.pitch_test_angle_rad}[dof]
-
-
-def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
-    """A-priori rigid + added inertia of a DOF from the configuration (kg or kg m^2), for controller gains."""
-    i = DOF_INDEX[dof]
-    rigid = cfg.vehicle.mass_kg if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
-    return float(rigid + cfg.added_mass_matrix[i, i])
 
 
 @dataclass(frozen=True)

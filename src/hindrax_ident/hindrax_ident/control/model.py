@@ -42,8 +42,8 @@ from ..vehicle.vehicle_match import parameter_differences
 from ..vehicle.uncertainty import declared_rel
 
 __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "load_model", "rigid_inertia",
-           "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",
-           "BIAS_THRUST_SCALE_SIGMAS", "unexplained_bias"]
+           "prior_inertia", "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS",
+           "VEHICLE_FILE", "BIAS_THRUST_SCALE_SIGMAS", "unexplained_bias"]
 
 #: Source name of a value taken from the vehicle file.
 VEHICLE_FILE = "vehicle file"
@@ -112,6 +112,12 @@ def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
     return float(cfg.vehicle.mass_kg) if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
 
 
+def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
+    """A-priori rigid + added inertia of one DOF from the vehicle file (kg or kg m^2)."""
+    i = DOFS.index(dof)
+    return rigid_inertia(cfg, dof) + float(cfg.added_mass_matrix[i, i])
+
+
 def declared_inertia_uncertainty_rel(cfg: VehicleConfig) -> float:
     """Relative 1-sigma uncertainty the vehicle file declares for its force model: the RMS of the two thrust-curve
     directions' relative uncertainty (the rule of the identification intervals,
@@ -126,12 +132,11 @@ def model_from_config(cfg: VehicleConfig, source: str = VEHICLE_FILE) -> Control
     axes = {}
     for dof in DOFS:
         h = cfg.dof_hydrodynamics(dof)
-        i = DOFS.index(dof)
         bias = float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
         v = cfg.vehicle
         restoring = float(v.centre_of_gravity_frd_m[2] * cfg.weight_n
                           - v.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n) if dof in ("roll", "pitch") else 0.0
-        axes[dof] = AxisModel(dof, rigid_inertia(cfg, dof) + float(cfg.added_mass_matrix[i, i]), rel,
+        axes[dof] = AxisModel(dof, prior_inertia(cfg, dof), rel,
                               h.linear_damping_positive, h.linear_damping_negative, h.quadratic_damping_positive,
                               h.quadratic_damping_negative, bias, restoring,
                               {k: source for k in ("inertia", "damping", "bias", "restoring")})
