@@ -584,18 +584,14 @@ class Controller:
                 continue
             w[k] = ax.update(sp, float(vel[k]), dt)
         w[2] = self._vertical(inp, dt, free, rpy)
-        for k, dof in ((3, "roll"), (4, "pitch")):
+        for k, dof, sp, measured in ((3, "roll", self.attitude_rad[0], inp.rpy_rad[:2]),
+                                     (4, "pitch", self.attitude_rad[1], inp.rpy_rad[:2]),
+                                     (5, "yaw", self.heading_rad, inp.rpy_rad[2:])):
             ax = self.axes[dof]
-            sp = float(self.attitude_rad[k - 3])
-            if dof in free or not math.isfinite(sp) or not np.all(np.isfinite(inp.rpy_rad[:2])):
+            if dof in free or not math.isfinite(sp) or not np.all(np.isfinite(measured)):
                 ax.release()
                 continue
-            w[k] = ax.update(sp, float(rpy[k - 3]), float(rates[k - 3]), dt)
-        ax = self.axes["yaw"]
-        if "yaw" in free or not math.isfinite(self.heading_rad) or not math.isfinite(float(inp.rpy_rad[2])):
-            ax.release()
-        else:
-            w[5] = ax.update(float(self.heading_rad), float(rpy[2]), float(rates[2]), dt)
+            w[k] = ax.update(float(sp), float(rpy[k - 3]), float(rates[k - 3]), dt)
         return w
 
     def _vertical(self, inp: ControlInput, dt: float, free: Sequence[str], rpy: np.ndarray) -> float:
