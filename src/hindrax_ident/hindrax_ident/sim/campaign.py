@@ -130,41 +130,24 @@ class Campaign:
 
     cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF
     (default ``identification.levels_per_dof``). seed: simulator seed (default ``simulation.seed``).
-    max_level_duration_s: cap of one run (default ``identification.max_level_duration_s``).
     progress: optional callable receiving one-line progress messages. real_time_factor: > 0 paces the
     simulation against the wall clock (0: as fast as possible). sim: an existing simulator (else built).
-    heave_repeats: down/up pairs per heave level (heave runs last 1-3 s in the depth available, so each level
-    is repeated to collect enough transient data). excitation, excitation_duration_s: ``ladder`` or one broadband
-    run per DOF and its length (default ``identification.excitation*``;
-    :class:`~..identification.online.executive.Executive`). calibrate, ballast_weight_in_water_n, line_pull_n,
-    float_buoyancy_n, inclining_load_n_m: the reference steps and their known forces
-    (:class:`~..identification.online.executive.Executive`); steps: run these step objects instead of the plan (a test
-    of one step); confirm: the loads an aborted campaign left, confirmed first
-    (:class:`~..identification.online.executive.Executive`). Raises ``ValueError`` for an unknown DOF.
+    Other keywords go to the :class:`~..identification.online.executive.Executive`
+    (``max_level_duration_s``, ``excitation``, the calibration steps and their known forces,
+    ``steps``, ``confirm``). Raises ``ValueError`` for an unknown DOF.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
-                 seed: int | None = None, max_level_duration_s: float | None = None,
-                 progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
-                 sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
-                 excitation_duration_s: float | None = None, inclining_load_n_m=(0.0, 0.0),
-                 float_buoyancy_n: float | None = None, steps=None, confirm=()) -> None:
-        bad = [d for d in dofs if d not in DOFS]
-        if bad:
-            raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
+                 seed: int | None = None, progress: Callable[[str], None] | None = None,
+                 real_time_factor: float = 0.0, sim: Simulator | None = None, **executive) -> None:
         self.cfg = cfg
         self.seed = int(cfg.simulation.seed if seed is None else seed)
         self.sim = sim if sim is not None else Simulator(cfg, seed=self.seed)
         rate = float(cfg.identification.estimate_rate_hz)
         self.steps_per_tick = max(1, int(round(1.0 / (rate * self.sim.step_s))))
         self.tick_s = self.steps_per_tick * self.sim.step_s
-        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,
-                                   heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
-                                   ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n,
-                                   excitation=excitation, excitation_duration_s=excitation_duration_s,
-                                   inclining_load_n_m=inclining_load_n_m, float_buoyancy_n=float_buoyancy_n,
-                                   steps=steps, confirm=confirm)
+        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, progress=progress,
+                                   **executive)
         #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
         self.operator = PoolOperator.for_steps(self.executive.steps)
         self._external_used = False
