@@ -128,23 +128,6 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 }
 
 
-class _Group:
-    """``Disturbances.<group>``: the ``disturbances.<group>.*`` values as attributes (the default
-    where the file does not set a key), built on first use and kept."""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
-
-    def __get__(self, obj: Any, owner: type | None = None) -> Any:
-        if obj is None:
-            return self
-        prefix = f"{self.name}."
-        value = SimpleNamespace(**{k[len(prefix):]: obj.get(k) for k in DISTURBANCE_SCHEMA
-                                   if k.startswith(prefix)})
-        obj.__dict__[self.name] = value  # a plain attribute from now on, as a cached_property
-        return value
-
-
 @dataclass(frozen=True)
 class Disturbances:
     """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
@@ -156,16 +139,16 @@ class Disturbances:
 
     values: Mapping[str, Any] = field(default_factory=dict)
 
-    thrust = _Group()
-    battery = _Group()
-    inflow = _Group()
-    hydrodynamics = _Group()
-    current = _Group()
-    tether = _Group()
-    floor = _Group()
-    dvl = _Group()
-    imu = _Group()
-    pressure = _Group()
+    def __getattr__(self, group: str) -> SimpleNamespace:
+        """``disturbances.<group>.*`` as attributes, built on first use and kept (called only for
+        a name that is not an attribute yet). Raises ``AttributeError`` for an unknown group."""
+        prefix = f"{group}."
+        keys = [k for k in DISTURBANCE_SCHEMA if k.startswith(prefix)]
+        if not keys:
+            raise AttributeError(f"{type(self).__name__} has no disturbance group {group!r}")
+        value = SimpleNamespace(**{k[len(prefix):]: self.get(k) for k in keys})
+        self.__dict__[group] = value  # a plain attribute from now on, as a cached_property
+        return value
 
     def get(self, key: str) -> Any:
         """Value of ``disturbances.<key>`` (the default when the file does not set it)."""
