@@ -9,13 +9,10 @@ curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and 
 produced during the tick go to the executive. At the end or on abort every thruster is commanded neutral. The
 simulator's truth (position, attitude) goes into the record for tests and plots only; the executive never sees it.
 
-Calibration steps (``calibrate``, :data:`~..identification.online.executive.CALIBRATION_STEPS`): the virtual pool plays
-the operator (:class:`PoolOperator`, shared with the graph's :class:`~..graph_campaign.VirtualOperator`). When the
-executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical, NED down,
-expressed in the body frame every tick) as an external force until the executive asks for its removal; the float is its
-net buoyancy, NED up; a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis
-and sense the step names (as a line over a pulley at the pool edge); an inclining test mass is its weight in water
-at the step's arm (:func:`inclining_wrench_frd`). Each time ``continue`` is given at once.
+Calibration steps (``calibrate``): the virtual pool plays the operator (:class:`PoolOperator`,
+shared with the graph's :class:`~..graph_campaign.VirtualOperator`): each known force a step
+prompts for acts on the vehicle until the executive asks for its removal; ``continue`` is given at
+once.
 """
 from __future__ import annotations
 
@@ -46,7 +43,8 @@ def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, do
 
 
 class PoolOperator:
-    """The virtual pool's operator of the calibration steps: which known force hangs on the vehicle.
+    """The virtual pool's operator of the calibration steps: which known force hangs on the vehicle
+    (ballast NED down, float NED up, a line over a pulley at the pool edge, an inclining mass).
 
     ballast_weight_n / float_buoyancy_n / line_pull_n: the known forces, N
     (:func:`~..identification.online.executive.calibration_forces`,
