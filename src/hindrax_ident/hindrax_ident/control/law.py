@@ -166,10 +166,10 @@ def design_gains(axis: AxisModel, w_target: float, zeta: float = 1.0, velocity: 
 class ReferenceModel:
     """Critically damped (``zeta``) second-order reference x_d'' = w^2 (r - x_d) - 2 zeta w x_d', with the rate limited
     to ``max_rate`` and the acceleration to ``max_accel`` while speeding up (the saturating elements of [Fossen2011]
-    §10.2), ``1 / REFERENCE_ACCEL_FRACTION`` times that while braking (a hold engaged on a moving vehicle brakes with
-    the whole limit, as the feedback would); angles wrap
-    (``angle``). :meth:`step` integrates one control tick in sub-steps of at most 5 ms (semi-implicit Euler) and returns
-    (x_d, x_d', x_d'')."""
+    §10.2), ``1 / REFERENCE_ACCEL_FRACTION`` times that while braking (a hold engaged on a moving
+    vehicle brakes with the whole limit, as the feedback would); angles wrap (``angle``).
+    :meth:`step` integrates one control tick in sub-steps of at most 5 ms (semi-implicit Euler) and
+    returns (x_d, x_d', x_d'')."""
 
     def __init__(self, w: float, zeta: float = 1.0, max_rate: float = math.inf, angle: bool = False,
                  max_accel: float = math.inf) -> None:

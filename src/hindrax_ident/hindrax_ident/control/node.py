@@ -18,11 +18,8 @@ It also publishes ``odom`` (nav_msgs/Odometry) and ``odom -> base_link`` on ``/t
 (REP-105, :mod:`.odometry`) while its sensor streams are open; a malformed ``esc/output_state``
 reads as disarmed.
 
-CPU: every input is a subscription callback on the node's executor. The tick runs at
-``control.rate_hz`` only while enabled: every :data:`ODOM_PERIOD_S` while disabled (one IMU message
-in :data:`IDLE_IMU_EVERY` conditioned, decoded from its CDR bytes only then), every
-:data:`GOAL_TICK_S` with the sensor streams closed while an identification goal runs
-(docs/architecture.md §10.1).
+CPU (docs/control.md §3 items 6-7): the tick runs at ``control.rate_hz`` only while enabled, every
+:data:`ODOM_PERIOD_S` while disabled, every :data:`GOAL_TICK_S` while an identification goal runs.
 
 Parameters: the vehicle configuration (``control.*``) and ``model_file`` (string, read-only, default
 "": identification.yaml to take the model from, "" = the vehicle file); a file that cannot be used

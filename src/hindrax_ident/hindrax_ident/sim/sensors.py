@@ -215,9 +215,8 @@ class NoiseSpec:
 
     @classmethod
     def of(cls, section: Any, unit: str, default_rate_hz: float) -> "NoiseSpec":
-        """From a ``simulation.sensors.<device>`` section: its optional ``noise_std_<unit>``,
-        ``bias_<unit>``, ``rate_hz`` and ``dropout_probability`` (None: absent -> 0, 0,
-        ``default_rate_hz``, 0)."""
+        """From a ``simulation.sensors.<device>`` section (module docstring); absent keys: 0, 0,
+        ``default_rate_hz``, 0."""
         return cls(float(or_default(getattr(section, f"noise_std_{unit}"), 0.0)),
                    float(or_default(getattr(section, f"bias_{unit}"), 0.0)),
                    float(or_default(section.rate_hz, default_rate_hz)),
