@@ -50,12 +50,8 @@ class SerialLockStep:
     """Serve one serial device emulator at the simulator's clock ticks and hold simulated time until its driver has
     handled every byte sent: the serial counterpart of the I2C emulators, which answer inside the driver's call.
 
-    :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`) writes
-    what is due at tick ``t``, the driver's clock already at ``t``, and has the driver read and
-    handle it in the simulator's thread
-    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.pump`); :meth:`settled`
-    (a step gate) lets time advance only when all of it is handled: the driver stamps every
-    message at the tick it was sent, whatever the load.
+    :meth:`tick` is a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode` and
+    :meth:`settled` a step gate: the driver stamps every message at the tick it was sent.
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
