@@ -393,11 +393,10 @@ class ControllerNode(VehicleNode):
         if not est.velocity_known:
             m.twist.covariance[0] = -1.0
         self.pub_odom.publish(m)
-        tf = TransformStamped()
-        tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, "odom", "base_link"
-        tr, rot = tf.transform.translation, tf.transform.rotation
+        tf = TransformStamped(header=m.header, child_frame_id="base_link")  # the same pose
+        tr = tf.transform.translation
         tr.x, tr.y, tr.z = p.x, p.y, p.z
-        rot.x, rot.y, rot.z, rot.w = q.x, q.y, q.z, q.w
+        tf.transform.rotation = q
         self.pub_tf.publish(TFMessage(transforms=[tf]))
 
     def clock_may_advance(self, t_s: float) -> bool:
