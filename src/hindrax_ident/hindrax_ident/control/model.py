@@ -48,10 +48,8 @@ __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "
 #: Source name of a value taken from the vehicle file.
 VEHICLE_FILE = "vehicle file"
 #: Substrings of verdict reasons (:mod:`hindrax_ident.identification.assessment.verdicts`) that do not disqualify a
-#: parameter for control in commanded-thrust units: a constant force other than the expected one (it is the measured
-#: holding force, which the feedforward should use) and the thrust curve differing from the vehicle (a uniform thrust
-#: scale cancels). A reason that matches none of them makes the parameter fall back (if the wording changes, it falls
-#: back: safe).
+#: parameter for control in commanded-thrust units (docs/control.md §4, "Verdicts"); any other
+#: reason makes it fall back (if the wording changes, it falls back: safe).
 CONTROL_IRRELEVANT_REASONS = ("differs from the expected", "the thrust curves do not match the vehicle")
 #: Width of the thrust scales that explain an identified holding force, in declared thrust-curve
 #: 1-sigmas (:func:`unexplained_bias`).

@@ -358,11 +358,9 @@ def jsonable(x: Any) -> Any:
 
 
 def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) -> Path:
-    """``control.json`` in ``out_dir``: ``cases`` (one per manoeuvre and hold, the mean over the seeds: maneuver,
-    model, rmse, rmse_setpoint, overshoot, settling_time_s, effort_n_rms, each with ``_std``, seeds, unit), ``runs``
-    (the same per seed), ``ratios`` and ``info``; and ``report/index.html`` with one plot per manoeuvre (response of
-    every hold for the first seed, the specified response and the setpoint; thrust effort). Returns the control.json
-    path. A settling time that never came is null."""
+    """``control.json`` (``cases``, ``runs``, ``ratios``, ``info``) and ``report/index.html`` in
+    ``out_dir``, as docs/control.md §6 lists them; a settling time that never came is null. Returns
+    the control.json path."""
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
     summary = summarise(cases)
