@@ -227,7 +227,6 @@ class _Axis:
         self.integral = 0.0
         self.engaged = False
         self.saturated_dir = 0  # from the allocation: +1 the axis got less than asked upwards, -1 downwards
-        self.last = {}
 
     def release(self) -> None:
         """The DOF is free (or its measurement invalid): the next hold starts from the measured state."""
@@ -251,7 +250,6 @@ class _Axis:
             self.integral = min(max(self.integral, self.lo / (m * ki) / max(proj, 1e-6)),
                                 self.hi / (m * ki) / max(proj, 1e-6))
         out = proj * (ff + fb + m * ki * self.integral)
-        self.last = {"ff": proj * ff, "fb": proj * fb, "i": proj * m * ki * self.integral, "error": e}
         return float(min(max(out, self.lo), self.hi))
 
 
@@ -282,9 +280,7 @@ class PositionAxis(_Axis):
         de = vd - (v if math.isfinite(v) else 0.0)
         ff = m.inertia * ad + m.damping(vd) + m.bias + m.restoring * math.sin(xd)
         fb = m.inertia * (self.gains.kp * e + self.gains.kd * de)
-        out = self._close(ff, fb, e, dt, proj)
-        self.last.update(desired=xd, desired_rate=vd)
-        return out
+        return self._close(ff, fb, e, dt, proj)
 
 
 class VelocityAxis(_Axis):
@@ -313,9 +309,7 @@ class VelocityAxis(_Axis):
         e = self.ud - u
         ff = m.inertia * a + m.damping(self.ud)
         fb = m.inertia * self.gains.kp * e
-        out = self._close(ff, fb, e, dt, 1.0)
-        self.last.update(desired=self.ud)
-        return out
+        return self._close(ff, fb, e, dt, 1.0)
 
 
 class FloorEstimator:
