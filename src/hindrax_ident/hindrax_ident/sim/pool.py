@@ -220,12 +220,11 @@ class Pool:
         self._since.clear()
         self._t = 0.0
 
-    def resolve(self, state: list[float], t_s: float) -> bool:
+    def resolve(self, state: list[float], t_s: float) -> None:
         """Enforce the box on ``state`` (13 floats, modified in place) at simulated time ``t_s``.
 
         Clamps the position so the hull box is inside the pool and removes the velocity into a touched face
-        (module docstring); updates the contact report. Returns True when a solid face (wall or floor) is
-        touched.
+        (module docstring); updates the contact report (:attr:`contact`).
         """
         _, _, _, qx, qy, qz, qw = state[:7]
         xx, yy, zz = qx * qx, qy * qy, qz * qz
@@ -266,7 +265,6 @@ class Pool:
         for face in touched:
             self._since.setdefault(face, t_s)
         self._t = t_s
-        return any(f != "surface" for f in touched)
 
     @staticmethod
     def _remove_velocity(state: list[float], r, axis: int, sign: float, v_ned):
