@@ -244,9 +244,7 @@ class SensorModel:
         self._walk = np.zeros(3)
         self._walk_t: float | None = None
         self.walk_rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99), 1000]))
-        self._k = 0
-        self._t0 = 0.0
-        self.next_due_s = 0.0
+        self.reset()
 
     def reset(self, t_s: float = 0.0) -> None:
         """Restart the sampling grid at ``t_s`` (the noise streams continue)."""

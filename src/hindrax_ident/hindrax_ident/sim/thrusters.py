@@ -58,9 +58,7 @@ class Thrusters:
         self.time_constant_s = float(t.time_constant_s)
         self.lag = ThrustLag(self.time_constant_s)
         self.matrix_co.flags.writeable = False
-        self.pulse_width_us = np.full(self.n, self.neutral_us)
-        self.commanded_force_n = np.zeros(self.n)
-        self.force_n = np.zeros(self.n)
+        self.reset()
 
     def reset(self) -> None:
         """All thrusters stopped: neutral pulse widths, zero thrust."""
