@@ -425,7 +425,6 @@ class Controller:
         self.model = model
         self.settings = settings or ControlSettings()
         s = self.settings
-        self.authority = a
         lim = s.hold_fraction * a
         #: acceleration limit of each reference model: REFERENCE_ACCEL_FRACTION of the smaller limit over the inertia
         #: (the rest of the force is left to the damping, the net buoyancy and the feedback), unless given

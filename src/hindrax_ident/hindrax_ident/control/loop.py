@@ -37,7 +37,6 @@ class HoldLoop:
     interface; tick_s: the control period (s)."""
 
     def __init__(self, cfg: VehicleConfig, hold: Any, tick_s: float) -> None:
-        self.cfg = cfg
         self.hold = hold
         self.tick_s = float(tick_s)
         self.state = SensorState(cfg)

@@ -138,7 +138,6 @@ class Campaign:
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
                  seed: int | None = None, progress: Callable[[str], None] | None = None,
                  real_time_factor: float = 0.0, sim: Simulator | None = None, **executive) -> None:
-        self.cfg = cfg
         self.seed = int(cfg.simulation.seed if seed is None else seed)
         self.sim = sim if sim is not None else Simulator(cfg, seed=self.seed)
         rate = float(cfg.identification.estimate_rate_hz)
