@@ -30,16 +30,7 @@ from ..identification.online.executive import CampaignAbort, Executive, TickInpu
 from ..identification.online.steps import Ballast, Float, Inclining, LinePull
 from .simulator import Simulator
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "inclining_wrench_frd", "PoolOperator"]
-
-
-def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, dof: str) -> np.ndarray:
-    """Wrench (6,) FRD about the body origin (the CG) of an inclining test mass: its weight in water ``weight_n``
-    (NED down) hung at ``arm_m`` along body +y (``dof`` roll) or +x (pitch) at the CG's height; ``rotation`` (3, 3)
-    body -> NED. Force R^T [0, 0, w], moment r x force."""
-    f = np.asarray(rotation, dtype=float).T @ np.array([0.0, 0.0, float(weight_n)])
-    r = np.array([0.0, float(arm_m), 0.0]) if dof == "roll" else np.array([float(arm_m), 0.0, 0.0])
-    return np.concatenate([f, np.cross(r, f)])
+__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "PoolOperator"]
 
 
 class PoolOperator:
@@ -111,8 +102,12 @@ class PoolOperator:
         """The wrench (6,) FRD about the body origin of the applied forces, vehicle at ``rotation`` body -> NED."""
         ext = np.zeros(6)
         rt = np.asarray(rotation).T  # NED -> body
-        if self.inclining is not None:
-            ext += inclining_wrench_frd(rotation, *self.inclining_load_n_m, self.inclining)
+        if self.inclining is not None:  # weight in water at its arm, body +y (roll) or +x (pitch)
+            weight_n, arm_m = self.inclining_load_n_m
+            f = rt @ np.array([0.0, 0.0, weight_n])
+            r = np.zeros(3)
+            r[1 if self.inclining == "roll" else 0] = arm_m
+            ext += np.concatenate([f, np.cross(r, f)])
         if self.ballast_on:
             ext[:3] += rt @ np.array([0.0, 0.0, self.ballast_weight_n])
         if self.float_on:
