@@ -58,10 +58,6 @@ class HoldLoop:
                 if cut:
                     del log[:cut]
 
-    def depth_now(self, t_s: float) -> tuple[float, float]:
-        """(depth m, depth rate m/s) of the body origin predicted to ``t_s`` (NaN before the first depth)."""
-        return self.depth.predict_to(t_s)
-
     def wrench(self, t_s: float, free: Sequence[str] = ()) -> np.ndarray:
         """FRD wrench (6,) of the hold for the tick at ``t_s`` (s)."""
         depth, rate = self.depth.predict_to(t_s)

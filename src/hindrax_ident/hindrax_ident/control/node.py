@@ -287,7 +287,7 @@ class ControllerNode(VehicleNode):
 
     def _hold_current(self) -> None:
         st = self.loop.state
-        depth, _rate = self.loop.depth_now(self._now_s())
+        depth, _rate = self.loop.depth.predict_to(self._now_s())
         msg = ControlSetpoint()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = "base_link"
@@ -433,7 +433,7 @@ class ControllerNode(VehicleNode):
         m.heading_setpoint_rad = float(h.heading_setpoint_rad)
         v = np.asarray(h.velocity_setpoint_m_s, dtype=float)
         m.surge_setpoint_m_s, m.sway_setpoint_m_s = float(v[0]), float(-v[1])
-        depth, _ = self.loop.depth_now(t)
+        depth, _ = self.loop.depth.predict_to(t)
         m.depth_m = float(depth)
         m.altitude_m = float(st.altitude_m)
         m.heading_rad = float(st.rpy_now()[2])

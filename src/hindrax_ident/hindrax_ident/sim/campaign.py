@@ -153,11 +153,6 @@ class Campaign:
         self._wall0 = 0.0
         self._sim0 = 0.0
 
-    @property
-    def online(self) -> dict:
-        """DOF -> :class:`~..identification.online.estimators.OnlineDofEstimator` of the executive."""
-        return self.executive.online
-
     def tick(self, wrench_frd: np.ndarray) -> np.ndarray | None:
         """Command ``wrench_frd`` (6,) FRD for one control tick on the simulator and hand the tick to the executive;
         returns the executive's next wrench, None once the campaign has finished."""

@@ -201,7 +201,7 @@ class VirtualHardware:
     def _ensure_samples(self) -> None:
         """Step the unpowered simulator until every device has produced a first sample (<= 1 s simulated)."""
         for _ in range(int(1.0 / self.sim.step_s) + 1):
-            if all(self.sim.latest_sample(d) is not None for d in self.sim.sensors.models):
+            if all(self.sim.sensors.latest.get(d) is not None for d in self.sim.sensors.models):
                 return
             self.sim.step(None)
 
@@ -210,7 +210,8 @@ class VirtualHardware:
         # measured at the ping (the emulator's cycle): the driver's time of validity (middle of the $DVPDL
         # interval of the trapezoidal deltas) is then exact; a dropout is a ping without bottom lock
         v = self.sim.measure("dvl75", dropout=True)
-        a = self.sim.measure("dvl75_attitude", dropout=True) or self.sim.latest_sample("dvl75_attitude")
+        latest = self.sim.sensors.latest
+        a = self.sim.measure("dvl75_attitude", dropout=True) or latest.get("dvl75_attitude")
         locked = bool(v is not None and v.locked and all(math.isfinite(x) for x in v.velocity_frd_m_s))
         altitude = v.altitude_m if v is not None and math.isfinite(v.altitude_m) else None
         roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a is not None else (0.0, 0.0, 0.0)

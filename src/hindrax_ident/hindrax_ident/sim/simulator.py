@@ -364,10 +364,6 @@ class Simulator:
             best = st
         return list(best)
 
-    def latest_sample(self, device: str) -> Any | None:
-        """Newest sample of a sensor device (None before its first sample or when disabled)."""
-        return self.sensors.latest.get(device)
-
     def measure(self, device: str, dropout: bool = False) -> Any | None:
         """A sample of ``device`` on the vehicle as it is now (:meth:`SensorSuite.measure`: noise and bias, off the
         device's rate grid; None when ``dropout`` and the device drops it). Raises ``KeyError`` for a disabled
