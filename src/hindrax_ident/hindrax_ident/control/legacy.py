@@ -35,7 +35,6 @@ class LegacyPDHold:
         self.hold_fraction = float(hold_fraction)
         self.net_buoyancy_n = float(cfg.buoyancy_n - cfg.weight_n)  # FRD force holding depth (down)
         self.depth_setpoint_m = math.nan
-        self.altitude_setpoint_m = math.nan  # not used by this law (the caller moves the depth setpoint)
         self.heading_setpoint_rad = 0.0
         self.velocity_setpoint_m_s = np.zeros(2)
         self.attitude_setpoint_rad = np.zeros(2)

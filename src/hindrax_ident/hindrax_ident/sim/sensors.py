@@ -233,7 +233,6 @@ class SensorModel:
     def __init__(self, name: str, spec: NoiseSpec, seed: int) -> None:
         if spec.rate_hz <= 0.0:
             raise ValueError(f"{name}: rate_hz must be positive, got {spec.rate_hz}")
-        self.name = name
         self.spec = spec
         self.period_s = 1.0 / spec.rate_hz
         self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99)]))
