@@ -426,8 +426,7 @@ class Controller:
         self.settings = settings or ControlSettings()
         s = self.settings
         lim = s.hold_fraction * a
-        #: acceleration limit of each reference model: REFERENCE_ACCEL_FRACTION of the smaller limit over the inertia
-        #: (the rest of the force is left to the damping, the net buoyancy and the feedback), unless given
+        # the default of the class docstring, on the smaller of the axis' two limits
         self.reference_accel = {d: REFERENCE_ACCEL_FRACTION * float(np.min(lim[i])) / model.axis(d).inertia
                                 for i, d in enumerate(DOFS)}
         if reference_accel:
