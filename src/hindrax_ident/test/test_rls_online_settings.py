@@ -60,7 +60,7 @@ def test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign(cfg):
     surge quadratic damping prior is 93 kg/m, the truth 66.5 kg/m), the last within a few per cent of the truth,
     no divergence, no change detected in a pool that does not change."""
     c = Campaign(cfg, dofs=["surge"], levels=3, seed=2)
-    est = c.online["surge"]
+    est = c.executive.online["surge"]
     first = {}
     orig = est.rls.update
 

@@ -83,7 +83,7 @@ def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample
         pressure_pa = float(np.mean([vh.emulators["ms5837"].truth(0.0)[0] for _ in range(20)]))
         port_depth = (pressure_pa - cfg.environment.surface_pressure_pa) / rho_g
         errors.append(port_depth - port_z - sim.position_ned_m[2])
-        stale.append(sim.t_s - sim.latest_sample("ms5837").stamp_s)
+        stale.append(sim.t_s - sim.sensors.latest["ms5837"].stamp_s)
     assert max(stale) > 0.05  # the grid sample was old at several of these reads
     noise_m = cfg.simulation.sensors.ms5837.noise_std_pa / rho_g / np.sqrt(20)
     assert np.max(np.abs(errors)) < 0.002 + 4 * noise_m  # the depth now (a 50 ms old sample is 15 mm off)

@@ -315,14 +315,14 @@ def test_surge_and_sway_pairs_make_no_yaw(cfg):
     thr = Thrusters(cfg)
     thr.command([1700, 1700, 1500, 1500, 1500, 1500, 1500, 1500])
     thr.advance(10.0)  # many time constants: the thrust equals its command
-    w = thr.wrench_cg()
+    w = thr.wrench_co()  # about the CG: the body origin is at the CG
     f = thr.commanded_force_n[0]
     assert f > 5.0
     assert w[0] == pytest.approx(2 * f * math.cos(math.radians(55)), rel=1e-6)  # config rounds to 6 digits
     assert abs(w[1]) < 1e-9 and abs(w[5]) < 1e-9
     thr.command([1700, 1500, 1700, 1500, 1500, 1500, 1500, 1500])
     thr.advance(10.0)
-    w = thr.wrench_cg()
+    w = thr.wrench_co()
     assert w[1] == pytest.approx(2 * f * math.sin(math.radians(55)), rel=1e-6)
     assert abs(w[0]) < 1e-9 and abs(w[5]) < 1e-9
 

@@ -173,7 +173,7 @@ def test_rates_and_dropout(cfg):
         assert counts[dev] == pytest.approx(expected, rel=0.05, abs=2), dev
     n_ping = 20.0 * c.simulation.sensors.ping1d.rate_hz
     assert counts["ping1d"] == pytest.approx(0.7 * n_ping, abs=4 * math.sqrt(n_ping * 0.21))
-    assert sim.latest_sample("ms5837").stamp_s == pytest.approx(20.0, abs=0.11)
+    assert sim.sensors.latest["ms5837"].stamp_s == pytest.approx(20.0, abs=0.11)
 
 
 def test_device_streams_do_not_depend_on_other_devices(cfg):

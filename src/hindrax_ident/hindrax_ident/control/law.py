@@ -1,49 +1,35 @@
 """The control law: depth / altitude, heading, roll, pitch and surge/sway velocity holds from a model (pure numpy).
 
-**Law** ([Fossen2011] §10.2 reference models, §12.2 PID control with reference feedforward, and §13.2 state
-feedback linearisation, whose feedforward part this is; docs/control.md §2). For each held DOF with the model of
-:mod:`.model` (inertia M, damping D(v), constant force b, restoring k_r):
+Per held DOF, with the model of :mod:`.model` (inertia M, damping D(v), constant force b, restoring
+k_r), the law of docs/control.md §2 (its items 1-6 give the reasons and the numbers):
 
-* a **reference model** (:class:`ReferenceModel`) turns the setpoint r into a smooth desired state: the critically
-  damped second-order response x_d'' = w^2 (r - x_d) - 2 zeta w x_d' at the target bandwidth w, with the desired rate
-  limited (``max_depth_rate_m_s``, ``max_yaw_rate_rad_s``) and the desired acceleration to
-  :data:`REFERENCE_ACCEL_FRACTION` of the axis' force limit over the model's inertia while speeding up (the whole
-  limit while braking); surge and sway velocities pass a first-order filter at their bandwidth. Engaging a hold (at
-  start, or after the DOF was free) starts it at the measured state (bumpless transfer);
-* **feedforward** of the model at the desired state: tau_ff = M x_d'' + D(x_d') + b + k_r sin(x_d) (heave: b = the net
-  buoyancy B - W; roll, pitch: the restoring moment);
-* **feedback** PID on e = x_d - x: tau_fb = M (k_p e + k_d e' + k_i int e) with k_p = w_c^2, k_d = 2 zeta w_c,
-  k_i = w_c k_p / 10 ([Fossen2011] §12.2: the integral gain a tenth of the bandwidth times k_p), velocity holds
-  k_v = w_c, k_i = w_c k_v / 10. With the model right, the error dynamics are those of a pure inertia and the
-  closed loop has bandwidth w_c;
-* **robust bandwidth**: the model's inertia is uncertain by sigma (relative, 1-sigma); at the 95 % bound the loop
-  gain is 1 / (1 - 1.96 sigma) too high, which moves the crossover towards the thruster lag and the sensor delays, so
-  the feedback bandwidth is lowered to w_c = w (1 - 1.96 sigma) (not below w / 2). The reference model keeps the
-  target w: every model is asked for the same response;
-* **saturation and anti-windup**: each component of the body wrench is clipped to ``hold_fraction`` of the axis'
-  authority (from the thrust allocation, per direction); the integrator stops integrating while the output is
-  clipped, or the allocation reported the axis short (:meth:`Controller.note_allocation`, from
-  ``allocation/status``' achieved wrench), in the direction of the error (conditional integration, [AstromHagglund2006]
-  Ch. 3), and the integral term alone never exceeds the limit.
+* a **reference model** (:class:`ReferenceModel`, [Fossen2011] §10.2) turns the setpoint r into a
+  smooth desired state, rate- and acceleration-limited; surge and sway velocities pass a first-order
+  filter. Engaging a hold starts it at the measured state (bumpless transfer);
+* **feedforward** of the model at the desired state ([Fossen2011] §13.2):
+  tau_ff = M x_d'' + D(x_d') + b + k_r sin(x_d) (heave: b = the net buoyancy B - W; roll, pitch: the
+  restoring moment);
+* **feedback** PID on e = x_d - x ([Fossen2011] §12.2): tau_fb = M (k_p e + k_d e' + k_i int e) with
+  k_p = w_c^2, k_d = 2 zeta w_c, k_i = w_c k_p / 10 (velocity holds k_v = w_c, k_i = w_c k_v / 10),
+  at the bandwidth w_c = w (1 - 1.96 sigma) that the inertia's relative 1-sigma sigma allows (not
+  below w / 2, :func:`design_gains`);
+* **saturation and anti-windup**: each wrench component clipped to ``hold_fraction`` of the axis'
+  authority per direction; conditional integration ([AstromHagglund2006] Ch. 3) stops while the
+  output is clipped or the allocation reported the axis short (:meth:`Controller.note_allocation`)
+  in the direction of the error.
 
 Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis
-as Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range: the floor under the
-vehicle is a local plane (:class:`FloorEstimator`, a linear Kalman filter on the floor depth under
-the body origin and its gradient), fed with every range as a floor point (the Ping1D along body z
-and the four DVL-75 beams, each beam's variance including the plane's own error at its distance from
-the altimeter's footprint, :data:`FLOOR_SLOPE_CHANGE_STD`); the depth hold follows
-x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d',
-x_d'' = g . a_ref + g' . v_ref - a_d'' with g the gradient, g' its low-passed time derivative (a
-floor whose slope changes under the moving vehicle, :meth:`Controller._floor_gradient_rate`), v_ref
-and a_ref the surge/sway references in NED and a_d the reference model of the altitude setpoint: the
-floor's rate and acceleration under a moving vehicle are fed forward before the altimeter sees them.
+as Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range over a local floor plane
+(:class:`FloorEstimator`, fed with the Ping1D and the DVL-75 beam ranges as floor points), whose
+rate and acceleration under the moving vehicle are fed forward (:meth:`Controller._vertical`).
 
-Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
-maintained Python library implements marine model-based PID with reference feedforward. The floor filter steps with
-:class:`~hindrax_ident.estimation.kalman.LinearKalman`, filterpy's predict/update equations without
-scipy (that module's docstring).
+Why our own code: the reference model, feedforward and anti-windup are a few lines each around the
+model, and no maintained Python library implements marine model-based PID with reference
+feedforward. The floor filter steps with :class:`~hindrax_ident.estimation.kalman.LinearKalman`,
+filterpy's predict/update equations without scipy (that module's docstring).
 
-Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north.
+Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from
+north.
 """
 from __future__ import annotations
 
@@ -180,10 +166,10 @@ def design_gains(axis: AxisModel, w_target: float, zeta: float = 1.0, velocity: 
 class ReferenceModel:
     """Critically damped (``zeta``) second-order reference x_d'' = w^2 (r - x_d) - 2 zeta w x_d', with the rate limited
     to ``max_rate`` and the acceleration to ``max_accel`` while speeding up (the saturating elements of [Fossen2011]
-    §10.2), ``1 / REFERENCE_ACCEL_FRACTION`` times that while braking (a hold engaged on a moving vehicle brakes with
-    the whole limit, as the feedback would); angles wrap
-    (``angle``). :meth:`step` integrates one control tick in sub-steps of at most 5 ms (semi-implicit Euler) and returns
-    (x_d, x_d', x_d'')."""
+    §10.2), ``1 / REFERENCE_ACCEL_FRACTION`` times that while braking (a hold engaged on a moving
+    vehicle brakes with the whole limit, as the feedback would); angles wrap (``angle``).
+    :meth:`step` integrates one control tick in sub-steps of at most 5 ms (semi-implicit Euler) and
+    returns (x_d, x_d', x_d'')."""
 
     def __init__(self, w: float, zeta: float = 1.0, max_rate: float = math.inf, angle: bool = False,
                  max_accel: float = math.inf) -> None:
@@ -241,7 +227,6 @@ class _Axis:
         self.integral = 0.0
         self.engaged = False
         self.saturated_dir = 0  # from the allocation: +1 the axis got less than asked upwards, -1 downwards
-        self.last = {}
 
     def release(self) -> None:
         """The DOF is free (or its measurement invalid): the next hold starts from the measured state."""
@@ -265,7 +250,6 @@ class _Axis:
             self.integral = min(max(self.integral, self.lo / (m * ki) / max(proj, 1e-6)),
                                 self.hi / (m * ki) / max(proj, 1e-6))
         out = proj * (ff + fb + m * ki * self.integral)
-        self.last = {"ff": proj * ff, "fb": proj * fb, "i": proj * m * ki * self.integral, "error": e}
         return float(min(max(out, self.lo), self.hi))
 
 
@@ -296,9 +280,7 @@ class PositionAxis(_Axis):
         de = vd - (v if math.isfinite(v) else 0.0)
         ff = m.inertia * ad + m.damping(vd) + m.bias + m.restoring * math.sin(xd)
         fb = m.inertia * (self.gains.kp * e + self.gains.kd * de)
-        out = self._close(ff, fb, e, dt, proj)
-        self.last.update(desired=xd, desired_rate=vd)
-        return out
+        return self._close(ff, fb, e, dt, proj)
 
 
 class VelocityAxis(_Axis):
@@ -327,25 +309,20 @@ class VelocityAxis(_Axis):
         e = self.ud - u
         ff = m.inertia * a + m.damping(self.ud)
         fb = m.inertia * self.gains.kp * e
-        out = self._close(ff, fb, e, dt, 1.0)
-        self.last.update(desired=self.ud)
-        return out
+        return self._close(ff, fb, e, dt, 1.0)
 
 
 class FloorEstimator:
-    """The floor under the vehicle as a local plane: depth z_f at the body origin's horizontal position (NED z, m)
-    and its gradient (g_n, g_e) (depth change per metre north and east); a linear Kalman filter
+    """The floor under the vehicle as a local plane (docs/control.md §2 item 6): depth z_f at the
+    body origin's horizontal position (NED z, m) and its gradient (g_n, g_e) (depth change per metre
+    north and east); a linear Kalman filter
     (:class:`~hindrax_ident.estimation.kalman.LinearKalman`).
 
-    Each range is a point of the floor: the Ping1D along the body z axis and each DVL-75 beam
-    (:func:`hindrax_drivers.dvl75.protocol.beam_directions_frd`) give the point's depth and horizontal offset from
-    the body origin, a measurement z_f + g_n dN + g_e dE (:meth:`update_point`); the beams of one DVL report at once
-    give the slope. Between points the vehicle moves by v dt, so the state advances as z_f += g . v dt
-    (:meth:`predict_to`, with the measured horizontal velocity, NED). Process noise: the floor's depth and slope
-    change as a random walk in time, and the slope also as a random walk in the distance travelled
-    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`): a floor's slope changes along the track, not while
-    the vehicle hovers. :meth:`floor_at` returns the depth and gradient now; without any range for
-    :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
+    Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement
+    z_f + g_n dN + g_e dE (:meth:`update_point`); between points the state advances as
+    z_f += g . v dt (:meth:`predict_to`). The slope walks in time and per metre travelled
+    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`). Without any range for :data:`FLOOR_TIMEOUT_S` the
+    floor is held (``stale``)."""
 
     def __init__(self) -> None:
         self.kf = LinearKalman(3)
@@ -448,10 +425,8 @@ class Controller:
         self.model = model
         self.settings = settings or ControlSettings()
         s = self.settings
-        self.authority = a
         lim = s.hold_fraction * a
-        #: acceleration limit of each reference model: REFERENCE_ACCEL_FRACTION of the smaller limit over the inertia
-        #: (the rest of the force is left to the damping, the net buoyancy and the feedback), unless given
+        # the default of the class docstring, on the smaller of the axis' two limits
         self.reference_accel = {d: REFERENCE_ACCEL_FRACTION * float(np.min(lim[i])) / model.axis(d).inertia
                                 for i, d in enumerate(DOFS)}
         if reference_accel:
@@ -601,21 +576,22 @@ class Controller:
                 continue
             w[k] = ax.update(sp, float(vel[k]), dt)
         w[2] = self._vertical(inp, dt, free, rpy)
-        for k, dof in ((3, "roll"), (4, "pitch")):
+        for k, dof, sp, measured in ((3, "roll", self.attitude_rad[0], inp.rpy_rad[:2]),
+                                     (4, "pitch", self.attitude_rad[1], inp.rpy_rad[:2]),
+                                     (5, "yaw", self.heading_rad, inp.rpy_rad[2:])):
             ax = self.axes[dof]
-            sp = float(self.attitude_rad[k - 3])
-            if dof in free or not math.isfinite(sp) or not np.all(np.isfinite(inp.rpy_rad[:2])):
+            if dof in free or not math.isfinite(sp) or not np.all(np.isfinite(measured)):
                 ax.release()
                 continue
-            w[k] = ax.update(sp, float(rpy[k - 3]), float(rates[k - 3]), dt)
-        ax = self.axes["yaw"]
-        if "yaw" in free or not math.isfinite(self.heading_rad) or not math.isfinite(float(inp.rpy_rad[2])):
-            ax.release()
-        else:
-            w[5] = ax.update(float(self.heading_rad), float(rpy[2]), float(rates[2]), dt)
+            w[k] = ax.update(float(sp), float(rpy[k - 3]), float(rates[k - 3]), dt)
         return w
 
     def _vertical(self, inp: ControlInput, dt: float, free: Sequence[str], rpy: np.ndarray) -> float:
+        """Heave force of the depth or altitude hold. Altitude: the depth hold follows
+        x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d',
+        x_d'' = g . a_ref + g' . v_ref - a_d'', with g the floor gradient, g' its low-passed time
+        derivative (:meth:`_floor_gradient_rate`), v_ref and a_ref the surge/sway references in NED
+        and a_d the reference model of the altitude setpoint."""
         ax = self.axes["heave"]
         z, zr = inp.depth_m, inp.depth_rate_m_s
         if "heave" in free or not math.isfinite(z) or not (math.isfinite(self.depth_m)

@@ -16,7 +16,7 @@ import numpy as np
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.frames import wrap_angle
 
-from .model import rigid_inertia
+from .model import prior_inertia
 
 __all__ = ["LegacyPDHold"]
 
@@ -29,15 +29,12 @@ class LegacyPDHold:
 
     def __init__(self, cfg: VehicleConfig, authority: Sequence[float], natural_frequency_rad_s: float = 2.0,
                  hold_fraction: float = 0.6) -> None:
-        self.cfg = cfg
         self.authority = np.asarray(authority, dtype=float)
-        self.inertia = np.array([rigid_inertia(cfg, d) + float(cfg.added_mass_matrix[i, i])
-                                 for i, d in enumerate(DOFS)])
+        self.inertia = np.array([prior_inertia(cfg, d) for d in DOFS])
         self.wn = float(natural_frequency_rad_s)
         self.hold_fraction = float(hold_fraction)
         self.net_buoyancy_n = float(cfg.buoyancy_n - cfg.weight_n)  # FRD force holding depth (down)
         self.depth_setpoint_m = math.nan
-        self.altitude_setpoint_m = math.nan  # not used by this law (the caller moves the depth setpoint)
         self.heading_setpoint_rad = 0.0
         self.velocity_setpoint_m_s = np.zeros(2)
         self.attitude_setpoint_rad = np.zeros(2)

@@ -1,18 +1,17 @@
 """Sensor samples in, wrench out: the campaign's conditioning around a hold (docs/control.md §5).
 
-:class:`HoldLoop` owns a :class:`~hindrax_ident.vehicle.state.SensorState` (depth of the body origin from the MS5837
-with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
-:class:`~hindrax_ident.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused with the vertical
-acceleration), exactly as the identification executive does, and hands them to a hold
-(:class:`~hindrax_ident.control.maneuvers.HoldController` or :class:`~hindrax_ident.control.legacy.LegacyPDHold`).
-The controller node (:mod:`.node`) feeds it the samples of the driver topics (:mod:`hindrax_ident.vehicle.signals`),
-the evaluation (:mod:`.evaluate`) those of the in-process simulator. Pure, no ROS.
+:class:`HoldLoop` owns a :class:`~hindrax_ident.vehicle.state.SensorState` (depth of the body origin
+from the MS5837 with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
+:class:`~hindrax_ident.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused
+with the vertical acceleration), exactly as the identification executive does, and hands them to a
+hold (:class:`~hindrax_ident.control.maneuvers.HoldController` or
+:class:`~hindrax_ident.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it
+the samples of the driver topics (:mod:`hindrax_ident.vehicle.signals`), the evaluation
+(:mod:`hindrax_ident.sim.control_evaluate`) those of the in-process simulator. Pure, no ROS.
 
-Memory: the state's sample logs (``SensorState.log``, which the identification executive keeps whole for its
-campaign record) are cut here to the last :data:`LOG_HORIZON_S` seconds of samples after every batch: the holds
-read only recent samples (rates and attitude interpolated at the stamps of the newest DVL and Ping1D samples), and
-the controller runs between goals for hours with its streams open, and its six lists grew without bound: 58 kB per
-second of samples in the virtual pool (IMU at 100 Hz; about 30 kB/s at the vehicle's 51 Hz), 100-200 MB an hour.
+Memory: the controller runs for hours, so the state's sample logs (``SensorState.log``, which the
+identification executive keeps whole for its campaign record) are cut here to the last
+:data:`LOG_HORIZON_S` seconds after every batch: the holds read only recent samples.
 """
 from __future__ import annotations
 
@@ -38,7 +37,6 @@ class HoldLoop:
     interface; tick_s: the control period (s)."""
 
     def __init__(self, cfg: VehicleConfig, hold: Any, tick_s: float) -> None:
-        self.cfg = cfg
         self.hold = hold
         self.tick_s = float(tick_s)
         self.state = SensorState(cfg)
@@ -59,10 +57,6 @@ class HoldLoop:
                 cut = bisect.bisect_left(log, log[-1][0] - LOG_HORIZON_S, hi=len(log) - 1, key=lambda e: e[0])
                 if cut:
                     del log[:cut]
-
-    def depth_now(self, t_s: float) -> tuple[float, float]:
-        """(depth m, depth rate m/s) of the body origin predicted to ``t_s`` (NaN before the first depth)."""
-        return self.depth.predict_to(t_s)
 
     def wrench(self, t_s: float, free: Sequence[str] = ()) -> np.ndarray:
         """FRD wrench (6,) of the hold for the tick at ``t_s`` (s)."""

@@ -12,8 +12,6 @@ simulator's truth):
   half the vehicle's extent at walls and floor, ``limits.max_depth_m`` / ``limits.min_altitude_m`` below
   and half the vehicle height plus :data:`SURFACE_CLEARANCE_M` at the free surface (the margin key is
   documented for walls and floor only). Run lengths are planned from the distance left in the box.
-* the sensor state the holds read (:class:`hindrax_ident.vehicle.state.SensorState`) lives with the vehicle's
-  physics, shared with the controller.
 * :class:`HoldController` - holds for depth (or altitude), roll, pitch, heading and surge/sway velocity: the
   model-based law of :mod:`hindrax_ident.control.law` with the vehicle file's model (or an identified one); the
   former PD/PI law is :class:`hindrax_ident.control.legacy.LegacyPDHold`.
@@ -33,7 +31,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from .law import ControlInput, ControlSettings, Controller
-from .model import ControlModel, model_from_config
+from .model import ControlModel, model_from_config, prior_inertia
 from ..vehicle.state import SensorState, rotation_ned_from_body
 
 __all__ = ["DOF_INDEX", "SURFACE_CLEARANCE_M", "dof_authority",
@@ -82,13 +80,6 @@ def tilt_test_angle_rad(cfg: VehicleConfig, dof: str) -> float:
     rad ([Hindrax-Drag] §4.2). Raises KeyError for another DOF."""
     ident = cfg.identification
     return {"roll": ident.roll_test_angle_rad, "pitch": ident.pitch_test_angle_rad}[dof]
-
-
-def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
-    """A-priori rigid + added inertia of a DOF from the configuration (kg or kg m^2), for controller gains."""
-    i = DOF_INDEX[dof]
-    rigid = cfg.vehicle.mass_kg if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
-    return float(rigid + cfg.added_mass_matrix[i, i])
 
 
 @dataclass(frozen=True)
@@ -144,8 +135,7 @@ class PoolBox:
 
 class HoldController:
     """Holds for depth (or altitude), roll, pitch, heading and body velocities from sensor values: the model-based law
-    of :mod:`hindrax_ident.control.law` (reference model, feedforward of the model's inertia, damping, net buoyancy and
-    restoring, PID at a bandwidth lowered by the model's uncertainty, anti-windup; docs/control.md).
+    of :mod:`hindrax_ident.control.law` (docs/control.md §2).
 
     cfg: the vehicle file. authority (6,) or (6, 2): largest wrench per axis (N, N m) from the thrust allocation
     (:func:`dof_authority`). natural_frequency_rad_s: target bandwidth w of the position holds; the velocity holds use

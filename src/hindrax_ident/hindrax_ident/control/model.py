@@ -1,45 +1,31 @@
 """The control model of each DOF: inertia, damping, net buoyancy and restoring, and where each value came from.
 
-The controller (:mod:`.law`) needs, per DOF, the rigid + added inertia M (its feedback gains), the damping
-D(v) = linear v + quadratic |v| v per direction (feedforward), the constant force that holds the vehicle still
-(heave: the net buoyancy B - W, FRD down; feedforward) and, for roll and pitch, the restoring coefficient
-z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources:
+The controller (:mod:`.law`) needs, per DOF, the rigid + added inertia M (its feedback gains), the
+damping D(v) = linear v + quadratic |v| v per direction (feedforward), the constant force that holds
+the vehicle still (heave: the net buoyancy B - W, FRD down; feedforward) and, for roll and pitch,
+the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources
+(docs/control.md §4 gives the rules and why):
 
-* :func:`model_from_config` - the vehicle file (``hydrodynamics.*``, mass, volume, geometry): the model before any
-  identification exists. Its relative inertia uncertainty is the declared thrust-curve uncertainty
-  (``thrusters.thrust_fit_uncertainty_rel`` or ``thrust_uncertainty_rel``, the RMS of the two directions): the
-  file states no uncertainty for its added masses, so this is a lower bound.
-* :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`), read by this
-  small tolerant loader (only ``provenance.vehicle_parameters`` (or, in files written before it,
-  ``provenance.configuration_sha256``), ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and
-  ``joint.scales`` are used; unknown keys are ignored, so the schema may grow).
+* :func:`model_from_config` - the vehicle file (``hydrodynamics.*``, mass, volume, geometry), with
+  the declared thrust-curve uncertainty as the inertia's (a lower bound: the file states none for
+  its added masses).
+* :func:`load_model` - ``identification.yaml``
+  (:mod:`hindrax_ident.identification.assessment.results`), read by this small tolerant loader
+  (``provenance.vehicle_parameters`` or ``provenance.configuration_sha256``,
+  ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and ``joint.scales``; other keys are
+  ignored). Values are in commanded-thrust units: a calibrated file's are divided by the thrust
+  scale of their group. A ``suspect`` parameter, a value that is not a finite number, or a negative
+  inertia or damping falls back to the vehicle file's, except for the reasons of
+  :data:`CONTROL_IRRELEVANT_REASONS`; a heave bias no thrust scale explains
+  (:func:`unexplained_bias`) makes the bias and damping fall back. Each value carries its source
+  (:attr:`AxisModel.sources`).
 
-**Units of thrust.** A self-propelled identification measures every parameter divided by the true thrust scale s
-of the curve (docs/identification.md, "Honest intervals": a uniform thrust error is invisible to the fit). The
-controller commands forces through the same curve, so the model it needs is exactly that one: M / s, D / s,
-(B - W) / s. An uncalibrated ``identification.yaml`` is therefore used as it is; a calibrated one (``joint.scales``
-with a value per DOF group, docs/identification.md §6.2) reports physical values theta = s phi, which are divided by
-that scale back into commanded-thrust units.
+**Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no
+``dofs`` mapping, or an identification of another vehicle (matched by
+:mod:`hindrax_ident.vehicle.vehicle_match`) raise :class:`ModelFileError` (one line).
 
-**Verdicts.** A parameter whose ``verdict`` is ``suspect`` falls back to the vehicle file's value, except when every
-one of its reasons only says that the thrust curve or a constant force differs from the vehicle file
-(:data:`CONTROL_IRRELEVANT_REASONS`: the heave bias differing from the net buoyancy, and the cross-DOF "thrust curves do
-not match" reason): in commanded-thrust units those are exactly what the controller must use, as long as a thrust
-scale explains them. A heave bias that no thrust scale explains (:func:`unexplained_bias`: e.g. -0.014 N where the
-file's net buoyancy is +0.785 N, with forward and reverse thrust 5 and 15 % weak) is a force error: the fit put the
-constant force into the per-direction damping, so the bias and the damping fall back to the vehicle file, the
-inertia (from the accelerations) stays identified. A value that is not a
-finite number, or a negative inertia or damping, also falls back. Each value carries its source
-(:attr:`AxisModel.sources`).
-
-**Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no ``dofs``
-mapping, or an identification of another vehicle raise :class:`ModelFileError` (one line). The vehicle is matched
-by the parameters the identification depends on (``provenance.vehicle_parameters``,
-:mod:`hindrax_ident.vehicle.vehicle_match`: mass properties, thrust model, sensor mounting), so
-editing a comment, the ESC calibration or the disk floor keeps it valid; a file written before that section is matched
-by ``provenance.configuration_sha256`` (the vehicle file's text).
-
-Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards.
+Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is
+downwards.
 """
 from __future__ import annotations
 
@@ -56,21 +42,17 @@ from ..vehicle.vehicle_match import parameter_differences
 from ..vehicle.uncertainty import declared_rel
 
 __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "load_model", "rigid_inertia",
-           "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",
-           "BIAS_THRUST_SCALE_SIGMAS", "unexplained_bias"]
+           "prior_inertia", "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS",
+           "VEHICLE_FILE", "BIAS_THRUST_SCALE_SIGMAS", "unexplained_bias"]
 
 #: Source name of a value taken from the vehicle file.
 VEHICLE_FILE = "vehicle file"
 #: Substrings of verdict reasons (:mod:`hindrax_ident.identification.assessment.verdicts`) that do not disqualify a
-#: parameter for control in commanded-thrust units: a constant force other than the expected one (it is the measured
-#: holding force, which the feedforward should use) and the thrust curve differing from the vehicle (a uniform thrust
-#: scale cancels). A reason that matches none of them makes the parameter fall back (if the wording changes, it falls
-#: back: safe).
+#: parameter for control in commanded-thrust units (docs/control.md §4, "Verdicts"); any other
+#: reason makes it fall back (if the wording changes, it falls back: safe).
 CONTROL_IRRELEVANT_REASONS = ("differs from the expected", "the thrust curves do not match the vehicle")
-#: A holding force (heave: the net buoyancy) in commanded-thrust units is the vehicle file's over the true thrust scale
-#: s; an identified one outside 1 / (1 +- this many times the larger declared thrust-curve 1-sigma) of the file's is no
-#: thrust scale but a force error (an asymmetric thrust, a tether, a fit that put the constant force into the
-#: per-direction damping): the DOF's force terms (bias and damping) then fall back (:func:`unexplained_bias`).
+#: Width of the thrust scales that explain an identified holding force, in declared thrust-curve
+#: 1-sigmas (:func:`unexplained_bias`).
 BIAS_THRUST_SCALE_SIGMAS = 3.0
 
 _DAMPING = ("linear_damping_positive", "linear_damping_negative", "quadratic_damping_positive",
@@ -128,6 +110,12 @@ def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
     return float(cfg.vehicle.mass_kg) if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
 
 
+def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
+    """A-priori rigid + added inertia of one DOF from the vehicle file (kg or kg m^2)."""
+    i = DOFS.index(dof)
+    return rigid_inertia(cfg, dof) + float(cfg.added_mass_matrix[i, i])
+
+
 def declared_inertia_uncertainty_rel(cfg: VehicleConfig) -> float:
     """Relative 1-sigma uncertainty the vehicle file declares for its force model: the RMS of the two thrust-curve
     directions' relative uncertainty (the rule of the identification intervals,
@@ -142,12 +130,11 @@ def model_from_config(cfg: VehicleConfig, source: str = VEHICLE_FILE) -> Control
     axes = {}
     for dof in DOFS:
         h = cfg.dof_hydrodynamics(dof)
-        i = DOFS.index(dof)
         bias = float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
         v = cfg.vehicle
         restoring = float(v.centre_of_gravity_frd_m[2] * cfg.weight_n
                           - v.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n) if dof in ("roll", "pitch") else 0.0
-        axes[dof] = AxisModel(dof, rigid_inertia(cfg, dof) + float(cfg.added_mass_matrix[i, i]), rel,
+        axes[dof] = AxisModel(dof, prior_inertia(cfg, dof), rel,
                               h.linear_damping_positive, h.linear_damping_negative, h.quadratic_damping_positive,
                               h.quadratic_damping_negative, bias, restoring,
                               {k: source for k in ("inertia", "damping", "bias", "restoring")})
@@ -172,16 +159,14 @@ def _disqualifying(entry: Mapping) -> list[str]:
 
 
 def unexplained_bias(entry: Mapping, file_bias: float, cfg: VehicleConfig, scale: float = 1.0) -> str | None:
-    """Why a DOF's identified constant force disqualifies its force terms, or None (module docstring, "Verdicts").
+    """Why a DOF's identified constant force disqualifies its force terms, or None
+    (docs/control.md §4, "Verdicts").
 
-    ``entry``: the DOF's mapping of identification.yaml; ``file_bias``: the vehicle file's holding force (N; heave
-    B - W, FRD down); ``scale``: the calibrated thrust scale the values are divided by. Only a DOF whose file
-    expects a holding force (heave) and whose bias is ``suspect`` for differing from it is judged: a uniform thrust
-    scale s gives b = file_bias / s, so a ratio b / file_bias within 1 / (1 +- r), r =
-    :data:`BIAS_THRUST_SCALE_SIGMAS` x the larger declared thrust-curve 1-sigma (``thrusters.thrust_uncertainty_rel``,
-    docs/identification.md §6), is a thrust scale and is used; outside it the constant force is wrong (it went into
-    the per-direction damping, or a force the file does not know acts), and the bias and damping identified with it
-    are not a model to feed forward."""
+    ``entry``: the DOF's mapping of identification.yaml; ``file_bias``: the vehicle file's holding
+    force (N; heave B - W, FRD down); ``scale``: the calibrated thrust scale the values are divided
+    by. Only a bias ``suspect`` for differing from a nonzero ``file_bias`` is judged: a ratio b /
+    file_bias within 1 / (1 +- r), r = :data:`BIAS_THRUST_SCALE_SIGMAS` x the larger declared
+    thrust-curve 1-sigma, is a thrust scale (None)."""
     par = entry.get("bias")
     if not isinstance(par, Mapping) or file_bias == 0.0 or par.get("verdict", "trusted") != "suspect":
         return None

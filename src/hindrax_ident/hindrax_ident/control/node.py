@@ -1,53 +1,29 @@
 """Controller node: depth or altitude, heading and surge/sway velocity holds as one more ``wrench`` source.
 
 A thin rclpy node over :class:`~.loop.HoldLoop` (the campaign's sensor conditioning) and
-:class:`~hindrax_ident.control.maneuvers.HoldController` (the model-based law of :mod:`.law`, the model of
-:mod:`.model`). The ESC, the thrust allocation and the supervisor are unchanged: the controller publishes a
-``wrench`` like the identification node or a pilot, and the allocation turns it into pulse widths. Run alone:
-``ros2 run hindrax_ident controller_node --ros-args --params-file hindrax.yaml -p model_file:=identification.yaml``.
+:class:`~hindrax_ident.control.maneuvers.HoldController` (the model-based law of :mod:`.law`, the
+model of :mod:`.model`). The ESC, the thrust allocation and the supervisor are unchanged: the
+controller publishes a ``wrench`` like the identification node or a pilot, and the allocation turns
+it into pulse widths. Run alone: ``ros2 run hindrax_ident controller_node --ros-args --params-file
+hindrax.yaml -p model_file:=identification.yaml``.
 
-Who owns ``wrench`` (docs/control.md §3): at most one source publishes at a time. The identification node publishes
-only while its ``run_identification`` goal runs; a pilot (topside joystick) only while driving. The controller
-publishes only while **enabled**, which it never is at start-up, and it **yields**: it disables itself (and says why
-in ``controller/status`` and the log) when ``identification/status`` reports a running goal, when a ``wrench``
-message it did not send arrives (a pilot took over), when the ESC output is disarmed (``esc/output_state``),
-or when its depth or attitude is older than ``control.sensor_timeout_s`` (then it publishes one zero wrench). It
-refuses to enable while a goal runs, while the ESC is disarmed or before its sensors have published. Enabling again
-is always an explicit request.
+Interfaces, and who owns ``wrench``: docs/control.md §3. The controller publishes only while
+**enabled**, which it never is at start-up; it **yields** (disables itself, saying why in
+``controller/status`` and the log) when ``identification/status`` reports a running goal, when a
+``wrench`` message it did not send arrives, when the ESC output is disarmed (``esc/output_state``),
+or when its depth or attitude is older than ``control.sensor_timeout_s`` (then it publishes one zero
+wrench). Enabling again is always an explicit request (``controller/hold``, ``controller/enable``).
 
-Interfaces
-----------
-Services
-    ``controller/hold`` (std_srvs/Trigger): hold the current state (the measured depth, or the
-    measured altitude when an altitude setpoint was given before, the current heading, zero
-    velocity) and enable. ``controller/enable`` (std_srvs/SetBool): enable with the current
-    setpoints (none given yet: as ``hold``) or disable (one zero wrench).
-Subscribes
-    ``controller/setpoint`` (hindrax_msgs/ControlSetpoint); the sensor topics of the identification
-    node (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``);
-    ``esc/output_state`` (the ESC's armed flag, latched: :mod:`hindrax_drivers.esc_state`;
-    subscribed for the node's life, the current state arrives at once; a malformed one reads as
-    disarmed; a dead ESC's last state stays, and the guard silences its outputs);
-    ``identification/status``; while enabled only, ``allocation/status`` (achieved wrench: the
-    anti-windup) and ``wrench`` (other writers).
-Publishes
-    ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
-    ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change; ``odom``
-    (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz from its sensor conditioning
-    (REP-105, :mod:`.odometry`), while its sensor streams are open (not while an identification goal
-    runs).
-CPU
-    Every input is a subscription callback on the node's executor, whatever the clock, each sensor
-    sample counted at its arrival. The tick runs at ``control.rate_hz`` only while enabled: every
-    :data:`ODOM_PERIOD_S` while disabled (one IMU message in :data:`IDLE_IMU_EVERY` conditioned,
-    decoded from its CDR bytes only then), every :data:`GOAL_TICK_S` with the sensor streams closed
-    while an identification goal runs (docs/architecture.md §10.1).
-Parameters
-    The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``,
-    ``rate_hz``, ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""):
-    identification.yaml to take the model from ("" = the vehicle file); a file that cannot be used
-    (unreadable, not an identification, another vehicle's) stops the start-up with one line naming
-    ``model_file``, never the vehicle file's model in its place.
+It also publishes ``odom`` (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz
+(REP-105, :mod:`.odometry`) while its sensor streams are open; a malformed ``esc/output_state``
+reads as disarmed.
+
+CPU (docs/control.md §3 items 6-7): the tick runs at ``control.rate_hz`` only while enabled, every
+:data:`ODOM_PERIOD_S` while disabled, every :data:`GOAL_TICK_S` while an identification goal runs.
+
+Parameters: the vehicle configuration (``control.*``) and ``model_file`` (string, read-only, default
+"": identification.yaml to take the model from, "" = the vehicle file); a file that cannot be used
+stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place.
 """
 from __future__ import annotations
 
@@ -311,7 +287,7 @@ class ControllerNode(VehicleNode):
 
     def _hold_current(self) -> None:
         st = self.loop.state
-        depth, _rate = self.loop.depth_now(self._now_s())
+        depth, _rate = self.loop.depth.predict_to(self._now_s())
         msg = ControlSetpoint()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = "base_link"
@@ -417,11 +393,10 @@ class ControllerNode(VehicleNode):
         if not est.velocity_known:
             m.twist.covariance[0] = -1.0
         self.pub_odom.publish(m)
-        tf = TransformStamped()
-        tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, "odom", "base_link"
-        tr, rot = tf.transform.translation, tf.transform.rotation
+        tf = TransformStamped(header=m.header, child_frame_id="base_link")  # the same pose
+        tr = tf.transform.translation
         tr.x, tr.y, tr.z = p.x, p.y, p.z
-        rot.x, rot.y, rot.z, rot.w = q.x, q.y, q.z, q.w
+        tf.transform.rotation = q
         self.pub_tf.publish(TFMessage(transforms=[tf]))
 
     def clock_may_advance(self, t_s: float) -> bool:
@@ -458,7 +433,7 @@ class ControllerNode(VehicleNode):
         m.heading_setpoint_rad = float(h.heading_setpoint_rad)
         v = np.asarray(h.velocity_setpoint_m_s, dtype=float)
         m.surge_setpoint_m_s, m.sway_setpoint_m_s = float(v[0]), float(-v[1])
-        depth, _ = self.loop.depth_now(t)
+        depth, _ = self.loop.depth.predict_to(t)
         m.depth_m = float(depth)
         m.altitude_m = float(st.altitude_m)
         m.heading_rad = float(st.rpy_now()[2])

@@ -9,13 +9,10 @@ curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and 
 produced during the tick go to the executive. At the end or on abort every thruster is commanded neutral. The
 simulator's truth (position, attitude) goes into the record for tests and plots only; the executive never sees it.
 
-Calibration steps (``calibrate``, :data:`~..identification.online.executive.CALIBRATION_STEPS`): the virtual pool plays
-the operator (:class:`PoolOperator`, shared with the graph's :class:`~..graph_campaign.VirtualOperator`). When the
-executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical, NED down,
-expressed in the body frame every tick) as an external force until the executive asks for its removal; the float is its
-net buoyancy, NED up; a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis
-and sense the step names (as a line over a pulley at the pool edge); an inclining test mass is its weight in water
-at the step's arm (:func:`inclining_wrench_frd`). Each time ``continue`` is given at once.
+Calibration steps (``calibrate``): the virtual pool plays the operator (:class:`PoolOperator`,
+shared with the graph's :class:`~..graph_campaign.VirtualOperator`): each known force a step
+prompts for acts on the vehicle until the executive asks for its removal; ``continue`` is given at
+once.
 """
 from __future__ import annotations
 
@@ -33,20 +30,12 @@ from ..identification.online.executive import CampaignAbort, Executive, TickInpu
 from ..identification.online.steps import Ballast, Float, Inclining, LinePull
 from .simulator import Simulator
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "inclining_wrench_frd", "PoolOperator"]
-
-
-def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, dof: str) -> np.ndarray:
-    """Wrench (6,) FRD about the body origin (the CG) of an inclining test mass: its weight in water ``weight_n``
-    (NED down) hung at ``arm_m`` along body +y (``dof`` roll) or +x (pitch) at the CG's height; ``rotation`` (3, 3)
-    body -> NED. Force R^T [0, 0, w], moment r x force."""
-    f = np.asarray(rotation, dtype=float).T @ np.array([0.0, 0.0, float(weight_n)])
-    r = np.array([0.0, float(arm_m), 0.0]) if dof == "roll" else np.array([float(arm_m), 0.0, 0.0])
-    return np.concatenate([f, np.cross(r, f)])
+__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "PoolOperator"]
 
 
 class PoolOperator:
-    """The virtual pool's operator of the calibration steps: which known force hangs on the vehicle.
+    """The virtual pool's operator of the calibration steps: which known force hangs on the vehicle
+    (ballast NED down, float NED up, a line over a pulley at the pool edge, an inclining mass).
 
     ballast_weight_n / float_buoyancy_n / line_pull_n: the known forces, N
     (:func:`~..identification.online.executive.calibration_forces`,
@@ -113,8 +102,12 @@ class PoolOperator:
         """The wrench (6,) FRD about the body origin of the applied forces, vehicle at ``rotation`` body -> NED."""
         ext = np.zeros(6)
         rt = np.asarray(rotation).T  # NED -> body
-        if self.inclining is not None:
-            ext += inclining_wrench_frd(rotation, *self.inclining_load_n_m, self.inclining)
+        if self.inclining is not None:  # weight in water at its arm, body +y (roll) or +x (pitch)
+            weight_n, arm_m = self.inclining_load_n_m
+            f = rt @ np.array([0.0, 0.0, weight_n])
+            r = np.zeros(3)
+            r[1 if self.inclining == "roll" else 0] = arm_m
+            ext += np.concatenate([f, np.cross(r, f)])
         if self.ballast_on:
             ext[:3] += rt @ np.array([0.0, 0.0, self.ballast_weight_n])
         if self.float_on:
@@ -130,41 +123,23 @@ class Campaign:
 
     cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF
     (default ``identification.levels_per_dof``). seed: simulator seed (default ``simulation.seed``).
-    max_level_duration_s: cap of one run (default ``identification.max_level_duration_s``).
     progress: optional callable receiving one-line progress messages. real_time_factor: > 0 paces the
     simulation against the wall clock (0: as fast as possible). sim: an existing simulator (else built).
-    heave_repeats: down/up pairs per heave level (heave runs last 1-3 s in the depth available, so each level
-    is repeated to collect enough transient data). excitation, excitation_duration_s: ``ladder`` or one broadband
-    run per DOF and its length (default ``identification.excitation*``;
-    :class:`~..identification.online.executive.Executive`). calibrate, ballast_weight_in_water_n, line_pull_n,
-    float_buoyancy_n, inclining_load_n_m: the reference steps and their known forces
-    (:class:`~..identification.online.executive.Executive`); steps: run these step objects instead of the plan (a test
-    of one step); confirm: the loads an aborted campaign left, confirmed first
-    (:class:`~..identification.online.executive.Executive`). Raises ``ValueError`` for an unknown DOF.
+    Other keywords go to the :class:`~..identification.online.executive.Executive`
+    (``max_level_duration_s``, ``excitation``, the calibration steps and their known forces,
+    ``steps``, ``confirm``). Raises ``ValueError`` for an unknown DOF.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
-                 seed: int | None = None, max_level_duration_s: float | None = None,
-                 progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
-                 sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
-                 excitation_duration_s: float | None = None, inclining_load_n_m=(0.0, 0.0),
-                 float_buoyancy_n: float | None = None, steps=None, confirm=()) -> None:
-        bad = [d for d in dofs if d not in DOFS]
-        if bad:
-            raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
-        self.cfg = cfg
+                 seed: int | None = None, progress: Callable[[str], None] | None = None,
+                 real_time_factor: float = 0.0, sim: Simulator | None = None, **executive) -> None:
         self.seed = int(cfg.simulation.seed if seed is None else seed)
         self.sim = sim if sim is not None else Simulator(cfg, seed=self.seed)
         rate = float(cfg.identification.estimate_rate_hz)
         self.steps_per_tick = max(1, int(round(1.0 / (rate * self.sim.step_s))))
         self.tick_s = self.steps_per_tick * self.sim.step_s
-        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,
-                                   heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
-                                   ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n,
-                                   excitation=excitation, excitation_duration_s=excitation_duration_s,
-                                   inclining_load_n_m=inclining_load_n_m, float_buoyancy_n=float_buoyancy_n,
-                                   steps=steps, confirm=confirm)
+        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, progress=progress,
+                                   **executive)
         #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
         self.operator = PoolOperator.for_steps(self.executive.steps)
         self._external_used = False
@@ -177,11 +152,6 @@ class Campaign:
         self._truth: dict[str, list] = {"pos": [], "eul": []}
         self._wall0 = 0.0
         self._sim0 = 0.0
-
-    @property
-    def online(self) -> dict:
-        """DOF -> :class:`~..identification.online.estimators.OnlineDofEstimator` of the executive."""
-        return self.executive.online
 
     def tick(self, wrench_frd: np.ndarray) -> np.ndarray | None:
         """Command ``wrench_frd`` (6,) FRD for one control tick on the simulator and hand the tick to the executive;

@@ -1,45 +1,25 @@
 """Closed-loop evaluation in the virtual pool: does the identified model hold depth, altitude and heading better?
 
-``hindrax control evaluate --truth FILE --model YAML`` (docs/control.md §6). The simulator runs in-process on a
-truth that differs from the vehicle file (:mod:`hindrax_ident.sim.truth`); the loop is the one of the campaign
-(:class:`~..control.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench -> thrust allocation -> pulse
-widths -> thrusters), at the controller node's rate (``control.rate_hz``, 50 Hz: the rate of the holds the vehicle
-flies, not the identification's slower tick). Three manoeuvres (:data:`MANEUVERS`):
+``hindrax control evaluate --truth FILE --model YAML``; the manoeuvres, why they were chosen, the
+fairness rules and the metrics are those of docs/control.md §6. The simulator runs in-process on a
+truth that differs from the vehicle file (:mod:`hindrax_ident.sim.truth`); the loop is the
+campaign's (:class:`~..control.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench ->
+thrust allocation -> pulse widths -> thrusters) at the controller node's rate (``control.rate_hz``).
+The manoeuvres (:data:`MANEUVERS`, their numbers in :class:`EvaluationSetup`): ``depth_step``,
+``altitude_hold`` (over the floor profile ``floor_profile_m``,
+:meth:`~hindrax_ident.sim.pool.Pool.set_floor_profile`), ``altitude_gentle`` (a plane floor,
+``gentle_floor_gradient``) and ``heading_step``; each with the holds of :data:`MODELS`:
+``identified`` (the law of :mod:`..control.law` with the model of ``identification.yaml``),
+``vehicle_file`` (the same law, the vehicle file's model) and ``pd_hold``
+(:class:`~..control.legacy.LegacyPDHold`). Every hold is asked for the same specified response
+(:class:`~..control.law.ReferenceModel` at the target bandwidth, with :func:`reference_limits`; the
+altitude hold: the setpoint).
 
-* ``depth_step``: hold depth at ``depth_start_m``, then a ``depth_step_m`` (0.3 m) step down;
-* ``altitude_hold``: hold ``altitude_m`` (0.5 m, Ping1D) while surging north at the survey speed
-  ``surge_speed_m_s`` (0.4 m/s) for ``surge_s`` (12 s), then stopping, over a floor whose slope changes
-  (``floor_profile_m``, :meth:`~hindrax_ident.sim.pool.Pool.set_floor_profile`): flat at the pool's 1.8 m, then rising
-  at 1:3 to 1.5 m over 0.9 m, then at 1:12. Why these numbers (the survey speed, the pool floor, the
-  box and the authority): docs/control.md §6, "Why this altitude manoeuvre";
-* ``altitude_gentle``: the former altitude manoeuvre, kept so that nothing is hidden: a plane floor rising 8 cm
-  per metre northwards (``gentle_floor_gradient``) while surging at ``gentle_surge_speed_m_s`` (0.3 m/s) for
-  ``gentle_surge_s`` (18 s): heave rate demand 0.024 m/s, forces near the ESC deadband, both model-based holds at the
-  sensor-noise floor (docs/control.md §6);
-* ``heading_step``: a ``heading_step_rad`` (30 deg) heading step;
-
-each with three holds (:data:`MODELS`): ``identified`` (the model-based law, :mod:`..control.law`, with the model of
-``identification.yaml``, :func:`~..control.model.load_model`), ``vehicle_file`` (the same law with the vehicle file's
-model) and ``pd_hold`` (the campaign's former PD/PI holds, :class:`~..control.legacy.LegacyPDHold`, gains from the
-vehicle file).
-
-**Fair comparison.** The same target bandwidth (``bandwidth_rad_s`` for the position holds, ``velocity_gain`` times it
-for the velocity holds), the same saturation (``hold_fraction`` of the allocation's smaller authority per axis), the
-same sensors, noise seed, start and setpoints. The specified response (``spec``) is the same for all: the critically
-damped second-order response at the target bandwidth (:class:`~..control.law.ReferenceModel`: the response the PD hold
-is designed for, k_p = M w^2, k_d = 2 M w, on a pure inertia), started from the setpoint before the step; in the
-altitude case the setpoint itself. So the difference between ``identified`` and ``vehicle_file`` is the model alone.
-
-**Metrics** (SI; computed from the simulator's truth, never seen by the loop), over the manoeuvre window (from the
-step, or from the start of the surge, to the end):
-
-* ``rmse``: RMS of (true value - specified response): m (depth; altitude: the noise-free Ping1D range) or rad
-  (heading). ``rmse_setpoint``: RMS of (true value - setpoint), for reference;
-* ``overshoot``: steps: the largest excursion beyond the final setpoint in the step's direction (m, rad; 0 if none);
-  altitude hold: the largest |altitude - setpoint| (m);
-* ``settling_time_s``: the time from the step (or the surge start) after which the value stays within
-  ``settling_band`` of the setpoint (5 % of the step; altitude: 2 cm);
-* ``effort_n_rms``: RMS over the window and the thrusters of the simulator's thrust per thruster, N.
+**Metrics** (SI; from the simulator's truth, never seen by the loop; over the window from the step
+or the surge start): ``rmse`` (against the specified response; m, or rad for heading; altitude: the
+noise-free Ping1D range), ``rmse_setpoint``, ``overshoot`` (beyond the final setpoint in the step's
+direction; altitude: the largest |error|), ``settling_time_s`` (within ``settling_fraction`` of the
+step, altitude ``altitude_band_m``) and ``effort_n_rms`` (RMS thrust per thruster, N).
 """
 from __future__ import annotations
 
@@ -378,11 +358,9 @@ def jsonable(x: Any) -> Any:
 
 
 def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) -> Path:
-    """``control.json`` in ``out_dir``: ``cases`` (one per manoeuvre and hold, the mean over the seeds: maneuver,
-    model, rmse, rmse_setpoint, overshoot, settling_time_s, effort_n_rms, each with ``_std``, seeds, unit), ``runs``
-    (the same per seed), ``ratios`` and ``info``; and ``report/index.html`` with one plot per manoeuvre (response of
-    every hold for the first seed, the specified response and the setpoint; thrust effort). Returns the control.json
-    path. A settling time that never came is null."""
+    """``control.json`` (``cases``, ``runs``, ``ratios``, ``info``) and ``report/index.html`` in
+    ``out_dir``, as docs/control.md §6 lists them; a settling time that never came is null. Returns
+    the control.json path."""
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
     summary = summarise(cases)

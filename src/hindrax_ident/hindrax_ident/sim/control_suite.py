@@ -1,13 +1,12 @@
 """The figure that matters: for each truth of the scenario suite, how much better the identified model holds depth and
 altitude than the vehicle file (``hindrax control scenarios``, docs/control.md §7).
 
-Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification campaign against that
-truth (:class:`~hindrax_ident.sim.campaign.Campaign`, surge, sway, heave and yaw, ``levels`` per DOF,
-the offline fit with its verdicts, :func:`~hindrax_ident.identification.assessment.results.build_results`), its
-``identification.yaml`` read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then the
-depth step and the altitude hold of :mod:`.control_evaluate` with the identified model, the vehicle file's and the
-former PD hold, on the same truth. Writes ``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json``
-and the summary ``<out>/control_scenarios.json`` / ``control_scenarios.md``.
+Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification
+(:class:`~hindrax_ident.sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml``
+read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then
+:data:`SUITE_MANEUVERS` of :mod:`.control_evaluate` on the same truth. Writes
+``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the summary
+``<out>/control_scenarios.json`` / ``control_scenarios.md``.
 """
 from __future__ import annotations
 

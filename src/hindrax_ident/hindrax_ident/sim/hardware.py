@@ -50,12 +50,8 @@ class SerialLockStep:
     """Serve one serial device emulator at the simulator's clock ticks and hold simulated time until its driver has
     handled every byte sent: the serial counterpart of the I2C emulators, which answer inside the driver's call.
 
-    :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`) writes
-    what is due at tick ``t``, the driver's clock already at ``t``, and has the driver read and
-    handle it in the simulator's thread
-    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.pump`); :meth:`settled`
-    (a step gate) lets time advance only when all of it is handled: the driver stamps every
-    message at the tick it was sent, whatever the load.
+    :meth:`tick` is a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode` and
+    :meth:`settled` a step gate: the driver stamps every message at the tick it was sent.
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
@@ -205,7 +201,7 @@ class VirtualHardware:
     def _ensure_samples(self) -> None:
         """Step the unpowered simulator until every device has produced a first sample (<= 1 s simulated)."""
         for _ in range(int(1.0 / self.sim.step_s) + 1):
-            if all(self.sim.latest_sample(d) is not None for d in self.sim.sensors.models):
+            if all(self.sim.sensors.latest.get(d) is not None for d in self.sim.sensors.models):
                 return
             self.sim.step(None)
 
@@ -214,7 +210,8 @@ class VirtualHardware:
         # measured at the ping (the emulator's cycle): the driver's time of validity (middle of the $DVPDL
         # interval of the trapezoidal deltas) is then exact; a dropout is a ping without bottom lock
         v = self.sim.measure("dvl75", dropout=True)
-        a = self.sim.measure("dvl75_attitude", dropout=True) or self.sim.latest_sample("dvl75_attitude")
+        latest = self.sim.sensors.latest
+        a = self.sim.measure("dvl75_attitude", dropout=True) or latest.get("dvl75_attitude")
         locked = bool(v is not None and v.locked and all(math.isfinite(x) for x in v.velocity_frd_m_s))
         altitude = v.altitude_m if v is not None and math.isfinite(v.altitude_m) else None
         roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a is not None else (0.0, 0.0, 0.0)

@@ -1,43 +1,37 @@
 """6-DOF Fossen model of Hindrax: rigid body + added mass + Coriolis + damping + restoring, pure numpy.
 
-Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eqs. 2.1, 2.6-2.7, 2.22-2.23, 2.80-2.83,
-2.90), body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
+Equations of motion ([NTNU-Thesis] eq. 2.90; each term's form, sign and source:
+docs/identification.md §1.A), body frame FRD, world frame NED, nu = [u v w p q r],
+tau = [X Y Z K M N]:
 
     eta_dot = J(eta) nu                      (position in NED, attitude as a unit quaternion)
     (M_RB + M_A) nu_dot + C_RB(nu) nu + C_A(nu) nu + D(nu) nu + g(eta) = tau
 
-* Reference point: the body origin CO of the configuration. ``vehicle.centre_of_gravity_frd_m`` is r_g (CG
-  relative to CO) and ``vehicle.centre_of_buoyancy_frd_m`` is r_b (CB relative to CO); the Hindrax file
-  puts CO at the CG (r_g = 0), but any r_g is supported. ``vehicle.inertia_kg_m2`` and the products of
-  inertia are about the CG; the inertia about CO follows from the parallel-axis theorem
-  ``I_o = I_cg - m S(r_g)^2``.
-* M_RB = [m I3, -m S(r_g); m S(r_g), I_o]   ([T] eq. 2.7).
-* M_A: the positive 6x6 added-mass matrix of the configuration (``VehicleConfig.added_mass_matrix``,
-  diagonal from [Hindrax-AM] Table 6 and assumptions, optional off-diagonal couplings; not forced symmetric).
-* C_RB: the coordinate-free form (docs/identification.md, Fossen 2011)
-  ``C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)]``,
-  whose product with nu equals the Newton-Euler terms of [T] eqs. 2.4-2.5.
-* C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``, ``C_A = [0, -S(a1); -S(a1), -S(a2)]``
-  (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case with M_A = -diag(derivatives)).
-* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.dof_hydrodynamics(dof)`` ([Hindrax-Drag] eq. 2 / Table 3), the
-  coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
-  down, [Hindrax-Drag] §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
-* g(eta) = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B]
-  (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V
-  from the configuration; B is multiplied by the submerged fraction of a free-surface model when one is given (the
-  hull emerging at the surface, :mod:`.pool`), otherwise the vehicle is fully submerged.
+* Reference point: the body origin CO. ``vehicle.centre_of_gravity_frd_m`` is r_g and
+  ``vehicle.centre_of_buoyancy_frd_m`` is r_b (relative to CO; the Hindrax file puts CO at the CG,
+  any r_g is supported); the inertia about the CG is moved to CO by the parallel-axis theorem
+  (:func:`rigid_body_mass_matrix`, [NTNU-Thesis] eq. 2.7).
+* M_A: the 6x6 added-mass matrix of the configuration (``VehicleConfig.added_mass_matrix``, diagonal
+  from [Hindrax-AM] Table 6, optional couplings; not forced symmetric); C_RB in Fossen's
+  coordinate-free form, C_A = [0, -S(a1); -S(a1), -S(a2)] with a = M_A nu ([NTNU-Thesis]
+  eqs. 2.80-2.83).
+* D(nu) nu: per DOF ``k_l v + k_q |v| v`` ([Hindrax-Drag] eq. 2 / Table 3), the coefficient pair
+  chosen by the sign of the velocity (heave: ``*_positive`` for w > 0, moving down, [Hindrax-Drag]
+  §4.1). No off-diagonal damping.
+* g(eta) ([NTNU-Thesis] eqs. 2.22-2.23 with the corrected sign of f_b): W = m g, B = rho g V, B
+  times the submerged fraction of a free-surface model when one is given (:mod:`.pool`), else fully
+  submerged.
 * Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
-  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an output only.
+  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an
+  output only.
 
 Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats
 (3-vectors as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call
-overhead dominates for 6x6 problems. The tests check it against the same equations in matrix form
-(C_RB and C_A as above, with :func:`rigid_body_mass_matrix`, :func:`damping_vector` and
-:func:`restoring_vector` of this module).
+overhead dominates for 6x6 problems; the tests check it against the matrix form.
 
 State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
-Not modelled: currents (nu is relative to still water), the variation of added mass and damping near the
-surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] §6).
+Not modelled: currents (nu is relative to still water), the variation of added mass and damping near
+the surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] §6).
 """
 from __future__ import annotations
 

@@ -36,12 +36,9 @@ on every control tick whatever the CPU load (a loaded machine otherwise lets the
 controller, which then overshoots its planned runs). A gate that has refused for :data:`GATE_TIMEOUT_S` of
 wall time is overridden with a warning, so a stalled node cannot freeze the simulation.
 
-Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`: its sensor
-listeners and latest samples), ``add_step_listener(cb(simulator))``, ``add_clock_listener(cb(t_s))``
-(at every /clock tick, after the driven clocks moved), and the ``pulse_width_source`` constructor
-argument: a callable returning the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685
-emulator; None keeps the previous ones), called before every step; it replaces the
-``thrusters/pulse_width`` subscription.
+Python API for in-process device emulators: ``node.simulator`` (its sensor listeners and latest
+samples), :meth:`SimulatorNode.add_step_listener`, :meth:`SimulatorNode.add_clock_listener` and the
+``pulse_width_source`` argument (:class:`SimulatorNode`).
 """
 from __future__ import annotations
 
@@ -91,7 +88,9 @@ class SimulatorNode(VehicleNode):
 
     config: a VehicleConfig (default: from the node's parameters, see
     :func:`~hindrax_drivers.node_common.load_node_config`).
-    pulse_width_source: optional callable replacing the ThrusterPwm subscription.
+    pulse_width_source: optional callable replacing the ThrusterPwm subscription, called before
+    every step: the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685 emulator; None
+    keeps the previous ones).
     simulator: optional prebuilt Simulator (must use ``config``). Other keyword arguments go to ``Node``.
     Raises :class:`ConfigError` for an invalid configuration (logged as one line first).
     """

@@ -8,14 +8,11 @@ Hull (ASSUMPTION, the papers give only the envelope): a box of ``vehicle.length_
 ([Hindrax-Drag] §2.1: 0.59 x 0.47 x 0.40 m) centred on the centre of buoyancy, aligned with the body axes. Its
 displaced volume is taken as uniformly distributed over its height, so the volume centroid is the CB.
 
-Floor: flat at ``depth_m`` by default; a sloped floor (truth ``disturbances.floor.gradient``, :mod:`.truth`: the
-floor's depth change per metre north and east) is the plane z_f(x, y) = depth_m + g_n (x - length_m / 2) +
-g_e (y - width_m / 2) (depth_m at the pool centre). Altitudes (DVL: vertical; Ping1D: along the body z axis) and the
-floor contact use that plane; the contact takes the floor depth under the hull centre (the tilt of the floor across
-the hull, a few mm at the slopes of a pool, is neglected). A floor whose slope changes along the pool
-(:meth:`Pool.set_floor_profile`, e.g. a pool's deep end rising at 1:3 to a shallow part at 1:12) is a piecewise-linear
-profile p(x) in north, breakpoints (x_k, z_k), linear between them and constant beyond the first and the last: then
-z_f(x, y) = p(x) + g_n (x - length_m / 2) + g_e (y - width_m / 2), and the rays, altitudes and contact use it alike.
+Floor: z_f(x, y) = p(x) + g_n (x - length_m / 2) + g_e (y - width_m / 2), with (g_n, g_e) the
+truth's ``disturbances.floor.gradient`` (:meth:`Pool.set_floor_gradient`; 0 by default) and
+p(x) = ``depth_m`` or the piecewise-linear profile along north of :meth:`Pool.set_floor_profile`.
+Altitudes (DVL: vertical; Ping1D: along the body z axis), rays and the floor contact use it; the
+contact takes the floor depth under the hull centre (the floor's tilt across the hull is neglected).
 
 Free surface (:class:`FreeSurface`): the submerged fraction of the hull is the part of its vertical extent
 below z = 0, ``f = clip((z_c + h) / (2 h), 0, 1)`` with z_c the depth of the hull centre (CB) and
@@ -223,12 +220,11 @@ class Pool:
         self._since.clear()
         self._t = 0.0
 
-    def resolve(self, state: list[float], t_s: float) -> bool:
+    def resolve(self, state: list[float], t_s: float) -> None:
         """Enforce the box on ``state`` (13 floats, modified in place) at simulated time ``t_s``.
 
         Clamps the position so the hull box is inside the pool and removes the velocity into a touched face
-        (module docstring); updates the contact report. Returns True when a solid face (wall or floor) is
-        touched.
+        (module docstring); updates the contact report (:attr:`contact`).
         """
         _, _, _, qx, qy, qz, qw = state[:7]
         xx, yy, zz = qx * qx, qy * qy, qz * qz
@@ -269,7 +265,6 @@ class Pool:
         for face in touched:
             self._since.setdefault(face, t_s)
         self._t = t_s
-        return any(f != "surface" for f in touched)
 
     @staticmethod
     def _remove_velocity(state: list[float], r, axis: int, sign: float, v_ned):

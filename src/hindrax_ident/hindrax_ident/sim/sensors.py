@@ -215,9 +215,8 @@ class NoiseSpec:
 
     @classmethod
     def of(cls, section: Any, unit: str, default_rate_hz: float) -> "NoiseSpec":
-        """From a ``simulation.sensors.<device>`` section: its optional ``noise_std_<unit>``,
-        ``bias_<unit>``, ``rate_hz`` and ``dropout_probability`` (None: absent -> 0, 0,
-        ``default_rate_hz``, 0)."""
+        """From a ``simulation.sensors.<device>`` section (module docstring); absent keys: 0, 0,
+        ``default_rate_hz``, 0."""
         return cls(float(or_default(getattr(section, f"noise_std_{unit}"), 0.0)),
                    float(or_default(getattr(section, f"bias_{unit}"), 0.0)),
                    float(or_default(section.rate_hz, default_rate_hz)),
@@ -234,7 +233,6 @@ class SensorModel:
     def __init__(self, name: str, spec: NoiseSpec, seed: int) -> None:
         if spec.rate_hz <= 0.0:
             raise ValueError(f"{name}: rate_hz must be positive, got {spec.rate_hz}")
-        self.name = name
         self.spec = spec
         self.period_s = 1.0 / spec.rate_hz
         self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99)]))
@@ -245,9 +243,7 @@ class SensorModel:
         self._walk = np.zeros(3)
         self._walk_t: float | None = None
         self.walk_rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99), 1000]))
-        self._k = 0
-        self._t0 = 0.0
-        self.next_due_s = 0.0
+        self.reset()
 
     def reset(self, t_s: float = 0.0) -> None:
         """Restart the sampling grid at ``t_s`` (the noise streams continue)."""

@@ -13,11 +13,10 @@ pool's contact constraints are applied (:meth:`.pool.Pool.resolve`), the time ad
 (no accumulated rounding) and the sensors due at that time are sampled. Everything is deterministic for a
 given configuration and seed.
 
-Truth (:mod:`.truth`): the simulator runs on the truth configuration (the vehicle file overlaid with a truth file,
-default ``ros_ws/config/truth/default.yaml``) and applies its disturbances (:mod:`.disturbances`): the thrust factor
-per thruster (scales, battery, inflow) on the curve thrust, the truth's ESC latency ``esc.output_latency_s`` as a
-queue of written widths, the extra wrench (current, coupled damping, drag centre, tether, floor) held over each
-step, and the sensor disturbances (:meth:`.sensors.SensorSuite.apply_disturbances`; the DVL latency reads a
+Truth (:mod:`.truth`): the simulator runs on the truth configuration and applies its disturbances
+(:mod:`.disturbances`): the thrust factor per thruster on the curve thrust, the ESC latency
+``esc.output_latency_s`` as a queue of written widths, the extra wrench held over each step, and the
+sensor disturbances (:meth:`.sensors.SensorSuite.apply_disturbances`; the DVL latency reads a
 history of states kept for that long).
 """
 from __future__ import annotations
@@ -364,10 +363,6 @@ class Simulator:
                 break
             best = st
         return list(best)
-
-    def latest_sample(self, device: str) -> Any | None:
-        """Newest sample of a sensor device (None before its first sample or when disabled)."""
-        return self.sensors.latest.get(device)
 
     def measure(self, device: str, dropout: bool = False) -> Any | None:
         """A sample of ``device`` on the vehicle as it is now (:meth:`SensorSuite.measure`: noise and bias, off the

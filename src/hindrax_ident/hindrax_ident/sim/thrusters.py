@@ -26,6 +26,7 @@ from hindrax_drivers.allocation.from_config import thrust_curve_from_config
 from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
 from hindrax_drivers.config import VehicleConfig
 
+from ..vehicle.rigid_body import skew
 from ..vehicle.thrust_lag import ThrustLag
 
 __all__ = ["PulseWidthError", "Thrusters"]
@@ -38,31 +39,26 @@ class PulseWidthError(ValueError):
 class Thrusters:
     """The thruster set of a configuration (module docstring).
 
-    Attributes: ``names`` (n,), ``n``, ``matrix_cg`` (6, n) thrust allocation matrix about the CG,
-    ``matrix_co`` (6, n) about the body origin, ``curve`` (ThrustCurve), ``time_constant_s``,
-    ``neutral_us``, ``force_n`` (n,) the current (lagged) thrust, ``commanded_force_n`` (n,) the thrust the
-    current pulse widths ask for, ``pulse_width_us`` (n,) the current wire pulse widths.
+    Attributes: ``names`` (n,), ``n``, ``matrix_co`` (6, n) thrust allocation matrix about the body
+    origin, ``curve`` (ThrustCurve), ``time_constant_s``, ``neutral_us``, ``force_n`` (n,) the
+    current (lagged) thrust, ``commanded_force_n`` (n,) the thrust the current pulse widths ask
+    for, ``pulse_width_us`` (n,) the current wire pulse widths.
     """
 
     def __init__(self, config: VehicleConfig) -> None:
         t = config.thrusters
         self.names = tuple(t.names)
         self.n = len(self.names)
-        self.matrix_cg = thrust_allocation_matrix(t.positions_frd_m, t.directions_frd)
-        r_g = np.asarray(config.vehicle.centre_of_gravity_frd_m, dtype=float)
         shift = np.eye(6)
-        shift[3:, :3] = np.array([[0.0, -r_g[2], r_g[1]], [r_g[2], 0.0, -r_g[0]], [-r_g[1], r_g[0], 0.0]])
-        self.matrix_co = shift @ self.matrix_cg
+        shift[3:, :3] = skew(config.vehicle.centre_of_gravity_frd_m)  # T_co = T_cg + r_g x F
+        self.matrix_co = shift @ thrust_allocation_matrix(t.positions_frd_m, t.directions_frd)
         self.curve = thrust_curve_from_config(config)  # the allocation's curve, the same object type and values
         self.neutral_us = float(t.pulse_width_neutral_us)
         self._reversed = np.array([th.reversed for th in t.thrusters], dtype=bool)
         self.time_constant_s = float(t.time_constant_s)
         self.lag = ThrustLag(self.time_constant_s)
-        for arr in (self.matrix_cg, self.matrix_co):
-            arr.flags.writeable = False
-        self.pulse_width_us = np.full(self.n, self.neutral_us)
-        self.commanded_force_n = np.zeros(self.n)
-        self.force_n = np.zeros(self.n)
+        self.matrix_co.flags.writeable = False
+        self.reset()
 
     def reset(self) -> None:
         """All thrusters stopped: neutral pulse widths, zero thrust."""
@@ -102,8 +98,3 @@ class Thrusters:
         """Body wrench [X Y Z K M N] (6,) of the current thrust about the body origin, FRD: forces
         in N, moments in N m."""
         return self.matrix_co @ self.force_n
-
-    def wrench_cg(self) -> np.ndarray:
-        """Body wrench [X Y Z K M N] (6,) of the current thrust about the CG (FRD, N, N m),
-        [Hindrax-Drag] eq. 9."""
-        return self.matrix_cg @ self.force_n

@@ -1,18 +1,12 @@
 """The virtual pool's truth: what the water, the thrusters and the sensors really do, apart from the vehicle file.
 
-A *truth file* (``ros_ws/config/truth/*.yaml``) is a partial overlay of the vehicle configuration: any key of the
-vehicle schema (``ros_ws/config/hindrax.yaml``, nested the same way but without the ``/**: ros__parameters:``
-wrapper, which would let a node load it) replaces the vehicle file's value for the simulator only, plus two
-sections no node reads:
-
-* ``simulation.sensors.<device>.*``: the simulated sensors' noise, bias, rate, dropouts (:mod:`.sensors`);
-* ``disturbances.*``: effects the vehicle file does not model (:class:`Disturbances`, every one off by default).
-
-The simulator and the device emulators read the truth (:attr:`Truth.config`); every node and estimator reads the
-vehicle file only (``test_truth.py`` checks that no module outside ``sim/`` names a truth-only key). The shipped
-``default.yaml`` holds the default sensor noise levels and no disturbance. The simulator always fills the keys the
-vehicle configuration lacks from ``default.yaml``; a truth file given with ``--truth`` then overrides any key (it
-states only what differs).
+A *truth file* (``ros_ws/config/truth/*.yaml``, docs/virtual_pool.md §2) overlays the vehicle
+configuration for the simulator and the device emulators only (:attr:`Truth.config`): any key of the
+vehicle schema, nested as in ``hindrax.yaml`` without the ``/**: ros__parameters:`` wrapper, plus
+``simulation.sensors.<device>.*`` (the simulated sensors' noise, bias, rate, dropouts:
+:mod:`.sensors`) and ``disturbances.*`` (:class:`Disturbances`, every one off by default). The
+shipped ``default.yaml`` (default sensor noise, no disturbance) fills the keys the vehicle
+configuration lacks; a truth file given with ``--truth`` then overrides any key.
 
 Disturbances (``disturbances:`` section; the physical source of each; all default off):
 
@@ -134,23 +128,6 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 }
 
 
-class _Group:
-    """``Disturbances.<group>``: the ``disturbances.<group>.*`` values as attributes (the default
-    where the file does not set a key), built on first use and kept."""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
-
-    def __get__(self, obj: Any, owner: type | None = None) -> Any:
-        if obj is None:
-            return self
-        prefix = f"{self.name}."
-        value = SimpleNamespace(**{k[len(prefix):]: obj.get(k) for k in DISTURBANCE_SCHEMA
-                                   if k.startswith(prefix)})
-        obj.__dict__[self.name] = value  # a plain attribute from now on, as a cached_property
-        return value
-
-
 @dataclass(frozen=True)
 class Disturbances:
     """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
@@ -162,16 +139,16 @@ class Disturbances:
 
     values: Mapping[str, Any] = field(default_factory=dict)
 
-    thrust = _Group()
-    battery = _Group()
-    inflow = _Group()
-    hydrodynamics = _Group()
-    current = _Group()
-    tether = _Group()
-    floor = _Group()
-    dvl = _Group()
-    imu = _Group()
-    pressure = _Group()
+    def __getattr__(self, group: str) -> SimpleNamespace:
+        """``disturbances.<group>.*`` as attributes, built on first use and kept (called only for
+        a name that is not an attribute yet). Raises ``AttributeError`` for an unknown group."""
+        prefix = f"{group}."
+        keys = [k for k in DISTURBANCE_SCHEMA if k.startswith(prefix)]
+        if not keys:
+            raise AttributeError(f"{type(self).__name__} has no disturbance group {group!r}")
+        value = SimpleNamespace(**{k[len(prefix):]: self.get(k) for k in keys})
+        self.__dict__[group] = value  # a plain attribute from now on, as a cached_property
+        return value
 
     def get(self, key: str) -> Any:
         """Value of ``disturbances.<key>`` (the default when the file does not set it)."""

@@ -1,11 +1,9 @@
 """The vehicle's state from its sensors: conditioning of the raw samples and the depth estimate (pure numpy, no ROS).
 
-* :class:`SensorState` - conditions the raw samples: depth of the body origin from the MS5837 pressure (lever arm
-  corrected with the DVL attitude), roll/pitch/heading from the DVL attitude, body rates from the ICM-20948 gyro
-  (mounting rotation and FLU->FRD applied, bias removed after a still period), body velocity from the DVL (lever arm
-  ``w x r`` removed with the gyro rate at the sample's time, unless the sample is already at the body origin, as the
-  DVL driver's ``dvl/data`` is), altitude from the Ping1D, and a dead-reckoned horizontal position (DVL velocity
-  rotated by the DVL heading, from the known start).
+* :class:`SensorState` - conditions the raw samples: depth of the body origin (MS5837, lever arm
+  corrected), attitude (DVL), body rates (ICM-20948 gyro, mounting applied, bias removed after a
+  still period), body velocity (DVL, lever arm removed with the gyro rate at the sample's time),
+  altitude (Ping1D) and a horizontal position dead-reckoned from the known start.
 * :class:`DepthEstimator` - depth and depth rate of the body origin, the MS5837 depth fused with the vertical
   acceleration (:class:`~.fusion.AccelAidedFilter`).
 * :func:`euler_rates`, :func:`rotation_ned_from_body` - the attitude kinematics ([Fossen2021] eqs. 2.18, 2.29).
