@@ -1,14 +1,8 @@
 """ament_python package hindrax_ident (colcon on the Pi; editable pip install in the dev venv).
 
 Python dependencies are declared once, in the repository's requirements.txt (dev venv) and
-package.xml (rosdep on the Pi); they are deliberately not repeated here.
-
-Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node``,
-``ident_control_node`` (the first and the third in one process, :mod:`hindrax_ident.composition`),
-``ident_record_node`` (the same with the recorder) and the ``hindrax`` command as console scripts in
-``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH once
-``install/setup.bash`` is sourced), the launch files in ``share/hindrax_ident/launch`` and the
-Foxglove layout in ``share/hindrax_ident/foxglove``.
+package.xml (rosdep on the Pi); they are deliberately not repeated here. Colcon also installs
+``bin/hindrax``, a wrapper on PATH once ``install/setup.bash`` is sourced.
 """
 import sys
 from glob import glob

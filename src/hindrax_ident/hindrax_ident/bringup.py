@@ -40,7 +40,7 @@ from hindrax_msgs.srv import SetArmed
 
 from .control.node import ControllerNode
 from .identification.online.node import IdentificationNode
-from .ordered_executor import ordered_executor
+from .ordered_executor import LeanWaitExecutor
 from .sim.hardware import VirtualHardware
 from .sim.node import SimulatorNode
 from .sim.simulator import Simulator
@@ -312,16 +312,14 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
                                Parameter("output_dir", value=str(record_dir))]
         nodes["recorder"] = RecorderNode(parameter_overrides=rec_params, **nkw)
     if sim and drive_clocks:
-        # The simulator sets every node's ROS clock directly at each tick instead of publishing /clock to ten
-        # subscriptions (the nodes keep use_sim_time, so they start on simulated time; their own /clock
-        # subscriptions stay idle). /clock is then not on the wire: a ROS tool in another process that needs
-        # simulated time sees none (the bag keeps every header stamp; `hindrax bag play --clock` rebuilds it).
+        # the nodes keep use_sim_time (they start on simulated time; their /clock subscriptions stay
+        # idle); the bag keeps every header stamp (`hindrax bag play --clock` rebuilds /clock)
         sim_node = nodes["simulator"]
         for name, node in nodes.items():
             if name != "simulator":
                 sim_node.drive_clock(node.get_clock())
         sim_node.publish_clock_topic = False
-    executor = ordered_executor(**kw)
+    executor = LeanWaitExecutor(**kw)
     stepped = bool(sim and drive_clocks)
     for name, node in nodes.items():
         if not (stepped and name == "simulator"):  # stepped: Graph.spin_once advances the simulator

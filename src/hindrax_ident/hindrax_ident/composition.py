@@ -3,16 +3,15 @@ with or without the recorder.
 
 ``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their names (``identification``,
 ``controller``), read the same vehicle file and are spun by one executor
-(:func:`hindrax_drivers.composition.run_group`). The node list is
-:data:`hindrax_drivers.composition.IDENT_GROUPS`; this module maps it to classes.
-``ident_record_node`` (recording on, the default): the same two and the recorder
-(``hindrax_drivers.recording.recorder_node``; the other nodes ignore keys they do not declare).
+(:func:`hindrax_drivers.composition.run_group`; the node list is
+:data:`hindrax_drivers.composition.IDENT_GROUPS`, this module maps it to classes).
+``ident_record_node`` (recording on, the default): the same two and the recorder (the other nodes
+ignore keys they do not declare).
 
-Why (docs/architecture.md §10.1): both load mostly the same Python modules once (``launch_pss_*``),
-and every sensor message both take reaches one participant instead of two. None of them has a safety
-role (§8): a failure of one ends all, and the allocation's wrench timeout brings the thrusters to
-neutral as for any lost wrench source. The recorder's bag writer keeps its own thread, and its
-keep-last depth (``queue_depth``, 1000) holds what arrives while an identification callback runs.
+Why composed: docs/architecture.md §10.1. None of them has a safety role (§8): a failure of one
+ends all, and the allocation's wrench timeout brings the thrusters to neutral as for any lost
+wrench source. The recorder's bag writer keeps its own thread, and its keep-last depth
+(``queue_depth``, 1000) holds what arrives while an identification callback runs.
 """
 from __future__ import annotations
 

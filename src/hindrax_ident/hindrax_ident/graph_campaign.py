@@ -1,4 +1,4 @@
-"""The identification campaign through the whole ROS graph in one process (``hindrax run``, issue "Main job").
+"""The identification campaign through the whole ROS graph in one process (``hindrax run``).
 
 :func:`run_graph_campaign`: build the graph (:func:`hindrax_ident.bringup.build_graph`: virtual pool, device
 emulators, drivers, ESC node, thrust allocation, identification node, recorder into ``out/bag``) on one
@@ -7,16 +7,14 @@ operator's service); send one ``run_identification`` goal and report its feedbac
 identify the bag (:func:`.identification.assessment.pipeline.identify_bag`), write the report and
 ``identification.yaml``. All waits are on simulated-time conditions with wall-clock deadlines.
 
-Calibration steps (``calibrate``, :data:`~.identification.online.executive.CALIBRATION_STEPS`): sent in the goal;
-:class:`VirtualOperator` plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast,
-the float or a line pull (``[attach_ballast] ...``, ``[attach_float] ...``, ``[apply_line_pull_surge] ...``), it applies
-the known force in the simulator (as the in-process campaign does, :class:`~.sim.campaign.PoolOperator`: the
-ballast's weight in water, NED down; the float's net buoyancy, NED up; the line pull, fixed in the pool frame along the
-body axis and sense named, all expressed in the body frame at every integration step) or removes it, and calls
-``identification/continue``. The thrust scales the node measured (its record) are applied to the bag's record
-before the offline identification and estimated jointly with the fits
-(:func:`~.identification.assessment.results.build_results`), with the ``calibration`` section of
-``identification.yaml``, as ``hindrax ident campaign --calibrate`` does.
+Calibration steps (``calibrate``, :data:`~.identification.online.executive.CALIBRATION_STEPS`):
+sent in the goal; :class:`VirtualOperator` plays the operator on the ROS interfaces: for each
+feedback ``prompt`` (``[attach_ballast] ...``, ``[apply_line_pull_surge] ...``) it applies or
+removes the known force in the simulator as the in-process campaign does
+(:class:`~.sim.campaign.PoolOperator`) and calls ``identification/continue``. The thrust scales the
+node measured are applied to the bag's record and estimated jointly with the fits
+(:func:`~.identification.assessment.results.build_results`), as ``hindrax ident campaign
+--calibrate`` does.
 
 Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.sim.hardware.SerialLockStep`),
 simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
@@ -69,21 +67,21 @@ def parse_prompt(prompt: str) -> str:
 
 
 class VirtualOperator:
-    """The virtual pool's operator for the calibration steps on the ROS graph (module docstring).
+    """The virtual pool's operator for the calibration steps on the ROS graph (module docstring);
+    what each step code does is :class:`~.sim.campaign.PoolOperator`'s, as in-process.
 
-    simulator: the :class:`~hindrax_ident.sim.simulator.Simulator` (``set_external_wrench``, ``rotation``);
-    ballast_weight_n / line_pull_n: the known forces, N (:func:`~.identification.online.executive.calibration_forces`);
-    request_continue: callable that sends one ``identification/continue`` request and returns its future (or None);
-    inclining_load_n_m: (weight in water N, arm m) of the inclining test mass
-    (:func:`~.identification.online.executive.inclining_load`); float_buoyancy_n: net buoyancy of the float, N
-    (:func:`~.identification.online.executive.float_buoyancy`); say: progress lines; freeze / resume: stop and restart
-    simulated time (:meth:`~hindrax_ident.bringup.Graph. freeze_time`) from acting on a prompt until the continue
-    answer, so the step goes on at the simulated instant the operator acted, whatever the wall time the call took. Feed
-    it every feedback prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step (a step listener of
-    the simulator node) and :meth:`poll` from the wait loop (a request with no answer within ``resend_after_s`` of wall
-    time is sent again: after a continue every step holds at least
-    :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing awaited
-    and is answered False). What each code does is :class:`~.sim.campaign.PoolOperator`'s, as in-process.
+    simulator: the :class:`~hindrax_ident.sim.simulator.Simulator`; ballast_weight_n, line_pull_n,
+    inclining_load_n_m (weight in water N, arm m), float_buoyancy_n: the known forces
+    (:mod:`~.identification.online.executive`: ``calibration_forces``, ``inclining_load``,
+    ``float_buoyancy``); request_continue: sends one ``identification/continue`` request and returns
+    its future (or None); say: progress lines; freeze / resume: hold simulated time
+    (:meth:`~hindrax_ident.bringup.Graph.freeze_time`) from acting on a prompt until the continue
+    answer, so the step goes on at the simulated instant the operator acted. Feed it every feedback
+    prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step and :meth:`poll`
+    from the wait loop: a request with no answer within ``resend_after_s`` of wall time is sent
+    again (after a continue every step holds at least
+    :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat
+    finds nothing awaited and is answered False).
     """
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
@@ -91,7 +89,6 @@ class VirtualOperator:
                  resend_after_s: float = 5.0, freeze: Callable[[], None] = lambda: None,
                  resume: Callable[[], None] = lambda: None, inclining_load_n_m=(0.0, 0.0),
                  float_buoyancy_n: float = 0.0) -> None:
-
         self.sim = simulator
         #: which known forces hang on the vehicle (:class:`~.sim.campaign.PoolOperator`)
         self.pool = PoolOperator(ballast_weight_n, line_pull_n, inclining_load_n_m, float_buoyancy_n)
@@ -104,11 +101,6 @@ class VirtualOperator:
         self._sent_at = -math.inf
         self._external_set = False
         self._freeze, self._resume = freeze, resume
-
-    ballast_on = property(lambda self: self.pool.ballast_on, doc="the ballast hangs on the vehicle")
-    float_on = property(lambda self: self.pool.float_on, doc="the float is tied to the vehicle")
-    line_ned = property(lambda self: self.pool.line_ned, doc="the line's force (3,) N in NED, None without")
-    inclining = property(lambda self: self.pool.inclining, doc="DOF whose inclining test mass hangs, or None")
 
     def on_prompt(self, prompt: str) -> None:
         """Act on one feedback prompt: apply or remove the force the step code asks for, then request continue."""
@@ -162,51 +154,18 @@ class VirtualOperator:
 class GraphCampaignOutcome:
     """What a graph campaign produced.
 
-    success / message: the action result; estimates: the action's online (RLS) HydroEstimates;
-    identifications / errors: offline results per DOF
-    (:func:`~.identification.fit.campaign_fit.identify_all_with_errors`) from the bag; bag_dir; record: the
-    CampaignRecord rebuilt from the bag; disarmed: the ESC reported disarmed after the run; sim_time_s / wall_time_s of
-    the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown; calibration: the identification node's
-    calibration step results (:attr:`~.identification.bag_input.campaign_record.CampaignRecord.calibration`, {} without
-    a step); node_record: the identification node's own CampaignRecord (its sensor log, calibration, inclining and
-    free-decay windows).
+    success / message: the action result; identifications / errors: offline results per DOF
+    (:func:`~.identification.fit.campaign_fit.identify_all_with_errors`) from the bag; bag_dir;
+    sim_time_s / wall_time_s of the whole run.
     """
 
     success: bool = False
     message: str = ""
-    estimates: list = field(default_factory=list)
     identifications: dict = field(default_factory=dict)
     errors: dict = field(default_factory=dict)
     bag_dir: Path | None = None
-    record: object = None
-    disarmed: bool = False
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
-    final_pulse_width_us: list = field(default_factory=list)
-    calibration: dict = field(default_factory=dict)
-    node_record: object = None
-
-
-def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int | None = None,
-                       seed: int | None = None, real_time_factor: float = 0.0, overrides: dict | None = None,
-                       progress: Callable[[str], None] | None = None, deadline_s: float = 3600.0,
-                       level_fractions: Sequence[float] = (), truth=None,
-                       calibrate: Sequence[str] = (), sections: Callable | None = None) -> GraphCampaignOutcome:
-    """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
-
-    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers the prompts);
-    with ``dofs`` empty only the calibration steps run (goal ``calibration_only``). sections(doc, record,
-    identifications): optional, adds sections to identification.yaml from the identification node's own record
-    (e.g. ``free_decay`` and ``inclining`` of the tilt_decay and inclining steps, which need its sensor log).
-
-    Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration, ``TimeoutError`` when a
-    step does not finish within its wall-clock deadline (the graph is shut down, thrusters neutral) and
-    :class:`~hindrax_drivers.vehicle_graph.ForeignVehicleError` when another ESC or supervisor is on the domain.
-    """
-    say = progress or (lambda _m: None)
-    wall0 = time.monotonic()
-    return _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s,
-                level_fractions, wall0, truth, list(calibrate), sections)
 
 
 #: rate of the simulator's ground truth (sim/odometry, sim/wrench) in the campaign's bag, Hz: for plots and checks
@@ -230,11 +189,26 @@ def run_domain(say: Callable[[str], None]):
         yield did
 
 
-def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s, level_fractions,
-         wall0, truth=None, calibrate=(), sections=None) -> GraphCampaignOutcome:
+def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int | None = None,
+                       seed: int | None = None, real_time_factor: float = 0.0,
+                       overrides: dict | None = None, progress: Callable[[str], None] | None = None,
+                       deadline_s: float = 3600.0, truth=None, calibrate: Sequence[str] = (),
+                       sections: Callable | None = None) -> GraphCampaignOutcome:
+    """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
 
+    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers
+    the prompts); with ``dofs`` empty only the calibration steps run (goal ``calibration_only``).
+    sections(doc, record, identifications): optional, adds sections to identification.yaml from
+    the identification node's own record (e.g. ``free_decay`` and ``inclining`` of the tilt_decay
+    and inclining steps, which need its sensor log).
 
-
+    Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration,
+    ``TimeoutError`` when a step does not finish within its wall-clock deadline (the graph is shut
+    down, thrusters neutral) and :class:`~hindrax_drivers.vehicle_graph.ForeignVehicleError` when
+    another ESC or supervisor is on the domain.
+    """
+    say = progress or (lambda _m: None)
+    wall0 = time.monotonic()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     bag_dir = out / "bag"
@@ -286,10 +260,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         keep = False  # the overlapped fits are wanted: the campaign ended normally
         try:
             say(f"graph up: {', '.join(graph.nodes)}; recording to {bag_dir}")
-            # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
-            # over, and stands still while the operator's calls are answered: the run then depends on the seed
-            # alone, not on how long those took in wall time (graph_campaign module docstring).
-            # and one that appears meanwhile: refused before arming, and while the run lasts
+            # another vehicle that appears meanwhile: refused before arming, and while the run lasts
             watch = ForeignVehicleWatch(client, "refused", _BESIDE,
                                         own=lambda: own_view([*graph.nodes.values(), client]), window_s=0.0)
             # the watch first: it looks at every poll, not only once the action server is up
@@ -303,7 +274,6 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             say("armed through esc/set_armed; sending run_identification goal "
                 f"({', '.join(dofs)}, {levels or cfg.identification.levels_per_dof} levels)")
             last = [None]
-
             last_said = [-float("inf")]
 
             def on_feedback(fb) -> None:
@@ -324,7 +294,6 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                     say(f"{100 * f.progress:5.1f} %  {f.dof}: {lvl}  (t_sim {sim.t_s:.0f} s)")
 
             goal = RunIdentification.Goal(dofs=list(dofs), levels_per_dof=int(levels or 0),
-                                          level_fractions=[float(x) for x in level_fractions],
                                           calibrate=list(calibrate), calibration_only=bool(calibrate and not dofs))
             graph.freeze_time()
             handle = goals.send(goal, spin, 30, feedback_callback=on_feedback)
@@ -334,14 +303,13 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                 say(outcome.message)
                 return outcome
             res = wait_until(lambda: goals.poll_result(handle), deadline_s, spin, "identification campaign").result
-            outcome.success, outcome.message, outcome.estimates = bool(res.success), res.message, list(res.estimates)
+            outcome.success, outcome.message = bool(res.success), res.message
             say(f"campaign finished after {sim.t_s:.0f} s simulated: {res.message}")
             graph.freeze_time()
             fut = arm.call_async(SetArmed.Request(arm=False))
             wait_until(fut.done, 30, spin, "disarm answer")
             graph.resume_time()
             wait_until(lambda: armed_state[0] is False, 30, spin, "ESC reporting disarmed")
-            outcome.disarmed = True
             say("disarmed through esc/set_armed")
             # let the recorder take the ESC's disarmed, neutral outputs too (ten 50 Hz output ticks)
             t_disarmed = sim.t_s
@@ -352,7 +320,6 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             watch.check()
             node_record = graph.nodes["identification"].last_record
             calibration = dict(node_record.calibration) if node_record is not None else {}
-            outcome.node_record = node_record
             keep = True
         finally:
             if overlap is not None and not keep:
@@ -360,8 +327,6 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             outcome.sim_time_s = sim.t_s
             graph.shutdown()
             client.destroy_node()
-            outcome.final_pulse_width_us = [float(x) for x in graph.hardware.pulse_widths_us()]
-    outcome.calibration = calibration
     if not dofs:
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
@@ -371,18 +336,19 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         say(f"fitted while the campaign ran: {', '.join(fitted) or 'none'}" if fitted is not None
             else f"overlapped fits lost ({overlap.error}): identifying serially")
     try:  # with the identification node's calibration results
-        record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration,
+        _record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration,
                                               fitted=None if calibration else fitted)
     except BagContentError as exc:
-        record, idents, errors = None, {}, {"bag": str(exc)}
-    outcome.record, outcome.identifications, outcome.errors = record, idents, errors
+        idents, errors = {}, {"bag": str(exc)}
+    outcome.identifications, outcome.errors = idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:
         note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), "
                 f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
                 f"action result: {outcome.message}")
         # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
-        add = sections if sections is not None and outcome.node_record is not None else None
+        add = sections if sections is not None and node_record is not None else None
         write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),
-                      calibration=calibration, sections=add and (lambda doc: add(doc, outcome.node_record, idents)))
+                      calibration=calibration,
+                      sections=add and (lambda doc: add(doc, node_record, idents)))
     return outcome

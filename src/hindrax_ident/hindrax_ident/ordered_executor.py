@@ -25,10 +25,8 @@ destroyed meanwhile (out of the snapshot from its wake on) is freed then.
 QoS event handlers (most waitables) enter their event handle into the wait set directly, without
 their Python wrappers. A wait over a subset of the nodes is rclpy's.
 
-Handlers: a ready timer or subscription whose callback is a plain function gets a :class:`_Call`
-(take and run at once) instead of rclpy's ``Task`` over two coroutines; the other entities
-(waitables such as action servers, guard conditions, clients, services, coroutine callbacks) get
-rclpy's.
+Handlers: a ready timer or subscription whose callback is a plain function gets a :class:`_Call`;
+the other entities get rclpy's.
 """
 from __future__ import annotations
 
@@ -48,7 +46,7 @@ from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.exceptions import InvalidHandle
 
-__all__ = ["LeanWaitExecutor", "ordered_executor"]
+__all__ = ["LeanWaitExecutor"]
 
 #: NumberOfEntities fields in the order _rclpy.WaitSet takes them (after subscriptions: guards,
 #: timers, clients, services, events)
@@ -424,9 +422,3 @@ def _plain(entity: Any) -> bool:
     if c is None or c[0] is not cb:
         c = entity.__dict__["_lean_plain"] = (cb, not inspect.iscoroutinefunction(cb))
     return c[1]
-
-
-def ordered_executor(**kwargs: Any) -> LeanWaitExecutor:
-    """The executor of the one-process graph (:class:`LeanWaitExecutor`; module docstring).
-    ``kwargs`` go to the executor (``context``)."""
-    return LeanWaitExecutor(**kwargs)

@@ -27,17 +27,16 @@ from __future__ import annotations
 
 import argparse
 import collections
+import functools
 import shutil
 import sys
-import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from hindrax_drivers.conditions import ros_context
+from hindrax_drivers.conditions import ConditionTimeout, ros_context, wait_until
 from hindrax_drivers.devices import DEVICES, I2C
 from hindrax_drivers.recording.make_test_bags import default_output_dir, write_bags
 from hindrax_drivers.recording.reader import BagReader
-
 from hindrax_drivers.config import default_config_path
 
 from .bringup import build_graph
@@ -57,29 +56,14 @@ SIM_BAGS: dict[str, tuple[float, dict[str, Any]]] = {
 }
 
 
-def _spin_until(graph: Any, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"record_bag: timed out waiting for {what}")
-        graph.spin_once(0.005)
-
-
 def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any,
                          overrides: dict | None = None) -> dict:
-    """Record ``duration_s`` of simulated time of the whole driver graph (the shipped vehicle file,
-    seed :data:`SIM_SEED`) into ``bag_dir`` (replaced).
-
-    Args:
-        bag_dir: output bag directory (removed first if it exists).
-        duration_s: simulated time to record, s.
-        context: an initialised rclpy context.
-        overrides: extra configuration overrides (dotted keys).
-    Returns:
-        topic -> number of messages the graph's nodes published while recording (every one is in the bag).
-    Raises:
-        TimeoutError: naming the condition not reached (each wait: 60 s of wall time); ConfigError
-        for bad overrides.
+    """Record ``duration_s`` (s) of simulated time of the whole driver graph (the shipped vehicle
+    file, seed :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if
+    it exists), in the initialised rclpy ``context``. Returns topic -> number of messages the
+    graph's nodes published while recording (every one is in the bag). Raises
+    :class:`~hindrax_drivers.conditions.ConditionTimeout` naming the condition not reached (each
+    wait: 60 s of wall time), ConfigError for bad overrides.
     """
     timeout_s = 60.0
     bag_dir = Path(bag_dir)
@@ -104,21 +88,22 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
                 published[topic] += 1
         pub.publish = publish
 
+    spin = functools.partial(graph.spin_once, 0.005)
     drivers = [graph.nodes[d.node] for d in DEVICES]
     for node in drivers + [sim_node]:
         for pub in node.publishers:
             count(pub)
     wanted = {pub.topic_name for node in drivers + [sim_node] for pub in node.publishers}
     try:
-        # hold simulated time at 0 until the serial drivers have finished their start-up exchange and the
-        # recorder is subscribed to every topic (Graph.startup_complete)
-        graph.freeze_time()
-        _spin_until(graph, graph.startup_complete, timeout_s, "the drivers' start-up and the recorder's subscriptions")
+        graph.freeze_time()  # at 0 until the drivers' start-up and the recorder's subscriptions
+        wait_until(graph.startup_complete, timeout_s, spin,
+                   "the drivers' start-up and the recorder's subscriptions")
         links = list(graph.hardware.serial_lock_steps.values())
         counting[0] = True
         graph.resume_time()
         sim = sim_node.simulator
-        _spin_until(graph, lambda: sim.t_s >= duration_s, timeout_s, f"{duration_s} s of simulated time")
+        wait_until(lambda: sim.t_s >= duration_s, timeout_s, spin,
+                   f"{duration_s} s of simulated time")
         graph.freeze_time()
 
         def flushed() -> bool:
@@ -131,11 +116,11 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
             return all(link.settled() for link in links) and all(
                 got.get(t, 0) >= n for t, n in published.items() if t in wanted)
         try:
-            _spin_until(graph, flushed, timeout_s, "the recorder wrote every published message")
-        except TimeoutError:
+            wait_until(flushed, timeout_s, spin, "the recorder wrote every published message")
+        except ConditionTimeout:
             got = recorder._writer.topic_counts()
             lagging = {t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}
-            raise TimeoutError(f"lagging: {lagging}")
+            raise ConditionTimeout(f"lagging: {lagging}") from None
         counting[0] = False
         recorder.stop_recording()
     finally:

@@ -12,9 +12,8 @@ leaves every other section untouched. The commands take the path from ``--result
 Makefile passes ``docs/results.md``); without it nothing is written. The write is atomic (a
 temporary file, then ``os.replace``).
 
-``make bench`` writes section ``bench`` and removes the sections ``bench-<names>`` that earlier
-``--only`` runs left; a partial run takes its benchmarks' rows out of the full table and leaves one
-line naming the section that holds the newer ones (:func:`supersede_rows`).
+``make bench`` replaces older partial results with the ``supersedes_*`` arguments of
+:func:`write_section`.
 
 Section ``durations`` (:func:`record_duration`): one row per long command (``make setup``, ``make
 ros-install``), written by the command itself with its seconds and the machine's load; the README
@@ -74,27 +73,20 @@ def provenance(command: str) -> str:
 def write_section(path: str | Path, name: str, title: str, body: str, command: str,
                   supersedes_prefix: str | None = None,
                   supersedes_rows: tuple[str, Sequence[str]] | None = None) -> Path:
-    """Replace (or append) section ``name`` of the Markdown document ``path``.
+    """Replace (or append) section ``name`` of the Markdown document ``path``; returns the path.
 
-    Args:
-        path: the document (created with :data:`TITLE` when absent; its folder must exist).
-        name: the section's id, ``[a-z][a-z0-9_-]*`` (e.g. ``bench``, ``scenarios``, ``control``).
-        title: the section's heading text (written as ``## title``).
-        body: Markdown of the section (tables, notes); a trailing newline is added when missing.
-        command: the command line that produced it, for the provenance line.
-        supersedes_prefix: when given, every other section whose name starts with it is removed in the same
-            write (``bench-`` for the full benchmark run).
-        supersedes_rows: ``(section, keys)``: the table rows of that other section whose first cell is one of
-            ``keys`` are removed in the same write (:func:`supersede_rows`; ``("bench", ["stack"])`` for
-            ``--only stack``).
+    path: the document (created with :data:`TITLE` when absent; its folder must exist). name: the
+    section's id, ``[a-z][a-z0-9_-]*`` (e.g. ``bench``, ``scenarios``, ``control``). title: its
+    heading text (``## title``). body: its Markdown (a trailing newline is added when missing).
+    command: the command line that produced it, for the provenance line. supersedes_prefix: every
+    other section whose name starts with it is removed in the same write (``bench-`` for the full
+    benchmark run). supersedes_rows: ``(section, keys)``: the table rows of that section whose first
+    cell is one of ``keys`` are removed in the same write (:func:`supersede_rows`;
+    ``("bench", ["stack"])`` for ``--only stack``).
 
-    Returns:
-        The path written.
-
-    Raises:
-        ResultsDocError: a bad name, or a document holding only one of the section's two markers or the
-            end marker before the begin marker (nothing is written then).
-        FileNotFoundError: the document's folder does not exist.
+    Raises :class:`ResultsDocError` for a bad name, or a document holding only one of the section's
+    two markers or the end marker before the begin marker (nothing is written then);
+    ``FileNotFoundError`` when the document's folder does not exist.
     """
     if not _NAME.match(name):
         raise ResultsDocError(f"results section name {name!r}: allowed [a-z][a-z0-9_-]*")

@@ -76,13 +76,14 @@ def test_prompt_codes_and_virtual_operator_forces():
     op = VirtualOperator(sim, 8.0, 5.0, lambda: sent.append(1))
     op.on_prompt("[attach_ballast] calibration: attach the ballast, then call continue")
     op.on_prompt("[attach_ballast] calibration: attach the ballast, then call continue")  # repeated feedback
-    assert len(sent) == 1 and op.ballast_on
+    assert len(sent) == 1 and op.pool.ballast_on
     op.on_step()
     assert sim.wrenches[-1] == pytest.approx([0, 0, 8.0, 0, 0, 0])  # weight: NED down = body down here
     op.on_prompt("")
     op.on_prompt("[remove_ballast] calibration: remove the ballast")
     op.on_prompt("[apply_line_pull_surge] pull the line")
-    assert not op.ballast_on and op.line_ned == pytest.approx([0.0, 5.0, 0.0])  # east, along body +x
+    assert not op.pool.ballast_on
+    assert op.pool.line_ned == pytest.approx([0.0, 5.0, 0.0])  # east, along body +x
     op.on_step()
     assert sim.wrenches[-1] == pytest.approx([5.0, 0, 0, 0, 0, 0])
     op.on_prompt("[release_line_surge] release the line")
@@ -95,10 +96,11 @@ def test_prompt_codes_and_virtual_operator_forces():
     op2 = VirtualOperator(sim, 8.0, 5.0, lambda: sent.append(1), float_buoyancy_n=9.3)
     op2.on_prompt("[attach_float] calibration: tie the float")
     op2.on_step()
-    assert op2.float_on and sim.wrenches[-1] == pytest.approx([0, 0, -9.3, 0, 0, 0])
+    assert op2.pool.float_on and sim.wrenches[-1] == pytest.approx([0, 0, -9.3, 0, 0, 0])
     op2.on_prompt("[remove_float] calibration: remove the float")
     op2.on_prompt("[apply_line_pull_sway_negative] pull the line along -y")
-    assert not op2.float_on and op2.line_ned == pytest.approx([5.0, 0.0, 0.0])  # body -y is north here
+    assert not op2.pool.float_on
+    assert op2.pool.line_ned == pytest.approx([5.0, 0.0, 0.0])  # body -y is north here
     op2.on_step()
     assert sim.wrenches[-1] == pytest.approx([0, -5.0, 0, 0, 0, 0])
 

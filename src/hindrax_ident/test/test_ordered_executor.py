@@ -9,7 +9,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.ordered_executor import ordered_executor
+from hindrax_ident.ordered_executor import LeanWaitExecutor
 
 
 def _drain(gen) -> list:
@@ -33,7 +33,7 @@ def _forget(executor) -> None:
 
 def test_lean_wait_yields_rclpys_callbacks_in_rclpys_order():
     with ros_context() as ctx:
-        ex = ordered_executor(context=ctx)
+        ex = LeanWaitExecutor(context=ctx)
         names = ["zeta", "alpha", "mid"]  # added in this order, not alphabetical
         nodes = [rclpy.create_node(n, context=ctx) for n in names]
         for node in nodes:
@@ -115,7 +115,7 @@ def test_plain_callbacks_run_at_once_and_their_errors_reach_the_spinner():
     from hindrax_ident.ordered_executor import _Call
 
     with ros_context() as ctx:
-        ex = ordered_executor(context=ctx)
+        ex = LeanWaitExecutor(context=ctx)
         node = rclpy.create_node("calls", context=ctx)
         ex.add_node(node)
         got: list = []
@@ -157,7 +157,7 @@ def test_snapshot_handles_held_from_one_wait_to_the_next(monkeypatch):
     enter = oe._ENTER
     monkeypatch.setattr(oe, "_ENTER", lambda h: (entered.append(h), enter(h)))
     with ros_context() as ctx:
-        ex = ordered_executor(context=ctx)
+        ex = LeanWaitExecutor(context=ctx)
         node = rclpy.create_node("held", context=ctx, start_parameter_services=False)
         ex.add_node(node)
         ran: list = []

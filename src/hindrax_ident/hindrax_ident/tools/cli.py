@@ -1,15 +1,14 @@
 """The ``hindrax`` command: one entry point for pool-test engineers.
 
-Subcommands are registered in :data:`COMMANDS` as (path, module, help); each module provides
-``add_arguments(parser)`` and ``run(args) -> int``. The command tree is built from :data:`COMMANDS` alone;
-only the module of the subcommand named on the command line is imported (to add its arguments, then to run
-it), so ``hindrax --help`` and ``hindrax bag --help`` import nothing but argparse, and ``hindrax config check``
-does not import ROS (checked by ``src/hindrax_ident/test/test_cli_help.py``; time in ``make bench``, ``cli``).
+Subcommands are registered in :data:`COMMANDS` as (words, module, help); each module provides
+``add_arguments(parser)`` and ``run(args) -> int``. Only the module of the subcommand named on the
+command line is imported, so ``hindrax --help`` imports nothing but argparse and ``hindrax config
+check`` does not import ROS (src/hindrax_ident/test/test_cli_help.py; time: ``make bench``).
 
-Exit status: 0 on success, 1 when the command ran and found a problem (e.g. an invalid configuration: the
-command raises :class:`~hindrax_ident.tools.commands.common.CommandError`, whose one-line message
-goes to stderr),
-2 on a usage error (argparse), 141 when the reader of its output closed the pipe (``| head``: no traceback).
+Exit status: 0 on success, 1 when the command found a problem (it raises
+:class:`~hindrax_ident.tools.commands.common.CommandError`, whose one-line message goes to
+stderr), 2 on a usage error (argparse), 130 when interrupted, 141 when the reader of its output
+closed the pipe (``| head``: no traceback).
 """
 from __future__ import annotations
 
@@ -24,95 +23,68 @@ from typing import Sequence
 # over the vehicle's loopback UDP transport (docs/architecture.md §11.4).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-#: (command words, module implementing add_arguments/run, one-line help)
+#: the package of the command modules
+PACKAGE = "hindrax_ident.tools.commands"
+#: (command words, module in PACKAGE implementing add_arguments/run, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
-    (("config", "check"), "hindrax_ident.tools.commands.config_check",
+    (("config", "check"), "config_check",
      "validate a vehicle configuration file; print each error as one line, or a summary"),
-    (("allocate",), "hindrax_ident.tools.commands.allocate",
+    (("allocate",), "allocate",
      "allocate a base_link wrench X Y Z K M N (N, N m) to thruster forces and pulse widths (JSON)"),
-    (("arm",), "hindrax_ident.tools.commands.arm",
-     "arm a vehicle's thruster outputs (--vehicle NAME, or the only vehicle on the domain; through its gateway "
-     "from the topside)"),
-    (("disarm",), "hindrax_ident.tools.commands.arm",
-     "disarm a vehicle's thruster outputs (--vehicle NAME, or the only vehicle on the domain)"),
-    (("thruster-test",), "hindrax_ident.tools.commands.thruster_test",
-     "step each thruster alone and print the wrench the model expects (catch reversed/swapped thrusters)"),
-    (("bringup",), "hindrax_ident.tools.commands.bringup",
-     "the virtual pool's single-process graph (--sim); the vehicle runs the launch file instead "
-     "(ros2 launch hindrax_drivers vehicle.launch.xml)"),
-    (("health",), "hindrax_ident.tools.commands.health",
-     "ready to dive? every node of the vehicle's launch file running, its /diagnostics OK and the supervisor OK; "
-     "exit 0, or 1 listing what is missing"),
-    (("decode",), "hindrax_ident.tools.commands.decode",
-     "run a serial driver's parser (dvl75: text lines, ping1d: raw bytes) over a capture; one JSON record per line"),
-    (("bag", "record"), "hindrax_ident.tools.commands.bag.record",
-     "record topics to a rosbag2-compatible MCAP bag (--topics/--regex/--all, --out, --duration)"),
-    (("bag", "play"), "hindrax_ident.tools.commands.bag.play",
-     "publish a bag with its timing (--rate, --start-offset, --topics, --loop, --clock)"),
-    (("bag", "info"), "hindrax_ident.tools.commands.bag.info",
-     "topics, types, counts, rates, duration and size of a bag"),
-    (("bag", "recover"), "hindrax_ident.tools.commands.bag.recover",
-     "rebuild the summary and metadata.yaml of a bag whose recorder was killed"),
-    (("ident", "free-decay"), "hindrax_ident.tools.commands.ident",
+    (("arm",), "arm", "arm a vehicle's thruster outputs (through its gateway from the topside)"),
+    (("disarm",), "arm", "disarm a vehicle's thruster outputs"),
+    (("thruster-test",), "thruster_test",
+     "step each thruster alone and print the wrench the model expects (reversed, swapped)"),
+    (("bringup",), "bringup",
+     "the virtual pool's single-process graph (--sim); the vehicle runs the launch file instead"),
+    (("health",), "health",
+     "ready to dive? every node of the launch file running, /diagnostics and supervisor OK"),
+    (("decode",), "decode",
+     "run a serial driver's parser (dvl75: text lines, ping1d: raw bytes) over a capture (JSON)"),
+    (("bag", "record"), "bag.record", "record topics to a rosbag2-compatible MCAP bag"),
+    (("bag", "play"), "bag.play", "publish a bag with its timing"),
+    (("bag", "info"), "bag.info", "topics, types, counts, rates, duration and size of a bag"),
+    (("bag", "recover"), "bag.recover", "rebuild a bag whose recorder was killed"),
+    (("ident", "free-decay"), "ident",
      "added mass from a free-decay CSV (time s, acceleration m/s^2), [Hindrax-AM] eqs. 2-9 (JSON)"),
-    (("ident", "thruster-fit"), "hindrax_ident.tools.commands.ident",
-     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] eq. 1 "
-     "(JSON; --write CONFIG)"),
-    (("ident", "priors"), "hindrax_ident.tools.commands.ident_references",
-     "empirical added mass and damping priors from geometry, [NTNU-Thesis] App. A.1/A.2 (JSON; --config "
-     "FILE or --length-m ... --top-area-m2)"),
-    (("ident", "inclining"), "hindrax_ident.tools.commands.ident_references",
-     "roll/pitch restoring stiffness from an inclining test CSV (arm m, IMU tilt rad) with a known mass (JSON)"),
-    (("ident", "tilt-decay"), "hindrax_ident.tools.commands.ident_references",
-     "rigid + added roll/pitch inertia from a free-decay CSV (time s, gyro rate or angle) and the inclining "
-     "stiffness, nonlinear ODE fit (JSON)"),
-    (("ident", "campaign"), "hindrax_ident.tools.commands.ident",
-     "identification campaign in-process on the simulator (same as `hindrax run`)"),
-    (("ident", "scenarios"), "hindrax_ident.tools.commands.scenarios",
-     "scenario suite: in-process campaigns on named truth files (disturbed pools); error, z, coverage, verdicts"),
-    (("ident", "start"), "hindrax_ident.tools.commands.ident_live",
-     "send the identification campaign to a running stack (action run_identification), print its feedback; "
-     "Ctrl-C cancels to a zero wrench"),
-    (("ident", "status"), "hindrax_ident.tools.commands.ident_live",
-     "print where a running identification campaign is (identification/status)"),
-    (("ident", "continue"), "hindrax_ident.tools.commands.ident_live",
-     "tell a running campaign's calibration step that the operator did what its prompt asked "
-     "(service identification/continue)"),
-    (("ident", "bag"), "hindrax_ident.tools.commands.ident_bag",
-     "offline identification (batch LS + output error, [Hindrax-Drag] eqs. 6-8) of a recorded campaign bag: "
-     "identification.yaml + report"),
-    (("ident", "fit"), "hindrax_ident.tools.commands.ident_fit",
-     "identify from any bag (WrenchStamped or ThrusterPwm force; Odometry, Twist or Dvl velocity): prediction-error "
-     "fit with delay, K-fold and holdout validation (nrmse): identification.yaml + report"),
-    (("ident", "predict"), "hindrax_ident.tools.commands.ident_predict",
-     "open-loop predictions of an identification.yaml on bags, re-initialised per segment (--segment-s): one CSV "
-     "t_s,segment,measured,predicted per bag and DOF, and their nrmse"),
-    (("run",), "hindrax_ident.tools.commands.run",
-     "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
-     "identification.yaml, report"),
-    (("control", "evaluate"), "hindrax_ident.tools.commands.control",
-     "closed-loop depth step, altitude hold over a sloped floor and heading step in the virtual pool against a truth: "
-     "identified model vs vehicle file vs the former PD hold (table, control.json, report)"),
-    (("control", "scenarios"), "hindrax_ident.tools.commands.control",
-     "for each scenario truth: identify in-process, then compare the depth and altitude holds of the identified model "
-     "and the vehicle file (control_scenarios.md/.json)"),
-    (("control", "hold"), "hindrax_ident.tools.commands.control_hold",
-     "the running controller holds a depth or an altitude (--depth-m / --altitude-m) and the heading, or where it is"),
-    (("control", "release"), "hindrax_ident.tools.commands.control_hold",
-     "the running controller lets go (zero wrench)"),
-    (("control", "model"), "hindrax_ident.tools.commands.control",
-     "the controller's gains and the source of each model value (--model identification.yaml or the vehicle file)"),
-    (("sros2", "policy"), "hindrax_ident.tools.commands.sros2",
-     "write the vehicle's SROS2 permissions policies (internal and topside domain) for its name and launch files"),
-    (("sros2", "keystore"), "hindrax_ident.tools.commands.sros2",
-     "create the vehicle's SROS2 keystore: enclaves, certificates, signed permissions (needs sros2, on the Pi)"),
-    (("keys",), "hindrax_ident.tools.commands.keys",
-     "create the vehicle's operator key (mode 0600) that signs arm, campaign and setpoints; says where the topside "
-     "copy goes"),
-    (("pool", "rehearse"), "hindrax_ident.tools.commands.pool",
-     "the README's pool day on a laptop: the live pool, the installed launch, the two shells' environments"),
-    (("esc", "calibrate"), "hindrax_ident.tools.commands.esc",
-     "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
+    (("ident", "thruster-fit"), "ident",
+     "thrust-curve cubics from bollard-pull CSV, [Hindrax-Drag] eq. 1 (JSON; --write CONFIG)"),
+    (("ident", "priors"), "ident_references",
+     "empirical added mass and damping priors from geometry, [NTNU-Thesis] App. A.1/A.2 (JSON)"),
+    (("ident", "inclining"), "ident_references",
+     "roll/pitch restoring stiffness from an inclining test CSV with a known mass (JSON)"),
+    (("ident", "tilt-decay"), "ident_references",
+     "rigid + added roll/pitch inertia from a free-decay CSV and the inclining stiffness (JSON)"),
+    (("ident", "campaign"), "ident", "the campaign in-process (`hindrax run --in-process`)"),
+    (("ident", "scenarios"), "scenarios",
+     "scenario suite: in-process campaigns on named truth files; error, z, coverage, verdicts"),
+    (("ident", "start"), "ident_live",
+     "send the identification campaign to a running stack, print its feedback; Ctrl-C cancels"),
+    (("ident", "status"), "ident_live", "where a running campaign is (identification/status)"),
+    (("ident", "continue"), "ident_live",
+     "tell a running campaign's calibration step that the operator did what its prompt asked"),
+    (("ident", "bag"), "ident_bag",
+     "offline identification of a recorded campaign bag: identification.yaml + report"),
+    (("ident", "fit"), "ident_fit",
+     "identify from any bag, validated (K-fold, holdout): identification.yaml + report"),
+    (("ident", "predict"), "ident_predict",
+     "open-loop predictions of an identification.yaml on bags: one CSV per bag and DOF, nrmse"),
+    (("run",), "run", "identification campaign on the virtual pool through the ROS graph"),
+    (("control", "evaluate"), "control",
+     "closed-loop holds in the virtual pool: identified model vs vehicle file vs the PD hold"),
+    (("control", "scenarios"), "control",
+     "per scenario truth: identify in-process, then compare the holds of the two models"),
+    (("control", "hold"), "control_hold",
+     "the running controller holds a depth or an altitude and the heading, or where it is"),
+    (("control", "release"), "control_hold", "the running controller lets go (zero wrench)"),
+    (("control", "model"), "control", "the controller's gains and the source of each model value"),
+    (("sros2", "policy"), "sros2", "write the vehicle's SROS2 permissions policies"),
+    (("sros2", "keystore"), "sros2",
+     "create the vehicle's SROS2 keystore: enclaves, certificates, permissions (needs sros2)"),
+    (("keys",), "keys", "create the vehicle's operator key that signs its operator requests"),
+    (("pool", "rehearse"), "pool",
+     "the README's pool day on a laptop: the live pool, the installed launch, the shells' env"),
+    (("esc", "calibrate"), "esc", "PCA9685 oscillator (esc.oscillator_hz) from a scope reading"),
 ]
 
 
@@ -136,9 +108,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                 groups[prefix] = sub.add_subparsers(dest="_".join(prefix) + "_command", metavar="COMMAND",
                                                     required=True)
         p = groups[words[:-1]].add_parser(words[-1], help=help_text, description=help_text)
-        p.set_defaults(_module=module)
+        p.set_defaults(_module=f"{PACKAGE}.{module}")
         if words == words_given:
-            _add_module_arguments(p, module)
+            _add_module_arguments(p, f"{PACKAGE}.{module}")
     return parser
 
 

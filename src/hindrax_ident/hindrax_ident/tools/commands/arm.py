@@ -1,13 +1,12 @@
 """``hindrax arm|disarm [--vehicle NAME]``: arm or disarm a vehicle's thruster outputs.
 
-On the topside (the operator's PC on the vehicle's topside domain) the command calls the gateway's ``/<name>/arm``
-or ``/<name>/disarm`` (hindrax_msgs/SignedTrigger, signed with the vehicle's key, docs/architecture.md §8.2); run on
-the vehicle itself it calls the ESC's
-``esc/set_armed`` (hindrax_msgs/SetArmed). The vehicle is the one named, or the only one on the domain
+On the topside (the operator's PC on the vehicle's topside domain) the command calls the gateway's
+``/<name>/arm`` or ``/<name>/disarm`` (hindrax_msgs/SignedTrigger, signed with the vehicle's key,
+docs/architecture.md §8.2); run on the vehicle itself it calls the ESC's ``esc/set_armed``
+(hindrax_msgs/SetArmed). The vehicle is the one named, or the only one on the domain
 (:mod:`hindrax_ident.tools.commands.vehicle`). Prints one line, ``<name>: armed`` / ``<name>:
-disarmed``, and exits 0;
-a refusal (the ESC's reason: not yet at neutral long enough, the supervisor tripped, the guard silent...) or no
-answer prints the reason on stderr and exits 1.
+disarmed``, and exits 0; a refusal (the ESC's reason: not yet at neutral long enough, the
+supervisor tripped, the guard silent...) or no answer prints the reason on stderr and exits 1.
 """
 from __future__ import annotations
 

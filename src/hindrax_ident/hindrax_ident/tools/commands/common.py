@@ -8,14 +8,13 @@ stays cheap (``hindrax --help`` imports no command module at all, :mod:`hindrax_
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["CommandError", "CONFIG_HELP", "WallProgress", "add_config_argument", "choices",
-           "load_vehicle", "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
-
-CONFIG_HELP = "vehicle configuration (default ros_ws/config/hindrax.yaml)"
+__all__ = ["CommandError", "WallProgress", "add_config_argument", "choices", "load_vehicle",
+           "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
 
 
 class CommandError(Exception):
@@ -24,7 +23,8 @@ class CommandError(Exception):
 
 def add_config_argument(parser: argparse.ArgumentParser, default: Any = None) -> None:
     """``--config FILE``: the vehicle configuration (None or empty: the default file, :func:`load_vehicle`)."""
-    parser.add_argument("--config", default=default, metavar="FILE", help=CONFIG_HELP)
+    parser.add_argument("--config", default=default, metavar="FILE",
+                        help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
 
 
 def choices(option: str, text: str | None, allowed, what: str, empty_ok: bool = True) -> list[str]:
@@ -75,10 +75,8 @@ def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:
 
 def remove_if_empty(path: Path) -> None:
     """Remove the folder ``path`` if it is empty: a failed command leaves no half-named result."""
-    try:
+    with contextlib.suppress(OSError):
         path.rmdir()
-    except OSError:
-        pass
 
 
 class WallProgress:
@@ -99,9 +97,7 @@ def _round_trip_yaml() -> Any:
     """A ruamel.yaml round-trip loader/dumper that reproduces the shipped vehicle file byte for byte.
 
     Lines are never wrapped (flow collections stay on their line), ``null`` is written as ``null``, and a float
-    set by a command is written with 10 significant digits and a decimal point (``-4.0e-07``, ``1500.0``): the
-    vehicle file is read by PyYAML (YAML 1.1), whose float pattern needs the point. Floats read from the file
-    keep their original text.
+    set by a command as :func:`yaml_float` writes it. Floats read from the file keep their text.
     """
     from ruamel.yaml import YAML
     from ruamel.yaml.representer import RoundTripRepresenter

@@ -1,21 +1,19 @@
 """``hindrax control evaluate | scenarios | model``: the identified model in closed loop (docs/control.md).
 
-* ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...] [--seed N]
-  [--seeds N]``:
-  closed-loop runs in the in-process virtual pool on the truth FILE (:mod:`hindrax_ident.sim.control_evaluate`): a 0.3 m
-  depth step, an altitude hold at 0.5 m over a sloped floor and a 30 degree heading step, each with the model of
-  YAML, the vehicle file's model and the former PD hold. Prints the table (RMSE, overshoot, settling time, RMS thrust)
-  and the ratios, writes ``control.json`` and ``report/index.html`` (plots) in DIR (default
-  ``<recording.output_root>/control-<UTC time>``); with ``--seeds N`` every case runs with N noise seeds and the
-  table and ``cases`` give the mean (and its std). A model file that cannot be used is reported in one line and the
-  vehicle file is used in its place (then the "identified" rows equal the vehicle file's).
-* ``hindrax control scenarios [--scenarios NAMES] [--seed N] [--levels N] [--out DIR]``: for each truth of the scenario
-  suite (``ros_ws/config/truth/scenarios/``), an in-process identification campaign (surge, sway, heave, yaw) against
-  that truth, then the depth step and the altitude hold with the identified model, the vehicle file's and the PD
-  hold: ``control_scenarios.json`` and ``control_scenarios.md`` (the RMSE ratios per scenario: the figure that says
-  whether identification pays).
-* ``hindrax control model [--model YAML]``: the gains of each hold, their bandwidth and the source of every model
-  value (identified, or the vehicle file and why).
+* ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...]
+  [--seed N] [--seeds N]``: closed-loop runs in the in-process virtual pool on the truth FILE
+  (:mod:`hindrax_ident.sim.control_evaluate`): a 0.3 m depth step, an altitude hold at 0.5 m over a
+  sloped floor and a 30 degree heading step, each with the model of YAML, the vehicle file's model
+  and the former PD hold. Prints the table (RMSE, overshoot, settling time, RMS thrust) and the
+  ratios, writes ``control.json`` and ``report/index.html`` in DIR (default
+  ``<recording.output_root>/control-<UTC time>``); with ``--seeds N`` the mean over N noise seeds.
+  A model file that cannot be used is reported in one line and the command exits 1.
+* ``hindrax control scenarios [--scenarios NAMES] [--seed N] [--levels N] [--out DIR]``: for each
+  truth of the scenario suite, an in-process identification campaign against that truth, then the
+  depth step and the altitude hold with the identified model, the vehicle file's and the PD hold:
+  ``control_scenarios.json`` and ``control_scenarios.md`` (the RMSE ratios per scenario).
+* ``hindrax control model [--model YAML]``: the gains of each hold, their bandwidth and the source
+  of every model value (identified, or the vehicle file and why).
 
 Exit status 0, or 1 on bad input (one line on stderr).
 """
@@ -78,13 +76,8 @@ def _out_dir(cfg, out: str | None, prefix: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """Dispatch on the subcommand."""
-    which = getattr(args, "_control", "")
     cfg = load_vehicle(args.config)
-    if which == "model":
-        return _model(args, cfg)
-    if which == "evaluate":
-        return _evaluate(args, cfg)
-    return _scenarios(args, cfg)
+    return {"model": _model, "evaluate": _evaluate}.get(args._control, _scenarios)(args, cfg)
 
 
 def _load_model(path, cfg):

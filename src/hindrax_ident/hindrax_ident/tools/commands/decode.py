@@ -50,7 +50,9 @@ def _fields(record: Any) -> Dict[str, Any]:
     return {f.name: _jsonable(getattr(record, f.name)) for f in dataclasses.fields(record)}
 
 
-def _summary(unit: str, n_records: int, by_type: Counter, counts: Dict[str, int]) -> str:
+def _summary(unit: str, by_type: Counter, counts: Dict[str, int], err) -> int:
+    """Write the summary line on ``err``; returns the exit status (1 when nothing was decoded)."""
+    n_records = sum(by_type.values())
     failed = {k: v for k, v in counts.items() if v and k != "garbage_bytes"}
     types = ", ".join(f"{k} {v}" for k, v in sorted(by_type.items())) or "none"
     parts = [f"decode: {n_records} record(s) ({types})"]
@@ -58,7 +60,8 @@ def _summary(unit: str, n_records: int, by_type: Counter, counts: Dict[str, int]
     detail = ", ".join(f"{k} {v}" for k, v in sorted(failed.items()))
     parts.append(f"{n_failed} {unit}(s) did not parse" + (f" ({detail})" if detail else ""))
     parts.append(f"{counts.get('garbage_bytes', 0)} garbage byte(s) discarded")
-    return "; ".join(parts)
+    err.write("; ".join(parts) + "\n")
+    return 0 if n_records else 1
 
 
 def _decode_dvl(data: bytes, out, err) -> int:
@@ -78,9 +81,7 @@ def _decode_dvl(data: bytes, out, err) -> int:
         for e in decoder.errors[reported:]:
             err.write(f"dvl75 line {e.line}: {e.kind}: {e.reason}\n")
         reported = len(decoder.errors)
-    n = sum(by_type.values())
-    err.write(_summary("line", n, by_type, decoder.counts) + "\n")
-    return 0 if n else 1
+    return _summary("line", by_type, decoder.counts, err)
 
 
 def _decode_ping(data: bytes, out, err) -> int:
@@ -99,9 +100,7 @@ def _decode_ping(data: bytes, out, err) -> int:
                               **_fields(item.payload)}) + "\n")
     for e in sorted(decoder.errors, key=lambda e: e.offset):
         err.write(f"ping1d offset {e.offset}: {e.kind}: {e.reason}\n")
-    n = sum(by_type.values())
-    err.write(_summary("frame", n, by_type, decoder.counts) + "\n")
-    return 0 if n else 1
+    return _summary("frame", by_type, decoder.counts, err)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from .common import CommandError, add_config_argument, load_vehicle, update_vehicle_file
 
-__all__ = ["add_arguments", "run", "write_oscillator"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,15 +34,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_argument(parser)
     parser.add_argument("--write", action="store_true",
                         help="write esc.oscillator_hz and esc.oscillator_calibrated: true into --config")
-
-
-def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
-    """Set ``esc.oscillator_hz`` (Hz, rounded to 0.1) and ``esc.oscillator_calibrated: true`` in place.
-
-    Raises ValueError when a key is missing, :class:`ConfigError` when the result is invalid (file restored).
-    """
-    update_vehicle_file(config_path, {"esc.oscillator_hz": round(float(oscillator_hz), 1),
-                                      "esc.oscillator_calibrated": True})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     }
     if args.write:
         try:
-            write_oscillator(path, f_true)
+            update_vehicle_file(path, {"esc.oscillator_hz": round(f_true, 1),
+                                       "esc.oscillator_calibrated": True})
         except (ValueError, ConfigError) as exc:
             raise CommandError(f"esc calibrate: {path} left unchanged: {exc}") from None
         result["written"] = True

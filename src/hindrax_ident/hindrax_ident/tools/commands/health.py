@@ -47,7 +47,7 @@ def _launch_path(spec: str):
     return ament_share(package) / "launch" / name
 
 
-def collect(expect, timeout_s: float, done=None):
+def collect(timeout_s: float, done=None):
     """Listen to the graph for up to ``timeout_s`` s (returning early once ``done(nodes, statuses, supervisor)``):
     returns (node names, {status name: Seen}, Seen of supervisor/status or None)."""
     import rclpy
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     def ready(nodes, statuses, supervisor) -> bool:
         return assess(expect, nodes, statuses, supervisor, args.strict).ready
 
-    nodes, statuses, supervisor = collect(expect, args.timeout, ready)
+    nodes, statuses, supervisor = collect(args.timeout, ready)
     if not ({n.rsplit("/", 1)[-1] for n in nodes} & set(expect.nodes)) and not statuses and supervisor is None:
         print(f"NOT READY: no node of {args.launch} seen on {_where()} within {args.timeout:g} s: is the vehicle "
               "running, on this domain? (from the topside: docs/deployment.md §6)")

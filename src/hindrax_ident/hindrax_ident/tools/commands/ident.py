@@ -1,28 +1,22 @@
 """``hindrax ident free-decay | thruster-fit | campaign``: offline identification tools.
 
 * ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO] [--model linear|quadratic]``:
-  [Hindrax-AM] analysis of a
-  free-decay record (CSV with a header row; column 1 time in s, column 2 acceleration in m/s^2). Prints one
-  JSON object (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
-  added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
-  ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear + quadratic damping, [SmallROV]
-  ([SmallROV]) eq. 12; :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`):
-  linear_damping_n_s_per_m, quadratic_damping_n_s2_per_m2, added_mass_ode_kg (each with ``_std``) and
-  ode_rms_residual_m_s2; the linear keys are unchanged.
+  [Hindrax-AM] analysis of a free-decay record (CSV with a header row; column 1 time in s, column 2
+  acceleration in m/s^2). Prints one JSON object
+  (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
+  added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8),
+  kc (eq. 9)... ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear +
+  quadratic damping, [SmallROV] eq. 12;
+  :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`).
 * ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
   ``{"negative": {c4..c1, c4_std..c1_std, thrust_relative_std, ...}, "positive": {...},
-  "thrust_fit_uncertainty_rel": [negative, positive]}``. ``--write`` replaces the ``curve_negative:`` and
-  ``curve_positive:`` lines of a configuration file in place (text edit, comments kept), sets
-  ``thrust_fit_uncertainty_rel:`` (the fit's relative thrust std per direction,
-  :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`; inserted after ``curve_positive:`` when
-  the file has no such line), which the identification intervals then use instead of the declared
-  ``thrust_uncertainty_rel``, and validates the result with ``load_config`` (the file is restored if it no
-  longer validates).
+  "thrust_fit_uncertainty_rel": [negative, positive]}``; ``--write`` stores the curves and the fit's
+  relative thrust std in a vehicle file (:func:`write_thruster_curves`), which the identification
+  intervals then use instead of the declared ``thrust_uncertainty_rel``.
 * ``hindrax ident campaign``: the identification campaign on the simulator, same as ``hindrax run``
   (:mod:`hindrax_ident.tools.commands.run`).
 
-One module serves the three subcommands: :func:`add_arguments` reads the subcommand from the parser's prog.
 Exit status 0 on success, 1 on bad input (one-line message on stderr).
 """
 from __future__ import annotations
@@ -38,7 +32,7 @@ from hindrax_drivers.config import ConfigError
 
 from .common import CommandError, update_vehicle_file
 
-__all__ = ["add_arguments", "run", "read_two_columns", "write_thruster_curves"]
+__all__ = ["add_arguments", "run", "read_two_columns"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -94,23 +88,6 @@ def read_two_columns(path: str) -> tuple[np.ndarray, np.ndarray]:
     return x, y
 
 
-def write_thruster_curves(config_path: str, negative, positive, relative_std=None) -> None:
-    """Set ``thrusters.curve_negative`` / ``thrusters.curve_positive`` (4 coefficients each, N per us^k) in a
-    vehicle file, keeping comments, and with ``relative_std`` = (negative, positive) set
-    ``thrusters.thrust_fit_uncertainty_rel`` (added after ``curve_positive`` when absent).
-
-    Validates the result and restores the original text on failure (:func:`~.common.update_vehicle_file`).
-    Raises ``ValueError`` (missing keys) or :class:`~hindrax_drivers.config.ConfigError`.
-    """
-    values = {"thrusters.curve_negative": [float(c) for c in negative],
-              "thrusters.curve_positive": [float(c) for c in positive]}
-    if relative_std is not None:
-        values["thrusters.thrust_fit_uncertainty_rel"] = [float(s) for s in relative_std]
-    update_vehicle_file(config_path, values, new_keys={"thrusters.thrust_fit_uncertainty_rel": (
-        "curve_positive", "1-sigma relative thrust std [negative, positive] of the bollard-pull fit "
-                          "(hindrax ident thruster-fit)")})
-
-
 def _free_decay(args) -> int:
     from ...estimation.free_decay import analyse_free_decay, quadratic_free_decay_keys
     from ...estimation.least_squares import EstimationError
@@ -140,7 +117,14 @@ def _thruster_fit(args) -> int:
                       "thrust_fit_uncertainty_rel": list(rel)}))
     if args.write:
         try:
-            write_thruster_curves(args.write, fit.negative.coefficients, fit.positive.coefficients, rel)
+            # comments kept; thrust_fit_uncertainty_rel added after curve_positive when absent
+            update_vehicle_file(args.write, {
+                "thrusters.curve_negative": [float(c) for c in fit.negative.coefficients],
+                "thrusters.curve_positive": [float(c) for c in fit.positive.coefficients],
+                "thrusters.thrust_fit_uncertainty_rel": [float(s) for s in rel]},
+                new_keys={"thrusters.thrust_fit_uncertainty_rel": (
+                    "curve_positive", "1-sigma relative thrust std [negative, positive] of the "
+                                      "bollard-pull fit (hindrax ident thruster-fit)")})
         except ConfigError as exc:
             raise CommandError(f"thruster-fit: {args.write} would be invalid, left unchanged: "
                                f"{'; '.join(exc.lines())}") from exc
@@ -152,10 +136,7 @@ def _thruster_fit(args) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Dispatch on the subcommand."""
-    which = getattr(args, "_ident", "")
-    if which == "free-decay":
-        return _free_decay(args)
-    if which == "thruster-fit":
-        return _thruster_fit(args)
     from . import run as run_cmd
-    return run_cmd.run(args)
+
+    which = getattr(args, "_ident", "")
+    return {"free-decay": _free_decay, "thruster-fit": _thruster_fit}.get(which, run_cmd.run)(args)

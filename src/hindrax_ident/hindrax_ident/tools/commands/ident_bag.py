@@ -2,18 +2,13 @@
 identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag,
-``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints the summary
-table; the pipeline is :mod:`hindrax_ident.identification.assessment.pipeline` (the campaign adapter of the bag
-reader, the fit core shared with ``hindrax ident fit``, docs/identification.md §7). When the bag holds the calibration
-steps' results
-(``identification/calibration``, published by the identification node when each step ends: ``hindrax ident start
---calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
-estimated jointly with the fits (sections ``calibration`` and ``joint``), the inclining steps give the section
-``inclining`` and the tilt_decay steps the section ``free_decay`` with the reference verdicts
-(docs/identification.md §6). A DOF whose chosen model does not beat holding the velocity in the cross-validation
-gets the verdict "no model beats holding the velocity" (printed and in identification.yaml, with every score under
-``model_selection`` and ``persistence``), as in ``hindrax ident fit``. Exit 0, or 1 with one line on stderr when
-the configuration, the bag or its content is unusable, or when no DOF could be identified.
+``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints
+the summary table; the pipeline is :mod:`hindrax_ident.identification.assessment.pipeline`
+(docs/identification.md §7). Calibration steps' results in the bag (``identification/calibration``)
+are applied as ``hindrax run`` applies them (docs/identification.md §6). A DOF whose chosen model
+does not beat holding the velocity in the cross-validation gets that verdict, as in ``hindrax ident
+fit``. Exit 0, or 1 with one line on stderr when the configuration, the bag or its content is
+unusable, or when no DOF could be identified.
 """
 from __future__ import annotations
 

@@ -38,13 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--holdout", nargs="+", default=[], metavar="BAG", help="bags used for validation only")
     parser.add_argument("--folds", type=int, default=4, help="K of the cross-validation (default 4)")
     parser.add_argument("--persistence-margin", type=float, default=None, metavar="FRACTION",
-                        help="relative margin by which a DOF's model must beat holding the velocity in "
-                             "cross-validation, else its verdict is 'no model beats holding the velocity' (default "
-                             "0.05: about what one physical term such as a per-run bias is worth, and the "
-                             "fold-to-fold scatter of the score)")
+                        help="relative margin by which a DOF's model must beat holding the "
+                             "velocity in cross-validation, else its verdict is 'no model beats "
+                             "holding the velocity' (default 0.05; docs/identification.md §7)")
     parser.add_argument("--max-delay-s", type=float, default=1.0,
-                        help="largest input delay + lag searched for a commanded wrench, s (default 1.0; also "
-                             "bounded by a tenth of the segment and a quarter period of the excitation bandwidth)")
+                        help="largest input delay + lag searched for a commanded wrench, s "
+                             "(default 1.0)")
     parser.add_argument("--config", default=None,
                         help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
                              "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")

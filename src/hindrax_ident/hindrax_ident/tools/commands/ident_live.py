@@ -1,28 +1,21 @@
-"""``hindrax ident start | status | continue``: the identification campaign on a running stack (vehicle or virtual
-pool).
+"""``hindrax ident start | status | continue``: the identification campaign on a running stack
+(vehicle or virtual pool).
 
-* ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--calibrate ballast,line_pull
-  [--calibration-only]] [--server-timeout S]``
-  sends one ``run_identification`` goal (hindrax_msgs/action/RunIdentification) to the identification node of a
-  running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback as one updating line on a
-  terminal (:mod:`hindrax_ident.progress_line`; in a log, a line only when it changes): DOF, level, command,
-  progress; a calibration step's operator prompt (``>>> [attach_ballast]
-  calibration: attach the ballast (8.56 N in water), then call continue``) is printed once when it appears. Ctrl-C
-  cancels the goal: the node brings the vehicle to a zero wrench and holds it until the ESC reports neutral widths, then
-  the action ends; the command waits for that end (a second Ctrl-C stops waiting). The result line carries the node's
-  message and the final online estimates. Exit 0 when the campaign completed, 1 when it was rejected, aborted or
-  cancelled, or no server answered.
-* ``hindrax ident status [--timeout S]`` prints the next ``identification/status`` message (ManeuverStatus):
-  phase, DOF, level, command, progress and the current step. Exit 1 when none arrives within the timeout.
-* ``hindrax ident continue [--timeout S]`` calls ``identification/continue`` (std_srvs/Trigger) once the operator
-  did what the prompt asked (ballast attached, line pulled, ...): prints the node's answer; exit 1 when nothing
-  was awaited (the reason is printed) or no service answered.
+* ``hindrax ident start [--dofs ...] [--levels N] [--fractions F1,F2,...] [--calibrate STEPS
+  [--calibration-only]] [--server-timeout S]`` sends one ``run_identification`` goal
+  (hindrax_msgs/action/RunIdentification) and prints its feedback as one updating line on a terminal
+  (:mod:`hindrax_ident.progress_line`), a calibration step's operator prompt once, prefixed ``>>>``.
+  Ctrl-C cancels the goal: the node brings the vehicle to a zero wrench and holds it until the ESC
+  reports neutral widths, and the command waits for that end (a second Ctrl-C stops waiting). Exit 0
+  when the campaign completed, 1 when it was rejected, aborted or cancelled, or no server answered.
+* ``hindrax ident status`` prints the next ``identification/status`` message (ManeuverStatus);
+  exit 1 when none arrives within the timeout.
+* ``hindrax ident continue`` calls ``identification/continue`` (std_srvs/Trigger) once the operator
+  did what the prompt asked; exit 1 when nothing was awaited or no service answered.
 
-Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain, and refuses
-with one line when it sees none or several (:mod:`hindrax_ident.tools.commands.vehicle`): on the
-topside through the
-vehicle's gateway (``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
-
+Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain
+(:mod:`hindrax_ident.tools.commands.vehicle`): on the topside through the vehicle's gateway
+(``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
 The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise.
 """
 from __future__ import annotations
@@ -54,10 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--fractions", default="",
                             help="explicit level fractions of each DOF's authority, comma-separated, each in (0, 1]")
         parser.add_argument("--calibrate", default="",
-                            help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
-                                 "line_pull, line_pull_negative), or some of ballast, float, line_pull, "
-                                 "line_pull_negative; tilt_decay, inclining (the node prompts; answer with `hindrax "
-                                 "ident continue`; docs/identification.md §6.1)")
+                            help="reference steps before the ladders, as hindrax run --calibrate "
+                                 "(the node prompts; answer with `hindrax ident continue`)")
         parser.add_argument("--calibration-only", action="store_true",
                             help="run only the --calibrate steps (no ladders)")
         parser.add_argument("--server-timeout", type=float, default=10.0,
@@ -247,5 +238,4 @@ def _continue(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Dispatch on the subcommand."""
-    which = getattr(args, "_live", "")
-    return _start(args) if which == "start" else (_continue(args) if which == "continue" else _status(args))
+    return {"start": _start, "continue": _continue}.get(args._live, _status)(args)

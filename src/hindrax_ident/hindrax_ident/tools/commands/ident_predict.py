@@ -27,10 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segment-s", type=float, default=None, metavar="S",
                         help="re-initialise from the measured velocity every S s from the first instant with force "
                              "and velocity (default: the tool's rule, 10 s segments of each continuous stretch)")
-    parser.add_argument("--wrench-topic", default=None, help="as hindrax ident fit")
-    parser.add_argument("--velocity-topic", default=None, help="as hindrax ident fit")
-    parser.add_argument("--imu-topic", default=None, help="as hindrax ident fit")
-    parser.add_argument("--depth-topic", default=None, help="as hindrax ident fit")
+    for signal in ("wrench", "velocity", "imu", "depth"):
+        parser.add_argument(f"--{signal}-topic", default=None, help="as hindrax ident fit")
     parser.add_argument("--config", default=None, help="vehicle file (needed for a ThrusterPwm force)")
 
 

@@ -13,15 +13,12 @@
   column 2 the IMU-measured tilt, rad or with ``--degrees`` deg). Prints
   :meth:`~hindrax_ident.estimation.free_decay.IncliningResult.to_dict` (restoring_n_m_per_rad, its std, bg_m...).
 * ``hindrax ident tilt-decay FILE --stiffness C [--stiffness-std S] [--rigid-inertia I] [--signal rate|angle]
-  [--identification YAML --dof roll|pitch]``: roll or pitch free decay (CSV with a header; column 1 time s,
-  column 2 the gyro rate in rad/s or the attitude angle in rad), fitted from its largest excursion on with the
-  nonlinear ODE I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
-  fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM]
-  eq. 4 applied to the vehicle, [SmallROV] eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
-  std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the
-  self-propelled inertia of that DOF is compared by the campaign's rule
-  (:func:`~hindrax_ident.identification.assessment.verdicts. apply_reference_verdicts`): ``verdict`` suspect, with the
-  ``reason``, when the two differ by more than 1.96 combined std.
+  [--identification YAML --dof roll|pitch]``: roll or pitch free decay (CSV with a header; column 1
+  time s, column 2 the gyro rate in rad/s or the attitude angle in rad), fitted from its largest
+  excursion on with I x'' + b1 x' + b2 |x'| x' + C x = 0 (docs/identification.md §6.4:
+  [Hindrax-AM] eq. 4 applied to the vehicle, [SmallROV] eq. 12); ``total_inertia_kg_m2_std``
+  combines the fit's std (``_std_fit``) with C's. With ``--identification`` the self-propelled
+  inertia of that DOF is compared by the campaign's rule (:func:`_compare_with_self_propelled`).
 
 Exit status 0 on success, 1 on bad input (one-line message on stderr).
 """
@@ -120,12 +117,11 @@ def _inclining(args) -> int:
 
 
 def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
-    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the free-decay
-    result ``out`` (in place): the campaign's verdict rule itself
-    (:func:`~hindrax_ident.identification.assessment.verdicts. apply_reference_verdicts` on a one-DOF document, i.e.
-    :func:`~hindrax_ident.identification.assessment.verdicts. free_decay_reason`: suspect beyond
-    :data:`~hindrax_ident.identification.assessment.verdicts.REFERENCE_Z_MAX` combined std). Raises ``ValueError`` when
-    ``path`` has no ``dofs.<dof>``."""
+    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the
+    free-decay result ``out`` (in place) by the campaign's verdict rule itself
+    (:func:`~hindrax_ident.identification.assessment.verdicts.apply_reference_verdicts` on a one-DOF
+    document: suspect beyond ``REFERENCE_Z_MAX`` combined std). Raises ``ValueError`` when ``path``
+    has no ``dofs.<dof>``."""
     from ...identification.assessment.results import read_identification
     from ...identification.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
 
@@ -179,9 +175,4 @@ def _tilt_decay(args) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Dispatch on the subcommand."""
-    which = getattr(args, "_ident_ref", "")
-    if which == "priors":
-        return _priors(args)
-    if which == "inclining":
-        return _inclining(args)
-    return _tilt_decay(args)
+    return {"priors": _priors, "inclining": _inclining}.get(args._ident_ref, _tilt_decay)(args)

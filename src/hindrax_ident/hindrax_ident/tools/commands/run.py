@@ -1,26 +1,22 @@
 """``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--in-process]``: the main job.
 
-Default: the campaign through the ROS graph, in one process with a SingleThreadedExecutor
-(:func:`hindrax_ident.bringup.build_graph`): the virtual pool simulator, the five device emulators, the four
-sensor drivers, the ESC node, the thrust allocation, the identification node and the recorder. The vehicle is
-armed through ``esc/set_armed`` (the operator's service, after ``esc.arming_time_s`` at neutral), the campaign
-runs as one ``run_identification`` action goal (progress lines from its feedback), then the vehicle is
-disarmed, the bag closed and the offline identification runs on the bag
-(:mod:`hindrax_ident.identification.bag_input.from_bag`). The simulator runs in lock-step with the identification
-node's control tick (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`), so CPU load slows the run
-but does not change it.
+Default: the campaign through the whole ROS graph in one process
+(:mod:`hindrax_ident.graph_campaign`: virtual pool, device emulators, drivers, ESC, allocation,
+identification node and recorder; armed through ``esc/set_armed``, one ``run_identification``
+goal, disarmed, then identified from the bag), in lock-step with the identification node's control
+tick, so CPU load slows the run but does not change it.
 
-``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
-(:mod:`hindrax_ident.sim.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
-no ROS graph, no bag), about four times faster; for quick studies of the method.
+``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the
+simulator (:mod:`hindrax_ident.sim.campaign`: no drivers, no ROS graph, no bag), about four times
+faster; for quick studies of the method.
 
 Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
-``--in-process``; a second run in the same second gets ``_1`` and one line says so), with a ``latest`` link beside
-it moved once the run has completed (:mod:`hindrax_ident.output_dirs`), or ``--out``, which must be new or empty.
-It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`),
-``report/index.html`` with its plots, and (graph) ``bag/`` (rosbag2 MCAP layout). At the end a table is printed:
-per DOF and parameter the identified value with its std, the configured value ("truth" in simulation) and the
-relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
+``--in-process``), with a ``latest`` link beside it moved once the run has completed
+(:mod:`hindrax_ident.output_dirs`), or ``--out``, which must be new or empty. It holds
+``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`),
+``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF
+and parameter the identified value with its std, the configured value ("truth" in simulation) and
+the relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
 """
 from __future__ import annotations
 
@@ -34,6 +30,13 @@ from .common import (CommandError, WallProgress, add_config_argument, choices, l
                      result_dir)
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
+
+#: options that replace a ``calibration.*`` key of the vehicle file: (option dest, key, help)
+_CALIBRATION_OPTIONS = (
+    ("ballast_mass_kg", "calibration.ballast_mass_kg", "ballast mass, kg"),
+    ("ballast_volume_m3", "calibration.ballast_volume_m3", "ballast displaced volume, m^3"),
+    ("line_pull_n", "calibration.line_pull_force_n", "horizontal line force over the pulley, N"),
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -61,21 +64,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
-                             "line_pull, line_pull_negative: every step the thrust scales per thruster group and "
-                             "rotation direction need, docs/identification.md §6.1), or some of them: ballast (a known "
-                             "sinker), float (a known float, calibration.float_*), line_pull (+x, +y), "
-                             "line_pull_negative (-x, -y) (known forces: the thrust scales are applied to the "
-                             "identification, identification.yaml gains calibration and joint sections), tilt_decay "
-                             "(roll and pitch free decay: rigid + added inertia with "
-                             "--restoring-n-m-per-rad or the inclining step, section free_decay), inclining (restoring "
-                             "stiffness C of roll and pitch from a known mass at a known arm, calibration.inclining_*; "
-                             "section inclining); through the graph the virtual pool plays "
-                             "the operator (applies the known force, calls identification/continue)")
-    parser.add_argument("--ballast-mass-kg", type=float, default=None,
-                        help="ballast mass, kg (default calibration.ballast_mass_kg of the vehicle file)")
-    parser.add_argument("--ballast-volume-m3", type=float, default=None,
-                        help="ballast displaced volume, m^3 (default calibration.ballast_volume_m3)")
+                        help="reference steps before the ladders, comma-separated: thrust (= "
+                             "ballast, float, line_pull, line_pull_negative), or some of them, "
+                             "tilt_decay, inclining (docs/identification.md §6); through the graph "
+                             "the virtual pool plays the operator")
+    for dest, key, text in _CALIBRATION_OPTIONS:
+        parser.add_argument("--" + dest.replace("_", "-"), type=float, default=None,
+                            help=f"{text} (default {key} of the vehicle file)")
     parser.add_argument("--restoring-n-m-per-rad", type=float, default=None,
                         help="roll/pitch restoring stiffness C for tilt_decay (from `hindrax ident inclining`; default "
                              "m g BG of the vehicle file, marked not measured)")
@@ -86,8 +81,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default identification.excitation of the vehicle file)")
     parser.add_argument("--excitation-duration", type=float, default=None,
                         help="length of the broadband run per DOF, s (default identification.excitation_duration_s)")
-    parser.add_argument("--line-pull-n", type=float, default=None,
-                        help="horizontal line force over the pulley, N (default calibration.line_pull_force_n)")
     if not parser.prog.endswith("campaign"):
         parser.add_argument("--in-process", action="store_true",
                             help="step the simulator in-process instead (no drivers, no ROS graph, no bag; about 4x "
@@ -218,13 +211,9 @@ def _calibration_steps(args) -> list[str]:
 
 
 def _calibration_overrides(args) -> dict:
-    """``calibration.*`` keys given on the command line (``--ballast-mass-kg``, ``--ballast-volume-m3``,
-    ``--line-pull-n``): {key: value} of those given."""
-    keys = {"ballast_mass_kg": "calibration.ballast_mass_kg",
-            "ballast_volume_m3": "calibration.ballast_volume_m3",
-            "line_pull_n": "calibration.line_pull_force_n"}
-    return {key: float(getattr(args, opt)) for opt, key in keys.items()
-            if getattr(args, opt, None) is not None}
+    """{key: value} of the :data:`_CALIBRATION_OPTIONS` given on the command line."""
+    return {key: float(getattr(args, dest)) for dest, key, _text in _CALIBRATION_OPTIONS
+            if getattr(args, dest, None) is not None}
 
 
 def run_graph(args: argparse.Namespace) -> int:

@@ -12,18 +12,13 @@ table) and prints the table. A scenario *meets the target* when every parameter'
 truth in at least 90 % of the seeds or the parameter is suspect in every case where it does not; the
 no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
 
-``--excitation ladder,multisine,prbs`` runs every case once per excitation
-(``identification.excitation``: the constant-thrust ladder or one broadband run per DOF,
-:mod:`hindrax_ident.identification.online.excitation`; ``--excitation-duration`` its length); the scenario label becomes
+``--excitation ladder,multisine,prbs`` runs every case once per force input
+(:mod:`hindrax_ident.identification.online.excitation`); the label becomes
 ``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
-(:func:`format_excitation_table`): pool seconds per DOF, mean |error| of the inertia and quadratic damping, their
-interval coverage, and the error scaled to 100 s of pool time (|error| x sqrt(pool s / 100), the 1 / sqrt(T) law of
-an unbiased estimate), i.e. the accuracy per second of pool time.
-
-``--calibrate thrust`` (or other reference steps) runs them before the manoeuvres of every case (the
-virtual pool plays the operator) and identifies as ``hindrax ident campaign --calibrate`` does: the per-direction
-thrust scales applied and estimated jointly with the fits and the empirical priors; the label gains
-``[calibrate <steps>]``. Without it the cases are identified on the curve's force.
+(:func:`format_excitation_table`). ``--calibrate thrust`` (or other reference steps) runs them
+before the manoeuvres of every case and identifies as ``hindrax ident campaign --calibrate`` does
+(:func:`run_case`); the label gains ``[calibrate <steps>]``. Without it the cases are identified on
+the curve's force.
 """
 from __future__ import annotations
 
@@ -78,19 +73,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_argument(parser)
     parser.add_argument("--jobs", type=int, default=1, help="campaigns run in parallel processes (default 1)")
     parser.add_argument("--cache", default=None,
-                        help="directory keeping each campaign's identification (pickle): a case found there is not "
-                             "run again, so the verdicts can be re-assessed and seeds added without re-running "
-                             "(keyed by scenario, seed, DOFs and levels: empty it when the vehicle file or the code "
-                             "changes)")
+                        help="directory keeping each campaign's identification (pickle, keyed by "
+                             "scenario, seed, DOFs and levels): a case found there is not run "
+                             "again (empty it when the vehicle file or the code changes)")
     parser.add_argument("--excitation", default=None,
                         help="comma-separated force inputs to compare: ladder, multisine, prbs, chirp (default "
                              "identification.excitation of the vehicle file)")
     parser.add_argument("--excitation-duration", type=float, default=None,
                         help="broadband run per DOF, s (default identification.excitation_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="reference steps before the manoeuvres in every case, comma-separated (as hindrax ident "
-                             "campaign --calibrate, e.g. thrust): the scales are applied and estimated jointly with "
-                             "the fits and the empirical priors (docs/identification.md §6.2); the label gains "
+                        help="reference steps before the manoeuvres of every case, as hindrax run "
+                             "--calibrate (docs/identification.md §6.2); the label gains "
                              "[calibrate <steps>]")
     parser.add_argument("--cached-only", action="store_true",
                         help="with --cache: use only the cases found there (re-assess them with the current verdicts "
@@ -271,11 +264,12 @@ def summarise(results: Sequence[dict]) -> dict:
 
 
 def format_excitation_table(results: Sequence[dict]) -> str:
-    """Markdown comparison of the force inputs (module docstring): per scenario, excitation and DOF over the seeds:
+    """Markdown comparison of the force inputs: per scenario, excitation and DOF over the seeds:
     mean pool seconds of the DOF, mean |error| of the inertia and of the quadratic damping (heave: both directions),
     how many of their 95 % intervals cover the truth, and each error scaled to 100 s of pool time
-    (|error| x sqrt(pool s / 100)); the last column scales the fits' own relative 1-sigma (``std_fit``, before the
-    thrust-model widening) the same way (less noisy than the error over a few seeds)."""
+    (|error| x sqrt(pool s / 100), the 1 / sqrt(T) law of an unbiased estimate); the last column
+    scales the fits' own relative 1-sigma (``std_fit``, before the thrust-model widening) the same
+    way (less noisy than the error over a few seeds)."""
     by: dict = {}
     for res in results:
         for row in res["cases"]:

@@ -1,13 +1,10 @@
-"""``hindrax bag play BAG``: publish a bag with its recorded timing.
+"""``hindrax bag play BAG``: publish a bag with its recorded timing (options: ``--help``).
 
-Options: ``--rate X`` (2 = twice as fast), ``--start-offset S`` (skip the first S seconds),
-``--topics T ...`` (subset), ``--loop``, ``--clock [HZ]`` (publish /clock, default 100 Hz, for nodes run
-with use_sim_time), ``--wait-subscribers S`` (wait up to S s for every topic to have a subscriber before
-starting), ``--safety-topics`` (also publish the safety and actuation topics: heartbeats, ``thrusters/*``,
-``esc/*``, ``supervisor/*``, ``guard/*``, ``wrench``, setpoints, action topics; withheld by default so that a bag
-never answers for a vehicle's supervisor or drives its thrusters, and refused while an ESC or supervisor is on the
-graph). Give BAG first (``--topics`` takes every following word). Exit 0 when played, 1 with one line on stderr when
-the bag cannot be played or is refused.
+The safety and actuation topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``,
+``guard/*``, ``wrench``, setpoints, action topics) are withheld unless ``--safety-topics``, so that
+a bag never answers for a vehicle's supervisor or drives its thrusters; that option is refused
+while an ESC or supervisor is on the graph. Give BAG first (``--topics`` takes every following
+word). Exit 0 when played, 1 with one line on stderr when the bag cannot be played or is refused.
 Implementation: :class:`hindrax_drivers.recording.player_node.BagPlayerNode`.
 """
 from __future__ import annotations
