@@ -34,14 +34,16 @@ a node did not declare among its parameters is absent from its configuration: re
 the key. Each field's unit and meaning: its key's ``Spec.doc`` in SCHEMA.
 """
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, dataclass_transform
 
 ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 """Marks a required key this configuration does not hold (a node's selection of keys) in :meth:`Section.build`."""
 
 
+@dataclass_transform(frozen_default=True, eq_default=False)
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path (the ``prefix`` class keyword of a subclass,
+    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is
+    the dotted path (the ``prefix`` class keyword of a subclass,
     ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
@@ -54,6 +56,7 @@ class Section:
         super().__init_subclass__(**kwargs)
         if prefix is not None:
             cls.PREFIX = prefix
+        dataclass(frozen=True, eq=False, repr=False)(cls)
 
     @classmethod
     def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
@@ -105,8 +108,7 @@ def _classes(path: str, node: dict, out: list[str]) -> None:
             _classes(f"{path}.{name}" if path else name, sub, out)
     if not path:
         return
-    lines = ["", "", "@dataclass(frozen=True, eq=False, repr=False)",
-             f'class {_camel(path)}(Section, prefix="{path}"):',
+    lines = ["", "", f'class {_camel(path)}(Section, prefix="{path}"):',
              f'    """``{path}.*`` (docs: hindrax_drivers.config.SCHEMA)."""', ""]
     for name, sub in node.items():
         if isinstance(sub, dict):

@@ -8,14 +8,16 @@ a node did not declare among its parameters is absent from its configuration: re
 the key. Each field's unit and meaning: its key's ``Spec.doc`` in SCHEMA.
 """
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, dataclass_transform
 
 ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 """Marks a required key this configuration does not hold (a node's selection of keys) in :meth:`Section.build`."""
 
 
+@dataclass_transform(frozen_default=True, eq_default=False)
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path (the ``prefix`` class keyword of a subclass,
+    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is
+    the dotted path (the ``prefix`` class keyword of a subclass,
     ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
@@ -28,6 +30,7 @@ class Section:
         super().__init_subclass__(**kwargs)
         if prefix is not None:
             cls.PREFIX = prefix
+        dataclass(frozen=True, eq=False, repr=False)(cls)
 
     @classmethod
     def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
@@ -55,7 +58,6 @@ class Section:
         return f"{type(self).__name__}({items})"
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class VehicleSection(Section, prefix="vehicle"):
     """``vehicle.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -72,7 +74,6 @@ class VehicleSection(Section, prefix="vehicle"):
     centre_of_buoyancy_frd_m: tuple[float, ...]
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class EnvironmentSection(Section, prefix="environment"):
     """``environment.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -82,7 +83,6 @@ class EnvironmentSection(Section, prefix="environment"):
     surface_pressure_pa: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsSurgeSection(Section, prefix="hydrodynamics.surge"):
     """``hydrodynamics.surge.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -91,7 +91,6 @@ class HydrodynamicsSurgeSection(Section, prefix="hydrodynamics.surge"):
     quadratic_damping_kg_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsSwaySection(Section, prefix="hydrodynamics.sway"):
     """``hydrodynamics.sway.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -100,7 +99,6 @@ class HydrodynamicsSwaySection(Section, prefix="hydrodynamics.sway"):
     quadratic_damping_kg_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
     """``hydrodynamics.heave.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -111,7 +109,6 @@ class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
     quadratic_damping_negative_kg_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsRollSection(Section, prefix="hydrodynamics.roll"):
     """``hydrodynamics.roll.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -120,7 +117,6 @@ class HydrodynamicsRollSection(Section, prefix="hydrodynamics.roll"):
     quadratic_damping_kg_m2: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsPitchSection(Section, prefix="hydrodynamics.pitch"):
     """``hydrodynamics.pitch.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -129,7 +125,6 @@ class HydrodynamicsPitchSection(Section, prefix="hydrodynamics.pitch"):
     quadratic_damping_kg_m2: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
     """``hydrodynamics.yaw.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -138,7 +133,6 @@ class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
     quadratic_damping_kg_m2: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsSection(Section, prefix="hydrodynamics"):
     """``hydrodynamics.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -151,7 +145,6 @@ class HydrodynamicsSection(Section, prefix="hydrodynamics"):
     yaw: HydrodynamicsYawSection
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class EscOutputEnableGpioSection(Section, prefix="esc.output_enable_gpio"):
     """``esc.output_enable_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -159,7 +152,6 @@ class EscOutputEnableGpioSection(Section, prefix="esc.output_enable_gpio"):
     line: int | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class EscOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_feed_gpio"):
     """``esc.output_enable_feed_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -167,7 +159,6 @@ class EscOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_feed_gpi
     line: int | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class EscSection(Section, prefix="esc"):
     """``esc.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -191,7 +182,6 @@ class EscSection(Section, prefix="esc"):
     output_enable_feed_timeout_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class LightsSection(Section, prefix="lights"):
     """``lights.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -200,7 +190,6 @@ class LightsSection(Section, prefix="lights"):
     pulse_width_full_us: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
     """``sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -219,7 +208,6 @@ class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
     attitude_noise_std_rad: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
     """``sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -234,7 +222,6 @@ class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
     max_range_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
     """``sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -254,7 +241,6 @@ class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
     noise_std_pa: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
     """``sensors.icm20948.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -278,7 +264,6 @@ class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
     gyro_noise_std_rad_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsSection(Section, prefix="sensors"):
     """``sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -288,7 +273,6 @@ class SensorsSection(Section, prefix="sensors"):
     icm20948: SensorsIcm20948Section
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class PoolSection(Section, prefix="pool"):
     """``pool.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -300,7 +284,6 @@ class PoolSection(Section, prefix="pool"):
     start_heading_rad: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class LimitsSection(Section, prefix="limits"):
     """``limits.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -310,7 +293,6 @@ class LimitsSection(Section, prefix="limits"):
     max_pitch_rad: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class IdentificationSection(Section, prefix="identification"):
     """``identification.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -336,7 +318,6 @@ class IdentificationSection(Section, prefix="identification"):
     excitation_duration_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
     """``simulation.sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -350,7 +331,6 @@ class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
     wall_lock_loss_distance_m: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsPing1dSection(Section, prefix="simulation.sensors.ping1d"):
     """``simulation.sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -360,7 +340,6 @@ class SimulationSensorsPing1dSection(Section, prefix="simulation.sensors.ping1d"
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsMs5837Section(Section, prefix="simulation.sensors.ms5837"):
     """``simulation.sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -370,7 +349,6 @@ class SimulationSensorsMs5837Section(Section, prefix="simulation.sensors.ms5837"
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsIcm20948AccelSection(Section, prefix="simulation.sensors.icm20948_accel"):
     """``simulation.sensors.icm20948_accel.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -380,7 +358,6 @@ class SimulationSensorsIcm20948AccelSection(Section, prefix="simulation.sensors.
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsIcm20948GyroSection(Section, prefix="simulation.sensors.icm20948_gyro"):
     """``simulation.sensors.icm20948_gyro.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -390,7 +367,6 @@ class SimulationSensorsIcm20948GyroSection(Section, prefix="simulation.sensors.i
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.icm20948_mag"):
     """``simulation.sensors.icm20948_mag.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -401,7 +377,6 @@ class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.ic
     earth_field_ned_t: tuple[float, ...] | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsDvl75AttitudeSection(Section, prefix="simulation.sensors.dvl75_attitude"):
     """``simulation.sensors.dvl75_attitude.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -411,7 +386,6 @@ class SimulationSensorsDvl75AttitudeSection(Section, prefix="simulation.sensors.
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsSection(Section, prefix="simulation.sensors"):
     """``simulation.sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -424,7 +398,6 @@ class SimulationSensorsSection(Section, prefix="simulation.sensors"):
     dvl75_attitude: SimulationSensorsDvl75AttitudeSection
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSection(Section, prefix="simulation"):
     """``simulation.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -435,7 +408,6 @@ class SimulationSection(Section, prefix="simulation"):
     sensors: SimulationSensorsSection
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class RecordingSection(Section, prefix="recording"):
     """``recording.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -449,7 +421,6 @@ class RecordingSection(Section, prefix="recording"):
     topics: tuple[str, ...] | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SupervisorMinRateSection(Section, prefix="supervisor.min_rate"):
     """``supervisor.min_rate.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -459,7 +430,6 @@ class SupervisorMinRateSection(Section, prefix="supervisor.min_rate"):
     imu_hz: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SupervisorRateCheckDisabledSection(Section, prefix="supervisor.rate_check_disabled"):
     """``supervisor.rate_check_disabled.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -469,7 +439,6 @@ class SupervisorRateCheckDisabledSection(Section, prefix="supervisor.rate_check_
     imu: str | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SupervisorSection(Section, prefix="supervisor"):
     """``supervisor.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -489,7 +458,6 @@ class SupervisorSection(Section, prefix="supervisor"):
     max_run_time_s: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class CalibrationSection(Section, prefix="calibration"):
     """``calibration.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -506,7 +474,6 @@ class CalibrationSection(Section, prefix="calibration"):
     hold_window_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class ControlSection(Section, prefix="control"):
     """``control.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
