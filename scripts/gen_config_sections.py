@@ -108,8 +108,7 @@ def _classes(path: str, node: dict, out: list[str]) -> None:
             _classes(f"{path}.{name}" if path else name, sub, out)
     if not path:
         return
-    lines = ["", "", f'class {_camel(path)}(Section, prefix="{path}"):',
-             f'    """``{path}.*`` (docs: hindrax_drivers.config.SCHEMA)."""', ""]
+    lines = ["", "", f'class {_camel(path)}(Section, prefix="{path}"):']
     for name, sub in node.items():
         if isinstance(sub, dict):
             lines.append(f"    {name}: {_camel(f'{path}.{name}')}")

@@ -59,8 +59,6 @@ class Section:
 
 
 class VehicleSection(Section, prefix="vehicle"):
-    """``vehicle.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     name: str
     mass_kg: float
     displaced_volume_m3: float
@@ -75,8 +73,6 @@ class VehicleSection(Section, prefix="vehicle"):
 
 
 class EnvironmentSection(Section, prefix="environment"):
-    """``environment.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     water_density_kg_m3: float
     gravity_m_s2: float
     kinematic_viscosity_m2_s: float
@@ -84,24 +80,18 @@ class EnvironmentSection(Section, prefix="environment"):
 
 
 class HydrodynamicsSurgeSection(Section, prefix="hydrodynamics.surge"):
-    """``hydrodynamics.surge.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg: float
     linear_damping_kg_s: float
     quadratic_damping_kg_m: float
 
 
 class HydrodynamicsSwaySection(Section, prefix="hydrodynamics.sway"):
-    """``hydrodynamics.sway.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg: float
     linear_damping_kg_s: float
     quadratic_damping_kg_m: float
 
 
 class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
-    """``hydrodynamics.heave.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg: float
     linear_damping_positive_kg_s: float
     quadratic_damping_positive_kg_m: float
@@ -110,32 +100,24 @@ class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
 
 
 class HydrodynamicsRollSection(Section, prefix="hydrodynamics.roll"):
-    """``hydrodynamics.roll.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
 class HydrodynamicsPitchSection(Section, prefix="hydrodynamics.pitch"):
-    """``hydrodynamics.pitch.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
 class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
-    """``hydrodynamics.yaw.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
 class HydrodynamicsSection(Section, prefix="hydrodynamics"):
-    """``hydrodynamics.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_coupling: tuple[float, ...]
     surge: HydrodynamicsSurgeSection
     sway: HydrodynamicsSwaySection
@@ -146,22 +128,16 @@ class HydrodynamicsSection(Section, prefix="hydrodynamics"):
 
 
 class EscOutputEnableGpioSection(Section, prefix="esc.output_enable_gpio"):
-    """``esc.output_enable_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     chip: str | None
     line: int | None
 
 
 class EscOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_feed_gpio"):
-    """``esc.output_enable_feed_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     chip: str | None
     line: int | None
 
 
 class EscSection(Section, prefix="esc"):
-    """``esc.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     i2c_bus: int
     i2c_address: int
     pwm_frequency_hz: float
@@ -183,16 +159,12 @@ class EscSection(Section, prefix="esc"):
 
 
 class LightsSection(Section, prefix="lights"):
-    """``lights.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     esc_channel: int
     pulse_width_off_us: float
     pulse_width_full_us: float
 
 
 class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
-    """``sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     port: str
     baud_rate: int
     position_frd_m: tuple[float, ...]
@@ -209,8 +181,6 @@ class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
 
 
 class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
-    """``sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     port: str
     baud_rate: int
     position_frd_m: tuple[float, ...]
@@ -223,8 +193,6 @@ class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
 
 
 class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
-    """``sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     i2c_bus: int
     i2c_address: int
     variant: str
@@ -242,8 +210,6 @@ class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
 
 
 class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
-    """``sensors.icm20948.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     i2c_bus: int
     i2c_address: int
     accel_full_scale_g: int
@@ -265,8 +231,6 @@ class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
 
 
 class SensorsSection(Section, prefix="sensors"):
-    """``sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl75: SensorsDvl75Section
     ping1d: SensorsPing1dSection
     ms5837: SensorsMs5837Section
@@ -274,8 +238,6 @@ class SensorsSection(Section, prefix="sensors"):
 
 
 class PoolSection(Section, prefix="pool"):
-    """``pool.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     length_m: float
     width_m: float
     depth_m: float
@@ -285,8 +247,6 @@ class PoolSection(Section, prefix="pool"):
 
 
 class LimitsSection(Section, prefix="limits"):
-    """``limits.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     max_depth_m: float
     min_altitude_m: float
     max_roll_rad: float
@@ -294,8 +254,6 @@ class LimitsSection(Section, prefix="limits"):
 
 
 class IdentificationSection(Section, prefix="identification"):
-    """``identification.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     levels_per_dof: int
     level_fraction_min: float
     level_fraction_max: float
@@ -319,8 +277,6 @@ class IdentificationSection(Section, prefix="identification"):
 
 
 class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
-    """``simulation.sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_m_s: float | None
     bias_m_s: float | None
     rate_hz: float | None
@@ -332,8 +288,6 @@ class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
 
 
 class SimulationSensorsPing1dSection(Section, prefix="simulation.sensors.ping1d"):
-    """``simulation.sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_m: float | None
     bias_m: float | None
     rate_hz: float | None
@@ -341,8 +295,6 @@ class SimulationSensorsPing1dSection(Section, prefix="simulation.sensors.ping1d"
 
 
 class SimulationSensorsMs5837Section(Section, prefix="simulation.sensors.ms5837"):
-    """``simulation.sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_pa: float | None
     bias_pa: float | None
     rate_hz: float | None
@@ -350,8 +302,6 @@ class SimulationSensorsMs5837Section(Section, prefix="simulation.sensors.ms5837"
 
 
 class SimulationSensorsIcm20948AccelSection(Section, prefix="simulation.sensors.icm20948_accel"):
-    """``simulation.sensors.icm20948_accel.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_m_s2: float | None
     bias_m_s2: float | None
     rate_hz: float | None
@@ -359,8 +309,6 @@ class SimulationSensorsIcm20948AccelSection(Section, prefix="simulation.sensors.
 
 
 class SimulationSensorsIcm20948GyroSection(Section, prefix="simulation.sensors.icm20948_gyro"):
-    """``simulation.sensors.icm20948_gyro.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_rad_s: float | None
     bias_rad_s: float | None
     rate_hz: float | None
@@ -368,8 +316,6 @@ class SimulationSensorsIcm20948GyroSection(Section, prefix="simulation.sensors.i
 
 
 class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.icm20948_mag"):
-    """``simulation.sensors.icm20948_mag.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_t: float | None
     bias_t: float | None
     rate_hz: float | None
@@ -378,8 +324,6 @@ class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.ic
 
 
 class SimulationSensorsDvl75AttitudeSection(Section, prefix="simulation.sensors.dvl75_attitude"):
-    """``simulation.sensors.dvl75_attitude.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_rad: float | None
     bias_rad: float | None
     rate_hz: float | None
@@ -387,8 +331,6 @@ class SimulationSensorsDvl75AttitudeSection(Section, prefix="simulation.sensors.
 
 
 class SimulationSensorsSection(Section, prefix="simulation.sensors"):
-    """``simulation.sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl75: SimulationSensorsDvl75Section
     ping1d: SimulationSensorsPing1dSection
     ms5837: SimulationSensorsMs5837Section
@@ -399,8 +341,6 @@ class SimulationSensorsSection(Section, prefix="simulation.sensors"):
 
 
 class SimulationSection(Section, prefix="simulation"):
-    """``simulation.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     step_s: float
     real_time_factor: float
     seed: int
@@ -409,8 +349,6 @@ class SimulationSection(Section, prefix="simulation"):
 
 
 class RecordingSection(Section, prefix="recording"):
-    """``recording.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     output_root: str
     compression: str
     chunk_size_bytes: int
@@ -422,8 +360,6 @@ class RecordingSection(Section, prefix="recording"):
 
 
 class SupervisorMinRateSection(Section, prefix="supervisor.min_rate"):
-    """``supervisor.min_rate.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl_hz: float
     altimeter_hz: float
     pressure_hz: float
@@ -431,8 +367,6 @@ class SupervisorMinRateSection(Section, prefix="supervisor.min_rate"):
 
 
 class SupervisorRateCheckDisabledSection(Section, prefix="supervisor.rate_check_disabled"):
-    """``supervisor.rate_check_disabled.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl: str | None
     altimeter: str | None
     pressure: str | None
@@ -440,8 +374,6 @@ class SupervisorRateCheckDisabledSection(Section, prefix="supervisor.rate_check_
 
 
 class SupervisorSection(Section, prefix="supervisor"):
-    """``supervisor.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     check_rate_hz: float
     rate_window_s: float
     max_sample_age_s: float
@@ -459,8 +391,6 @@ class SupervisorSection(Section, prefix="supervisor"):
 
 
 class CalibrationSection(Section, prefix="calibration"):
-    """``calibration.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     ballast_mass_kg: float
     ballast_volume_m3: float
     line_pull_force_n: float
@@ -475,8 +405,6 @@ class CalibrationSection(Section, prefix="calibration"):
 
 
 class ControlSection(Section, prefix="control"):
-    """``control.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     rate_hz: float | None
     depth_bandwidth_rad_s: float | None
     heading_bandwidth_rad_s: float | None
