@@ -22,6 +22,7 @@ executor. Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 from typing import Any, Iterable, List, Optional, Sequence, Tuple
 
@@ -316,10 +317,8 @@ class SerialDeviceNode(VehicleNode):
     def _publish_diagnostics(self) -> None:
         if self._closed:
             return
-        try:
+        with contextlib.suppress(Exception):  # context shutting down
             self.diagnostics.publish()
-        except Exception:  # noqa: BLE001 - context shutting down
-            pass
 
     # -- executor side
     def _housekeeping(self) -> None:

@@ -26,6 +26,7 @@ need the same three calls on an emulated line that a register-exact chip emulato
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from typing import Any, Callable
@@ -69,10 +70,8 @@ class GpiodLine:
 
     def release(self) -> None:
         """Free the request (the pin returns to an input: the pull resistor decides the level)."""
-        try:
+        with contextlib.suppress(Exception):  # releasing on shutdown must not raise
             self._request.release()
-        except Exception:  # noqa: BLE001 - releasing on shutdown must not raise
-            pass
 
 
 class EmulatedGpioLine:

@@ -19,6 +19,7 @@ The sleep function and the clock are injected, so tests run without real waiting
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -151,21 +152,14 @@ class BusHandle:
         injected bus or one that is not open)."""
         if not self.owned or self._bus is None:
             return False
-        close_quietly(self._bus)
+        with contextlib.suppress(Exception):  # closing a bus must not raise
+            self._bus.close()
         self._bus = None
         return True
 
     def close(self) -> None:
         """Close an owned bus (shutdown)."""
         self.reset()
-
-
-def close_quietly(bus: Any) -> None:
-    """Close a bus on shutdown; errors are swallowed (shutdown must not raise)."""
-    try:
-        bus.close()
-    except Exception:  # noqa: BLE001 - closing a bus on shutdown must not raise
-        pass
 
 
 class I2CDevice:
