@@ -258,16 +258,6 @@ class I2CDevice:
             self._run(f"write_byte(0x{value:02x})", lambda: self.bus.write_byte(self.address, value))
             self._tap("write", value, b"")
 
-    def read_byte(self) -> int:
-        """Read one byte continuing from the device pointer (SMBus receive byte).
-
-        Raw tap: ``("read", address, None, bytes([value]))``.
-        """
-        with self.lock:
-            value = int(self._run("read_byte()", lambda: self.bus.read_byte(self.address)))
-            self._tap("read", None, bytes([value]))
-            return value
-
     def write_byte_data(self, register: int, value: int) -> None:
         """Write one register: transaction ``[register, value]``.
 
@@ -353,8 +343,3 @@ class I2CDevice:
                 self.write_byte_data(write.register, write.value)
                 if write.delay_after_s > 0.0:
                     self._sleep(write.delay_after_s)
-
-    def sleep(self, seconds: float) -> None:
-        """Wait using the injected sleep function (for device conversion times)."""
-        if seconds > 0.0:
-            self._sleep(seconds)
