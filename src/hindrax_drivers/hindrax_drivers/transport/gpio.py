@@ -29,9 +29,9 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from typing import Any, Callable
+from typing import Callable
 
-__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable", "open_output_line"]
+__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable"]
 
 
 class GpiodLine:
@@ -156,9 +156,3 @@ class WatchedOutputEnable:
     def is_high(self) -> bool:
         """True: the outputs are disabled (the guard asserts /OE, or the watchdog ran out)."""
         return self.oe.is_high() or self.feed.expired()
-
-
-def open_output_line(chip: str, line: int, initial_high: bool = True,
-                     consumer: str = "hindrax-output-guard") -> Any:
-    """A :class:`GpiodLine` on ``chip``/``line``, driven ``initial_high`` at once (see the class for errors)."""
-    return GpiodLine(chip, line, initial_high=initial_high, consumer=consumer)
