@@ -40,8 +40,6 @@ clock), timeout: the read-only node parameter ``heartbeat_timeout_s`` (default `
 The two heartbeats are callbacks in both clock modes (the path the vehicle takes is the path the tests take). A
 small process of its own (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's
 sensor code cannot take the second stop path with it.
-
-Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
 from __future__ import annotations
 
