@@ -1,11 +1,14 @@
-"""Typed configuration sections: one frozen dataclass per section of the vehicle file (GENERATED).
+"""Typed configuration sections: frozen dataclasses of the vehicle file (GENERATED).
 
-Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``; the tests
-check that this file is current. Field names are the keys' last segments, nested dataclasses follow the nesting
-of the keys, optional keys are ``X | None`` (None when absent) and lists are tuples. Build them through
-:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A required key that
-a node did not declare among its parameters is absent from its configuration: reading it raises KeyError naming
-the key. Each field's unit and meaning: its key's ``Spec.doc`` in SCHEMA.
+Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``;
+the tests check that this file is current. Field names are the keys' last segments, nested
+dataclasses follow the nesting of the keys (sibling sections with the same keys share one class,
+``HydrodynamicsSurgeSwaySection``: a section's dotted path is given when it is built), optional keys
+are ``X | None`` (None when absent) and lists are tuples. Build them through
+:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
+required key that a node did not declare among its parameters is absent from its configuration:
+reading it raises KeyError naming the key. Each field's unit and meaning: its key's ``Spec.doc`` in
+SCHEMA.
 """
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, dataclass_transform
@@ -79,13 +82,7 @@ class EnvironmentSection(Section, prefix="environment"):
     surface_pressure_pa: float
 
 
-class HydrodynamicsSurgeSection(Section, prefix="hydrodynamics.surge"):
-    added_mass_kg: float
-    linear_damping_kg_s: float
-    quadratic_damping_kg_m: float
-
-
-class HydrodynamicsSwaySection(Section, prefix="hydrodynamics.sway"):
+class HydrodynamicsSurgeSwaySection(Section, prefix="hydrodynamics.surge"):
     added_mass_kg: float
     linear_damping_kg_s: float
     quadratic_damping_kg_m: float
@@ -99,19 +96,7 @@ class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
     quadratic_damping_negative_kg_m: float
 
 
-class HydrodynamicsRollSection(Section, prefix="hydrodynamics.roll"):
-    added_mass_kg_m2: float
-    linear_damping_kg_m2_s: float
-    quadratic_damping_kg_m2: float
-
-
-class HydrodynamicsPitchSection(Section, prefix="hydrodynamics.pitch"):
-    added_mass_kg_m2: float
-    linear_damping_kg_m2_s: float
-    quadratic_damping_kg_m2: float
-
-
-class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
+class HydrodynamicsRollPitchYawSection(Section, prefix="hydrodynamics.roll"):
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
@@ -119,20 +104,15 @@ class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
 
 class HydrodynamicsSection(Section, prefix="hydrodynamics"):
     added_mass_coupling: tuple[float, ...]
-    surge: HydrodynamicsSurgeSection
-    sway: HydrodynamicsSwaySection
+    surge: HydrodynamicsSurgeSwaySection
+    sway: HydrodynamicsSurgeSwaySection
     heave: HydrodynamicsHeaveSection
-    roll: HydrodynamicsRollSection
-    pitch: HydrodynamicsPitchSection
-    yaw: HydrodynamicsYawSection
+    roll: HydrodynamicsRollPitchYawSection
+    pitch: HydrodynamicsRollPitchYawSection
+    yaw: HydrodynamicsRollPitchYawSection
 
 
-class EscOutputEnableGpioSection(Section, prefix="esc.output_enable_gpio"):
-    chip: str | None
-    line: int | None
-
-
-class EscOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_feed_gpio"):
+class EscOutputEnableGpioOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_gpio"):
     chip: str | None
     line: int | None
 
@@ -152,8 +132,8 @@ class EscSection(Section, prefix="esc"):
     bus_call_timeout_s: float
     heartbeat_timeout_s: float
     guard_heartbeat_timeout_s: float
-    output_enable_gpio: EscOutputEnableGpioSection
-    output_enable_feed_gpio: EscOutputEnableFeedGpioSection
+    output_enable_gpio: EscOutputEnableGpioOutputEnableFeedGpioSection
+    output_enable_feed_gpio: EscOutputEnableGpioOutputEnableFeedGpioSection
     output_enable_feed_rate_hz: float | None
     output_enable_feed_timeout_s: float | None
 

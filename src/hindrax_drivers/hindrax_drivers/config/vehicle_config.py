@@ -44,24 +44,26 @@ def or_default(value: _V | None, default: _V) -> _V:
     return default if value is None else value
 
 
-def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
-    """The typed section ``cls`` (a generated :class:`~.typed_sections.Section`) from validated flat keys.
+def build_section(cls: type[_S], flat: Mapping[str, Any], prefix: str | None = None) -> _S:
+    """The typed section ``cls`` (a generated :class:`~.typed_sections.Section`) at dotted path
+    ``prefix`` (default ``cls.PREFIX``) from validated flat keys.
 
     Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
     held as ABSENT and raises KeyError naming the key when read.
     """
+    prefix = cls.PREFIX if prefix is None else prefix
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
         if isinstance(f.type, type) and issubclass(f.type, Section):
-            kw[f.name] = build_section(f.type, flat)
+            kw[f.name] = build_section(f.type, flat, f"{prefix}.{f.name}")
             continue
-        key = f"{cls.PREFIX}.{f.name}"
+        key = f"{prefix}.{f.name}"
         if key in flat:
             v = flat[key]
             kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
         else:
             kw[f.name] = None if is_optional(key) else ABSENT
-    return cls.build(kw)
+    return cls.build(kw, prefix)
 
 
 class _TypedSection(Generic[_S]):
