@@ -24,24 +24,29 @@ HAND_WRITTEN = ("thrusters",)
 TYPES = {"float": "float", "int": "int", "str": "str", "bool": "bool", "float[]": "tuple[float, ...]",
          "str[]": "tuple[str, ...]"}
 
-HEADER = '''"""Typed configuration sections: one frozen dataclass per section of the vehicle file (GENERATED).
+HEADER = '''"""Typed configuration sections: frozen dataclasses of the vehicle file (GENERATED).
 
-Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``; the tests
-check that this file is current. Field names are the keys' last segments, nested dataclasses follow the nesting
-of the keys, optional keys are ``X | None`` (None when absent) and lists are tuples. Build them through
-:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A required key that
-a node did not declare among its parameters is absent from its configuration: reading it raises KeyError naming
-the key. Each field's unit and meaning: its key's ``Spec.doc`` in SCHEMA.
+Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``;
+the tests check that this file is current. Field names are the keys' last segments, nested
+dataclasses follow the nesting of the keys (sibling sections with the same keys share one class,
+``HydrodynamicsSurgeSwaySection``: a section's dotted path is given when it is built), optional keys
+are ``X | None`` (None when absent) and lists are tuples. Build them through
+:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
+required key that a node did not declare among its parameters is absent from its configuration:
+reading it raises KeyError naming the key. Each field's unit and meaning: its key's ``Spec.doc`` in
+SCHEMA.
 """
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, dataclass_transform
 
 ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 """Marks a required key this configuration does not hold (a node's selection of keys) in :meth:`Section.build`."""
 
 
+@dataclass_transform(frozen_default=True, eq_default=False)
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path (the ``prefix`` class keyword of a subclass,
+    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is
+    the dotted path (the ``prefix`` class keyword of a subclass,
     ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
@@ -54,6 +59,7 @@ class Section:
         super().__init_subclass__(**kwargs)
         if prefix is not None:
             cls.PREFIX = prefix
+        dataclass(frozen=True, eq=False, repr=False)(cls)
 
     @classmethod
     def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
@@ -99,22 +105,36 @@ def _tree() -> dict:
     return tree
 
 
-def _classes(path: str, node: dict, out: list[str]) -> None:
+def _type(key: str, spec) -> str:
+    return TYPES[spec.kind] + (" | None" if c.is_optional(key) else "")
+
+
+def _class_names(path: str, node: dict) -> dict[str, str]:
+    """Class name of each nested section of ``node``: sibling sections with the same keys (and no
+    nested sections) share one class, named after all of them (``HydrodynamicsSurgeSwaySection``).
+    """
+    groups: dict = {}
     for name, sub in node.items():
         if isinstance(sub, dict):
-            _classes(f"{path}.{name}" if path else name, sub, out)
+            leaves = all(not isinstance(v, dict) for v in sub.values())
+            shape = tuple((n, _type(*v)) for n, v in sub.items()) if leaves and path else name
+            groups.setdefault(shape, []).append(name)
+    return {name: _camel(".".join([path, *members]) if path else members[0])
+            for members in groups.values() for name in members}
+
+
+def _classes(path: str, node: dict, out: list[str], cls: str = "") -> None:
+    names = _class_names(path, node)
+    emitted: set[str] = set()
+    for name, sub in node.items():
+        if isinstance(sub, dict) and names[name] not in emitted:
+            emitted.add(names[name])
+            _classes(f"{path}.{name}" if path else name, sub, out, names[name])
     if not path:
         return
-    lines = ["", "", "@dataclass(frozen=True, eq=False, repr=False)",
-             f'class {_camel(path)}(Section, prefix="{path}"):',
-             f'    """``{path}.*`` (docs: hindrax_drivers.config.SCHEMA)."""', ""]
+    lines = ["", "", f'class {cls}(Section, prefix="{path}"):']
     for name, sub in node.items():
-        if isinstance(sub, dict):
-            lines.append(f"    {name}: {_camel(f'{path}.{name}')}")
-        else:
-            key, spec = sub
-            typ = TYPES[spec.kind] + (" | None" if c.is_optional(key) else "")
-            lines.append(f"    {name}: {typ}")
+        lines.append(f"    {name}: {names[name] if isinstance(sub, dict) else _type(*sub)}")
     out.append("\n".join(lines) + "\n")
 
 

@@ -39,6 +39,7 @@ Respawn
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shlex
@@ -124,10 +125,8 @@ def ament_share(package: str) -> Path:
     install or ``/opt/ros``); in a repository checkout whose packages are not in the index (the development venv),
     the package's source directory ``src/<package>``, which holds the same ``launch/`` and ``config/``. Raises
     :class:`LaunchFileError` when neither has the package."""
-    try:
+    with contextlib.suppress(Exception):  # not in the index (or no index at all): try the checkout
         return Path(get_package_share_directory(package))
-    except Exception:  # noqa: BLE001 - not in the index (or no index at all): try the checkout
-        pass
     for parent in Path(__file__).resolve().parents:
         candidate = parent / "src" / package
         if (candidate / "package.xml").is_file():

@@ -6,10 +6,8 @@ The pieces every safety node (ESC, output guard, supervisor) shares:
 * :class:`HeartbeatPublisher`: a node's heartbeat (``hindrax_msgs/Heartbeat``) with ``boot_id``
   (random, non-zero, new at every node start) and ``seq`` (1, 2, 3 ... per beat), which make it hard
   to take for another process's.
-* :class:`HeartbeatIdentity`: the pure check a receiver runs: exactly one live publisher on the
-  topic, every publisher with the expected node name; ``seq`` strictly increasing within one
-  ``boot_id``; no ``boot_id`` change while armed. A forged publisher or a replayed bag is a fault,
-  and a beat it rejects does not count as the peer being alive.
+* :class:`HeartbeatIdentity`: the pure check a receiver runs on the topic's publishers and every
+  beat (a forger, a replayed bag); a beat it rejects does not count as the peer being alive.
 * :class:`HeartbeatWatch`: the receiver's subscription, taking the beats as bytes
   (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: AUTOMATIC
   liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the liveliness event counts the *live*

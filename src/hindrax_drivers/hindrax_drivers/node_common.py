@@ -48,13 +48,10 @@ def time_from_ns(ns: int) -> Time:
 class DeviceDiagnostics:
     """Counters and state of one device, rendered as a ``diagnostic_msgs/DiagnosticStatus``.
 
-    name: status name, e.g. ``"hindrax/dvl75"``; hardware_id: port or I2C address.
-    ``published()`` counts output messages (rate over a sliding window of ``window_s`` seconds);
-    ``count(kind, n)`` counts errors by kind (``"bad_checksum"``, ``"garbage_bytes"``, ``"i2c_error"`` ...);
-    ``set_state(state, level, message)`` sets the device state (``"connected"``, ``"disconnected"``...);
-    ``warn(key, message)`` raises a named warning until ``clear(key)``; ``error(key, message)`` raises a
-    named ERROR condition (an implausible or stuck reading the node no longer publishes) until ``clear(key)``.
-    Thread-safe: transports may call ``count`` from their own threads.
+    name: status name, e.g. ``"hindrax/dvl75"``; hardware_id: port or I2C address; the output rate
+    is counted over a sliding window of ``window_s`` seconds. Error kinds: ``"bad_checksum"``,
+    ``"garbage_bytes"``, ``"i2c_error"`` ...; states: ``"connected"``, ``"disconnected"`` ...
+    Thread-safe: transports may call :meth:`count` from their own threads.
     """
 
     def __init__(self, name: str, hardware_id: str, now_s: Callable[[], float], window_s: float = 5.0):

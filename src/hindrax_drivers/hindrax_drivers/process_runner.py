@@ -19,6 +19,7 @@ for the package's prefix in the ament index; in a development venv where the pac
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -150,16 +151,12 @@ class ProcessRunner:
                              (signal.SIGKILL, 10.0)):
             alive = [s for s in reversed(slots) if s.popen is not None and s.popen.poll() is None]
             for s in alive:
-                try:
+                with contextlib.suppress(ProcessLookupError):
                     s.popen.send_signal(sig)
-                except ProcessLookupError:
-                    pass
             deadline = time.monotonic() + timeout
             for s in alive:
-                try:
+                with contextlib.suppress(subprocess.TimeoutExpired):
                     s.popen.wait(max(0.0, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    pass
         for s in slots:
             if s.thread is not None:
                 s.thread.join(timeout=5.0)

@@ -46,6 +46,7 @@ rclpy is imported when the block is entered, not when this module is.
 """
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import gc
 import inspect
@@ -320,10 +321,8 @@ class RosProcess:
             except Exception as error:  # noqa: BLE001 - the exit goes on; say what failed
                 traceback.print_exception(error)
         for stream in (sys.stdout, sys.stderr):
-            try:
+            with contextlib.suppress(OSError, ValueError):  # a closed pipe or stream
                 stream.flush()
-            except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said
-                pass
         os._exit(status)
 
     def _shut_down(self, exc_type: type | None, exc: BaseException | None) -> bool:

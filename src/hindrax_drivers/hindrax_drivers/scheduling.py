@@ -27,6 +27,7 @@ the choice of threads and the report.
 """
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import resource
@@ -117,10 +118,8 @@ def set_every_thread(policy: int, priority: int) -> int:
             continue
         except OSError:
             for t in done:
-                try:
+                with contextlib.suppress(OSError):
                     os.sched_setscheduler(t, os.SCHED_OTHER, os.sched_param(0))
-                except OSError:
-                    pass
             raise
     return len(done)
 

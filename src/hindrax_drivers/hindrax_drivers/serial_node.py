@@ -22,14 +22,16 @@ executor. Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 from typing import Any, Iterable, List, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from rcl_interfaces.msg import ParameterDescriptor
 from sensor_msgs.msg import Range
 
-from .config import ConfigError, ConfigIssue, build_section
+from .config import build_section
+from .config.node_parameters import declare_node_parameter
+from .config.spec import integer
 from .config.typed_sections import SensorsDvl75Section, SensorsPing1dSection
 from .node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector,
                           load_node_config, time_from_ns)
@@ -41,6 +43,8 @@ __all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S", "range_m
 #: Connected but nothing published for this long (ROS time): diagnostics WARN "connected, no data", s.
 NO_DATA_TIMEOUT_S = 2.0
 _HOUSEKEEPING_PERIOD_S = 0.25
+#: node parameter ``stuck_limit_samples`` (read-only, :func:`declare_node_parameter`)
+STUCK_LIMIT_SAMPLES = integer("identical readings in a row after which a sensor counts as stuck", 2)
 #: Received bytes collected for raw/<device> are published at the latest when they exceed this, bytes.
 RAW_FLUSH_BYTES = 4096
 
@@ -145,7 +149,7 @@ class SerialDeviceNode(VehicleNode):
         command_gap_s: pause between start-up commands, s.
         **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
     Raises:
-        ConfigError: invalid vehicle configuration or ``stuck_limit_samples`` (after logging one line).
+        ConfigError: invalid vehicle configuration or ``stuck_limit_samples``.
     """
 
     def __init__(self, node_name: str, *, device_name: str,
@@ -157,7 +161,8 @@ class SerialDeviceNode(VehicleNode):
         self.device_name = device_name
         self.port = str(self.settings.port)
         self.baud_rate = int(self.settings.baud_rate)
-        self.stuck_limit_samples = self._int_parameter("stuck_limit_samples", 50, minimum=2)
+        self.stuck_limit_samples = declare_node_parameter(self, "stuck_limit_samples",
+                                                          STUCK_LIMIT_SAMPLES, 50)
         self._closed = False
         self._ever_connected = False
         self._no_data = False
@@ -178,18 +183,6 @@ class SerialDeviceNode(VehicleNode):
         self._housekeeping_timer = self.create_timer(_HOUSEKEEPING_PERIOD_S, self._housekeeping)
 
     # -- helpers for subclasses
-    def _int_parameter(self, name: str, default: int, minimum: int) -> int:
-        docs = {"stuck_limit_samples": "identical consecutive readings after which a sensor is reported stuck"}
-        value = (self.get_parameter(name).value if self.has_parameter(name)
-                 else self.declare_parameter(name, default, ParameterDescriptor(
-                     description=docs.get(name, name), read_only=True, dynamic_typing=True,
-                     additional_constraints=f"allowed an integer >= {minimum}")).value)
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            issue = ConfigIssue(name, value, f"an integer >= {minimum}")
-            self.get_logger().fatal(f"invalid configuration: {issue.line()}")
-            raise ConfigError([issue], f"parameters of {self.get_name()}")
-        return int(value)
-
     def count_decoder_events(self, counts: dict[str, int]) -> None:
         """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total:
         garbage bytes, bad
@@ -316,10 +309,8 @@ class SerialDeviceNode(VehicleNode):
     def _publish_diagnostics(self) -> None:
         if self._closed:
             return
-        try:
+        with contextlib.suppress(Exception):  # context shutting down
             self.diagnostics.publish()
-        except Exception:  # noqa: BLE001 - context shutting down
-            pass
 
     # -- executor side
     def _housekeeping(self) -> None:

@@ -19,17 +19,13 @@ the schema writes that segment as ``<thruster>``.
 Where each thing is:
 
 * :mod:`.spec`: :class:`Spec` (one key), :class:`ConfigIssue` / :class:`ConfigError` (the one-line errors), the
-  check of one value; why Spec and not generate_parameter_library's YAML is said there.
+  check of one value; why our own validator is said there.
 * :mod:`.sections`: one module per section of the file (``sections/esc.py``, ``sections/supervisor.py``, ...), each
   owning its keys' schema, its optional keys and its checks across keys; ``sections/__init__`` joins them.
 * :mod:`.validation`: a flat mapping checked against every section; :mod:`.loader`: files and node parameters;
   :mod:`.vehicle_config`: :class:`VehicleConfig` and its typed sections (:mod:`.typed_sections`, generated).
 * :mod:`.node_parameters`: the keys each node declares as described ROS parameters, validated like the file, and
   the read-only node parameters outside the file (rclpy; not imported here, so offline tools load no rclpy).
-
-Why our own validator rather than a schema library: the errors must name ROS parameter keys in the exact
-one-line form users see from ``hindrax config check``, and the same checks must run on a YAML file and on
-the parameters of a running rclpy node. No maintained library covers ROS parameter overrides.
 
 The names below are the package's API (``from hindrax_drivers.config import load_config``).
 """

@@ -1,21 +1,26 @@
-"""Typed configuration sections: one frozen dataclass per section of the vehicle file (GENERATED).
+"""Typed configuration sections: frozen dataclasses of the vehicle file (GENERATED).
 
-Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``; the tests
-check that this file is current. Field names are the keys' last segments, nested dataclasses follow the nesting
-of the keys, optional keys are ``X | None`` (None when absent) and lists are tuples. Build them through
-:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A required key that
-a node did not declare among its parameters is absent from its configuration: reading it raises KeyError naming
-the key. Each field's unit and meaning: its key's ``Spec.doc`` in SCHEMA.
+Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``;
+the tests check that this file is current. Field names are the keys' last segments, nested
+dataclasses follow the nesting of the keys (sibling sections with the same keys share one class,
+``HydrodynamicsSurgeSwaySection``: a section's dotted path is given when it is built), optional keys
+are ``X | None`` (None when absent) and lists are tuples. Build them through
+:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
+required key that a node did not declare among its parameters is absent from its configuration:
+reading it raises KeyError naming the key. Each field's unit and meaning: its key's ``Spec.doc`` in
+SCHEMA.
 """
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, dataclass_transform
 
 ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 """Marks a required key this configuration does not hold (a node's selection of keys) in :meth:`Section.build`."""
 
 
+@dataclass_transform(frozen_default=True, eq_default=False)
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path (the ``prefix`` class keyword of a subclass,
+    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is
+    the dotted path (the ``prefix`` class keyword of a subclass,
     ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
@@ -28,6 +33,7 @@ class Section:
         super().__init_subclass__(**kwargs)
         if prefix is not None:
             cls.PREFIX = prefix
+        dataclass(frozen=True, eq=False, repr=False)(cls)
 
     @classmethod
     def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
@@ -55,10 +61,7 @@ class Section:
         return f"{type(self).__name__}({items})"
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class VehicleSection(Section, prefix="vehicle"):
-    """``vehicle.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     name: str
     mass_kg: float
     displaced_volume_m3: float
@@ -72,38 +75,20 @@ class VehicleSection(Section, prefix="vehicle"):
     centre_of_buoyancy_frd_m: tuple[float, ...]
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class EnvironmentSection(Section, prefix="environment"):
-    """``environment.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     water_density_kg_m3: float
     gravity_m_s2: float
     kinematic_viscosity_m2_s: float
     surface_pressure_pa: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsSurgeSection(Section, prefix="hydrodynamics.surge"):
-    """``hydrodynamics.surge.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
+class HydrodynamicsSurgeSwaySection(Section, prefix="hydrodynamics.surge"):
     added_mass_kg: float
     linear_damping_kg_s: float
     quadratic_damping_kg_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsSwaySection(Section, prefix="hydrodynamics.sway"):
-    """``hydrodynamics.sway.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    added_mass_kg: float
-    linear_damping_kg_s: float
-    quadratic_damping_kg_m: float
-
-
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
-    """``hydrodynamics.heave.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_kg: float
     linear_damping_positive_kg_s: float
     quadratic_damping_positive_kg_m: float
@@ -111,66 +96,28 @@ class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
     quadratic_damping_negative_kg_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsRollSection(Section, prefix="hydrodynamics.roll"):
-    """``hydrodynamics.roll.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
+class HydrodynamicsRollPitchYawSection(Section, prefix="hydrodynamics.roll"):
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsPitchSection(Section, prefix="hydrodynamics.pitch"):
-    """``hydrodynamics.pitch.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    added_mass_kg_m2: float
-    linear_damping_kg_m2_s: float
-    quadratic_damping_kg_m2: float
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
-    """``hydrodynamics.yaw.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    added_mass_kg_m2: float
-    linear_damping_kg_m2_s: float
-    quadratic_damping_kg_m2: float
-
-
-@dataclass(frozen=True, eq=False, repr=False)
 class HydrodynamicsSection(Section, prefix="hydrodynamics"):
-    """``hydrodynamics.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     added_mass_coupling: tuple[float, ...]
-    surge: HydrodynamicsSurgeSection
-    sway: HydrodynamicsSwaySection
+    surge: HydrodynamicsSurgeSwaySection
+    sway: HydrodynamicsSurgeSwaySection
     heave: HydrodynamicsHeaveSection
-    roll: HydrodynamicsRollSection
-    pitch: HydrodynamicsPitchSection
-    yaw: HydrodynamicsYawSection
+    roll: HydrodynamicsRollPitchYawSection
+    pitch: HydrodynamicsRollPitchYawSection
+    yaw: HydrodynamicsRollPitchYawSection
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class EscOutputEnableGpioSection(Section, prefix="esc.output_enable_gpio"):
-    """``esc.output_enable_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
+class EscOutputEnableGpioOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_gpio"):
     chip: str | None
     line: int | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class EscOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_feed_gpio"):
-    """``esc.output_enable_feed_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    chip: str | None
-    line: int | None
-
-
-@dataclass(frozen=True, eq=False, repr=False)
 class EscSection(Section, prefix="esc"):
-    """``esc.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     i2c_bus: int
     i2c_address: int
     pwm_frequency_hz: float
@@ -185,25 +132,19 @@ class EscSection(Section, prefix="esc"):
     bus_call_timeout_s: float
     heartbeat_timeout_s: float
     guard_heartbeat_timeout_s: float
-    output_enable_gpio: EscOutputEnableGpioSection
-    output_enable_feed_gpio: EscOutputEnableFeedGpioSection
+    output_enable_gpio: EscOutputEnableGpioOutputEnableFeedGpioSection
+    output_enable_feed_gpio: EscOutputEnableGpioOutputEnableFeedGpioSection
     output_enable_feed_rate_hz: float | None
     output_enable_feed_timeout_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class LightsSection(Section, prefix="lights"):
-    """``lights.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     esc_channel: int
     pulse_width_off_us: float
     pulse_width_full_us: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
-    """``sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     port: str
     baud_rate: int
     position_frd_m: tuple[float, ...]
@@ -219,10 +160,7 @@ class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
     attitude_noise_std_rad: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
-    """``sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     port: str
     baud_rate: int
     position_frd_m: tuple[float, ...]
@@ -234,10 +172,7 @@ class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
     max_range_m: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
-    """``sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     i2c_bus: int
     i2c_address: int
     variant: str
@@ -254,10 +189,7 @@ class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
     noise_std_pa: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
-    """``sensors.icm20948.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     i2c_bus: int
     i2c_address: int
     accel_full_scale_g: int
@@ -278,20 +210,14 @@ class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
     gyro_noise_std_rad_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SensorsSection(Section, prefix="sensors"):
-    """``sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl75: SensorsDvl75Section
     ping1d: SensorsPing1dSection
     ms5837: SensorsMs5837Section
     icm20948: SensorsIcm20948Section
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class PoolSection(Section, prefix="pool"):
-    """``pool.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     length_m: float
     width_m: float
     depth_m: float
@@ -300,20 +226,14 @@ class PoolSection(Section, prefix="pool"):
     start_heading_rad: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class LimitsSection(Section, prefix="limits"):
-    """``limits.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     max_depth_m: float
     min_altitude_m: float
     max_roll_rad: float
     max_pitch_rad: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class IdentificationSection(Section, prefix="identification"):
-    """``identification.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     levels_per_dof: int
     level_fraction_min: float
     level_fraction_max: float
@@ -336,10 +256,7 @@ class IdentificationSection(Section, prefix="identification"):
     excitation_duration_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
-    """``simulation.sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_m_s: float | None
     bias_m_s: float | None
     rate_hz: float | None
@@ -350,50 +267,35 @@ class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
     wall_lock_loss_distance_m: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsPing1dSection(Section, prefix="simulation.sensors.ping1d"):
-    """``simulation.sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_m: float | None
     bias_m: float | None
     rate_hz: float | None
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsMs5837Section(Section, prefix="simulation.sensors.ms5837"):
-    """``simulation.sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_pa: float | None
     bias_pa: float | None
     rate_hz: float | None
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsIcm20948AccelSection(Section, prefix="simulation.sensors.icm20948_accel"):
-    """``simulation.sensors.icm20948_accel.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_m_s2: float | None
     bias_m_s2: float | None
     rate_hz: float | None
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsIcm20948GyroSection(Section, prefix="simulation.sensors.icm20948_gyro"):
-    """``simulation.sensors.icm20948_gyro.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_rad_s: float | None
     bias_rad_s: float | None
     rate_hz: float | None
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.icm20948_mag"):
-    """``simulation.sensors.icm20948_mag.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_t: float | None
     bias_t: float | None
     rate_hz: float | None
@@ -401,20 +303,14 @@ class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.ic
     earth_field_ned_t: tuple[float, ...] | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsDvl75AttitudeSection(Section, prefix="simulation.sensors.dvl75_attitude"):
-    """``simulation.sensors.dvl75_attitude.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     noise_std_rad: float | None
     bias_rad: float | None
     rate_hz: float | None
     dropout_probability: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSensorsSection(Section, prefix="simulation.sensors"):
-    """``simulation.sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl75: SimulationSensorsDvl75Section
     ping1d: SimulationSensorsPing1dSection
     ms5837: SimulationSensorsMs5837Section
@@ -424,10 +320,7 @@ class SimulationSensorsSection(Section, prefix="simulation.sensors"):
     dvl75_attitude: SimulationSensorsDvl75AttitudeSection
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SimulationSection(Section, prefix="simulation"):
-    """``simulation.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     step_s: float
     real_time_factor: float
     seed: int
@@ -435,10 +328,7 @@ class SimulationSection(Section, prefix="simulation"):
     sensors: SimulationSensorsSection
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class RecordingSection(Section, prefix="recording"):
-    """``recording.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     output_root: str
     compression: str
     chunk_size_bytes: int
@@ -449,30 +339,21 @@ class RecordingSection(Section, prefix="recording"):
     topics: tuple[str, ...] | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SupervisorMinRateSection(Section, prefix="supervisor.min_rate"):
-    """``supervisor.min_rate.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl_hz: float
     altimeter_hz: float
     pressure_hz: float
     imu_hz: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SupervisorRateCheckDisabledSection(Section, prefix="supervisor.rate_check_disabled"):
-    """``supervisor.rate_check_disabled.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     dvl: str | None
     altimeter: str | None
     pressure: str | None
     imu: str | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class SupervisorSection(Section, prefix="supervisor"):
-    """``supervisor.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     check_rate_hz: float
     rate_window_s: float
     max_sample_age_s: float
@@ -489,10 +370,7 @@ class SupervisorSection(Section, prefix="supervisor"):
     max_run_time_s: float
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class CalibrationSection(Section, prefix="calibration"):
-    """``calibration.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     ballast_mass_kg: float
     ballast_volume_m3: float
     line_pull_force_n: float
@@ -506,10 +384,7 @@ class CalibrationSection(Section, prefix="calibration"):
     hold_window_s: float | None
 
 
-@dataclass(frozen=True, eq=False, repr=False)
 class ControlSection(Section, prefix="control"):
-    """``control.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
     rate_hz: float | None
     depth_bandwidth_rad_s: float | None
     heading_bandwidth_rad_s: float | None

@@ -1,20 +1,17 @@
-"""The validated vehicle configuration, :class:`VehicleConfig`: typed sections built on first use from the flat
-dotted keys, derived views (rigid-body and added-mass matrices, hydrodynamics per DOF, calibration forces) and the
-ROS-parameter conversion.
+"""The validated vehicle configuration, :class:`VehicleConfig`: typed sections built on first use
+from the flat dotted keys, derived views (rigid-body and added-mass matrices, hydrodynamics per DOF,
+calibration forces) and the ROS-parameter conversion.
 
-Typed access: one frozen dataclass per section (``cfg.esc.output_latency_s``, ``cfg.sensors.dvl75.position_frd_m``,
-``cfg.supervisor.min_rate.imu_hz``), so a misspelt name is an AttributeError that mypy and the import of a module's
-tests catch, not a KeyError on the vehicle. The classes live in :mod:`.typed_sections`, GENERATED from the schema
-by ``scripts/gen_config_sections.py`` (a test checks the file is current and that every key has a field of its kind,
-and every field a key): writing them by hand next to a 250-key schema would let the two drift, and generating them
-at import time would hide them from mypy. Field names are the keys' last segments (ROS parameter names do not
-change), lists are tuples, optional keys are ``X | None``. Section objects are built lazily, once per configuration
-(it is immutable). A node's configuration holds only the keys it declared (:mod:`.node_parameters`): reading
-another required key raises KeyError naming it. ``cfg.thrusters`` is the hand-written
-:class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys); ``cfg.dof_hydrodynamics(dof)`` and
-``cfg.known_forces`` are derived views over the sections ``cfg.hydrodynamics`` and ``cfg.calibration``
-(every section is read by its own name). ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter
-conversion, overrides and validation; modules outside the configuration do not index it by a literal key.
+Typed access (``cfg.esc.output_latency_s``, ``cfg.supervisor.min_rate.imu_hz``): a misspelt name is
+an AttributeError that mypy and the import of a module's tests catch, not a KeyError on the vehicle.
+The classes live in :mod:`.typed_sections` (its docstring: fields, absent keys), generated from the
+schema by ``scripts/gen_config_sections.py`` (a test checks the file is current): written by hand
+next to a 250-key schema they would drift, and generated at import time they would hide from mypy.
+Section objects are built once per configuration (it is immutable). ``cfg.thrusters`` is the
+hand-written :class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys);
+``cfg.dof_hydrodynamics(dof)`` and ``cfg.known_forces`` are derived views over ``cfg.hydrodynamics``
+and ``cfg.calibration``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion,
+overrides and validation; modules outside the configuration do not index it by a literal key.
 """
 from __future__ import annotations
 
@@ -47,24 +44,26 @@ def or_default(value: _V | None, default: _V) -> _V:
     return default if value is None else value
 
 
-def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
-    """The typed section ``cls`` (a generated :class:`~.typed_sections.Section`) from validated flat keys.
+def build_section(cls: type[_S], flat: Mapping[str, Any], prefix: str | None = None) -> _S:
+    """The typed section ``cls`` (a generated :class:`~.typed_sections.Section`) at dotted path
+    ``prefix`` (default ``cls.PREFIX``) from validated flat keys.
 
     Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
     held as ABSENT and raises KeyError naming the key when read.
     """
+    prefix = cls.PREFIX if prefix is None else prefix
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
         if isinstance(f.type, type) and issubclass(f.type, Section):
-            kw[f.name] = build_section(f.type, flat)
+            kw[f.name] = build_section(f.type, flat, f"{prefix}.{f.name}")
             continue
-        key = f"{cls.PREFIX}.{f.name}"
+        key = f"{prefix}.{f.name}"
         if key in flat:
             v = flat[key]
             kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
         else:
             kw[f.name] = None if is_optional(key) else ABSENT
-    return cls.build(kw)
+    return cls.build(kw, prefix)
 
 
 class _TypedSection(Generic[_S]):

@@ -15,6 +15,7 @@ library only.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 import struct
@@ -71,10 +72,8 @@ class Channel:
 
     def close(self) -> None:
         """Close this end (the other process sees the end of the channel)."""
-        try:
+        with contextlib.suppress(OSError):
             self.sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
         self._reader.close()
         self.sock.close()
 

@@ -32,6 +32,7 @@ Parameters: read by the internal side (:mod:`.internal`). Run alone: ``python -m
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
@@ -328,10 +329,8 @@ class Gateway:
 
     @staticmethod
     def _spin(executor: Any) -> None:
-        try:
+        with contextlib.suppress(ExternalShutdownException):
             executor.spin()
-        except ExternalShutdownException:
-            pass
 
     def close(self) -> None:
         """Stop the topside executors, join their threads, destroy the topside nodes (idempotent)."""

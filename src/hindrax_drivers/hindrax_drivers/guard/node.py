@@ -40,8 +40,6 @@ clock), timeout: the read-only node parameter ``heartbeat_timeout_s`` (default `
 The two heartbeats are callbacks in both clock modes (the path the vehicle takes is the path the tests take). A
 small process of its own (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's
 sensor code cannot take the second stop path with it.
-
-Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
 from __future__ import annotations
 
@@ -58,7 +56,7 @@ from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, TickGaps, h
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
-from ..transport.gpio import open_output_line
+from ..transport.gpio import GpiodLine
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
@@ -85,7 +83,7 @@ def open_output_enable(chip: str, line: int) -> Any:
     shared = open_shared_line("oe", True)
     if shared is not None:
         return shared
-    return open_output_line(chip, line, initial_high=True)
+    return GpiodLine(chip, line, initial_high=True)
 
 
 def open_watchdog_feed(chip: str, line: int) -> Any:
@@ -94,7 +92,7 @@ def open_watchdog_feed(chip: str, line: int) -> Any:
     shared = open_shared_line("oe_feed", False)
     if shared is not None:
         return shared
-    return open_output_line(chip, line, initial_high=False, consumer="hindrax-watchdog-feed")
+    return GpiodLine(chip, line, initial_high=False, consumer="hindrax-watchdog-feed")
 
 
 class OutputGuardNode(VehicleNode):

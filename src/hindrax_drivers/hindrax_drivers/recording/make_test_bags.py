@@ -145,38 +145,31 @@ def _wrench(t: float, rng: np.random.Generator) -> Any:
     return m
 
 
-def _raw_dvl(t: float, rng: np.random.Generator) -> Any:
+def _raw(t: float, device: str, transport: int, address: int, register: int, data: bytes) -> Any:
     m = _stamp(RawDeviceData(), t, "")
+    m.device_name = device
+    m.transport = transport
+    m.direction = RawDeviceData.DIRECTION_DEVICE_TO_HOST
+    m.i2c_address = address
+    m.i2c_register = register
+    m.data = data
+    return m
+
+
+def _raw_dvl(t: float, rng: np.random.Generator) -> Any:
     body = (f"DVEXT,{int(round(t * 1000))},{surge_velocity_m_s(t):.3f},0.000,0.000,0.800,95,1,"
             "0.866,0.866,0.866,0.866,0.0,0.0,0.0")
-    m.device_name = "dvl75"
-    m.transport = RawDeviceData.TRANSPORT_SERIAL
-    m.direction = RawDeviceData.DIRECTION_DEVICE_TO_HOST
-    m.i2c_register = -1
-    m.data = format_sentence(body)
-    return m
+    return _raw(t, "dvl75", RawDeviceData.TRANSPORT_SERIAL, 0, -1, format_sentence(body))
 
 
 def _raw_ms5837(t: float, rng: np.random.Generator) -> Any:
-    m = _stamp(RawDeviceData(), t, "")
-    m.device_name = "ms5837"
-    m.transport = RawDeviceData.TRANSPORT_I2C
-    m.direction = RawDeviceData.DIRECTION_DEVICE_TO_HOST
-    m.i2c_address = 0x76
-    m.i2c_register = 0x00  # ADC read
-    m.data = int(rng.integers(4_000_000, 4_100_000)).to_bytes(3, "big")
-    return m
+    data = int(rng.integers(4_000_000, 4_100_000)).to_bytes(3, "big")
+    return _raw(t, "ms5837", RawDeviceData.TRANSPORT_I2C, 0x76, 0x00, data)  # ADC read
 
 
 def _raw_icm(t: float, rng: np.random.Generator) -> Any:
-    m = _stamp(RawDeviceData(), t, "")
-    m.device_name = "icm20948"
-    m.transport = RawDeviceData.TRANSPORT_I2C
-    m.direction = RawDeviceData.DIRECTION_DEVICE_TO_HOST
-    m.i2c_address = 0x68
-    m.i2c_register = 0x2D  # ACCEL_XOUT_H: accel + gyro burst
-    m.data = bytes(int(v) & 0xFF for v in rng.integers(0, 256, 12))
-    return m
+    data = bytes(int(v) & 0xFF for v in rng.integers(0, 256, 12))
+    return _raw(t, "icm20948", RawDeviceData.TRANSPORT_I2C, 0x68, 0x2D, data)  # accel + gyro burst
 
 
 STREAMS: tuple[StreamSpec, ...] = (

@@ -15,10 +15,9 @@ durations are ``{sec, nsec}`` with infinity = 2^63-1 ns = {9223372036, 854775807
 - :func:`subscription_policies` is rosbag2's ``adapt_request_to_offers``: reliable only if every
   publisher is reliable (a reliable subscription never matches a best-effort publisher), transient
   local only if every publisher is.
-- :func:`recorder_policies` is what this project's recorder requests: best effort for every volatile topic (a
-  best-effort reader sends no acknowledgements, so a writer whose readers are all best effort runs no reliability
-  protocol: docs/architecture.md §10.1; on the vehicle's loopback a sample is lost only to a full socket buffer),
-  rosbag2's rule for the transient-local ones (their history reaches a late reader only when it is reliable).
+- :func:`recorder_policies` is what this project's recorder requests: best effort for every
+  volatile topic (why: :func:`hindrax_drivers.node_common.sensor_input_qos`), rosbag2's rule for the
+  transient-local ones (their history reaches a late reader only when it is reliable).
 - :func:`playback_profile` is rosbag2's ``adapt_offer_to_recorded_offers``: the recorded profile when
   all publishers agree on the compatibility-relevant policies (history reset to keep_last 10), else
   the default (reliable, volatile, keep_last 10).

@@ -51,8 +51,6 @@ Time
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``);
     the read-only node parameter ``clock_stall_timeout_s``.
-
-Run alone: ``python -m hindrax_drivers.supervisor.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
 from __future__ import annotations
 

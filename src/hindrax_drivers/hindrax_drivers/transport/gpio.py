@@ -26,11 +26,12 @@ need the same three calls on an emulated line that a register-exact chip emulato
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from typing import Any, Callable
+from typing import Callable
 
-__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable", "open_output_line"]
+__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable"]
 
 
 class GpiodLine:
@@ -69,10 +70,8 @@ class GpiodLine:
 
     def release(self) -> None:
         """Free the request (the pin returns to an input: the pull resistor decides the level)."""
-        try:
+        with contextlib.suppress(Exception):  # releasing on shutdown must not raise
             self._request.release()
-        except Exception:  # noqa: BLE001 - releasing on shutdown must not raise
-            pass
 
 
 class EmulatedGpioLine:
@@ -157,9 +156,3 @@ class WatchedOutputEnable:
     def is_high(self) -> bool:
         """True: the outputs are disabled (the guard asserts /OE, or the watchdog ran out)."""
         return self.oe.is_high() or self.feed.expired()
-
-
-def open_output_line(chip: str, line: int, initial_high: bool = True,
-                     consumer: str = "hindrax-output-guard") -> Any:
-    """A :class:`GpiodLine` on ``chip``/``line``, driven ``initial_high`` at once (see the class for errors)."""
-    return GpiodLine(chip, line, initial_high=initial_high, consumer=consumer)

@@ -19,6 +19,7 @@ The sleep function and the clock are injected, so tests run without real waiting
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -151,21 +152,14 @@ class BusHandle:
         injected bus or one that is not open)."""
         if not self.owned or self._bus is None:
             return False
-        close_quietly(self._bus)
+        with contextlib.suppress(Exception):  # closing a bus must not raise
+            self._bus.close()
         self._bus = None
         return True
 
     def close(self) -> None:
         """Close an owned bus (shutdown)."""
         self.reset()
-
-
-def close_quietly(bus: Any) -> None:
-    """Close a bus on shutdown; errors are swallowed (shutdown must not raise)."""
-    try:
-        bus.close()
-    except Exception:  # noqa: BLE001 - closing a bus on shutdown must not raise
-        pass
 
 
 class I2CDevice:
@@ -264,16 +258,6 @@ class I2CDevice:
             self._run(f"write_byte(0x{value:02x})", lambda: self.bus.write_byte(self.address, value))
             self._tap("write", value, b"")
 
-    def read_byte(self) -> int:
-        """Read one byte continuing from the device pointer (SMBus receive byte).
-
-        Raw tap: ``("read", address, None, bytes([value]))``.
-        """
-        with self.lock:
-            value = int(self._run("read_byte()", lambda: self.bus.read_byte(self.address)))
-            self._tap("read", None, bytes([value]))
-            return value
-
     def write_byte_data(self, register: int, value: int) -> None:
         """Write one register: transaction ``[register, value]``.
 
@@ -359,8 +343,3 @@ class I2CDevice:
                 self.write_byte_data(write.register, write.value)
                 if write.delay_after_s > 0.0:
                     self._sleep(write.delay_after_s)
-
-    def sleep(self, seconds: float) -> None:
-        """Wait using the injected sleep function (for device conversion times)."""
-        if seconds > 0.0:
-            self._sleep(seconds)

@@ -14,6 +14,7 @@ Linux/POSIX only (pty, termios).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import math
 import os
@@ -298,10 +299,8 @@ class PtyDevice:
             os.unlink(self._link)
         for fd in (master, slave):
             if fd is not None:
-                try:
+                with contextlib.suppress(OSError):
                     os.close(fd)
-                except OSError:
-                    pass
 
     @property
     def path(self) -> str:

@@ -18,6 +18,7 @@ error and has no reconnect, state, or tap.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from dataclasses import dataclass
@@ -218,10 +219,8 @@ class SerialTransport:
             ser = self._ser
             self._port_lost.notify_all()
         if ser is not None and hasattr(ser, "cancel_read"):
-            try:
+            with contextlib.suppress(Exception):  # best effort wake-up of a blocked read
                 ser.cancel_read()
-            except Exception:  # noqa: BLE001 - best effort wake-up of a blocked read
-                pass
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self._thread = None
@@ -256,10 +255,8 @@ class SerialTransport:
         self._connected_event.clear()
         self._port_lost.notify_all()
         if ser is not None:
-            try:
+            with contextlib.suppress(Exception):  # port may already be gone
                 ser.close()
-            except Exception:  # noqa: BLE001 - port may already be gone
-                pass
 
     def _open(self) -> bool:
         try:

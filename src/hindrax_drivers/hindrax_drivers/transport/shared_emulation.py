@@ -23,6 +23,7 @@ I2C adapter and a GPIO chip shared across processes.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from multiprocessing.connection import Client, Listener
@@ -57,14 +58,10 @@ class EmulationServer:
 
     def close(self) -> None:
         """Stop accepting connections and remove the socket file."""
-        try:
+        with contextlib.suppress(OSError):
             self._listener.close()
-        except OSError:
-            pass
-        try:
+        with contextlib.suppress(OSError):
             os.unlink(self.path)
-        except OSError:
-            pass
 
     def _accept(self) -> None:
         while True:
@@ -130,10 +127,8 @@ class _Client:
 
     def close(self) -> None:
         """Close the connection (lines this client drove are released by the server)."""
-        try:
+        with contextlib.suppress(OSError):
             self._conn.close()
-        except OSError:
-            pass
 
 
 @forward_smbus_methods
@@ -162,10 +157,8 @@ class SharedGpioLine(_Client):
         return bool(self._call(self.name, "is_high"))
 
     def release(self) -> None:
-        try:
+        with contextlib.suppress(OSError):
             self._call(self.name, "release")
-        except OSError:
-            pass
         self.close()
 
 

@@ -21,6 +21,7 @@ does the framing.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
 import socket
@@ -99,10 +100,8 @@ class SocketI2CBus:
             ctypes.memmove(m.buf, data, m.len)
 
     def close(self) -> None:
-        try:
+        with contextlib.suppress(OSError):
             self._conn.close()
-        except OSError:
-            pass
 
 
 def _rdwr(bus: Any, spec: list) -> list[bytes]:
@@ -144,10 +143,8 @@ class I2CSocketServer:
                     sock.shutdown(socket.SHUT_RDWR)
             except OSError:
                 pass
-            try:
+            with contextlib.suppress(OSError):
                 conn.close()
-            except OSError:
-                pass
 
     def _accept(self) -> None:
         self.scheduling_refused = set_this_thread(self.realtime_priority)  # the serving threads inherit it

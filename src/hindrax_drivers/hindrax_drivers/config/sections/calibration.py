@@ -35,25 +35,18 @@ SCHEMA, OPTIONAL = section("calibration", {
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     """The ballast and the inclining test mass sink, the float floats (with the configured water density)."""
     issues: list[ConfigIssue] = []
-    if "calibration.ballast_mass_kg" in c and "calibration.ballast_volume_m3" in c:
-        rho = float(c.get("environment.water_density_kg_m3", 1000.0))
-        v_max = c["calibration.ballast_mass_kg"] / rho
-        if c["calibration.ballast_volume_m3"] >= v_max:
-            issues.append(ConfigIssue("calibration.ballast_volume_m3", c["calibration.ballast_volume_m3"],
-                                      f"below calibration.ballast_mass_kg / water density = {v_max:.4g} (the ballast "
-                                      "must sink)"))
-    if "calibration.float_mass_kg" in c and "calibration.float_volume_m3" in c:
-        v_min = c["calibration.float_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
-        if c["calibration.float_volume_m3"] <= v_min:
-            issues.append(ConfigIssue("calibration.float_volume_m3", c["calibration.float_volume_m3"],
-                                      f"above calibration.float_mass_kg / water density = {v_min:.4g} (the float "
-                                      "must float)"))
-    if "calibration.inclining_mass_kg" in c and "calibration.inclining_volume_m3" in c:
-        v_max = c["calibration.inclining_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
-        if c["calibration.inclining_volume_m3"] >= v_max:
-            issues.append(ConfigIssue("calibration.inclining_volume_m3", c["calibration.inclining_volume_m3"],
-                                      f"below calibration.inclining_mass_kg / water density = {v_max:.4g} (the test "
-                                      "mass must sink)"))
+    rho = float(c.get("environment.water_density_kg_m3", 1000.0))
+    bodies = (("ballast", "below", "the ballast must sink"),
+              ("float", "above", "the float must float"),
+              ("inclining", "below", "the test mass must sink"))
+    for body, side, why in bodies:
+        mass, volume = f"calibration.{body}_mass_kg", f"calibration.{body}_volume_m3"
+        if mass in c and volume in c:
+            limit = c[mass] / rho
+            ok = c[volume] > limit if side == "above" else c[volume] < limit
+            if not ok:
+                issues.append(ConfigIssue(volume, c[volume],
+                                          f"{side} {mass} / water density = {limit:.4g} ({why})"))
     return issues
 
 

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import Any, ClassVar, Mapping
 
 import numpy as np
@@ -116,7 +116,6 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     return issues
 
 
-@dataclass(frozen=True, repr=False)
 class ThrusterConfig(Section):
     """One thruster: name, position relative to the CG (FRD, m), unit direction of positive thrust (FRD),
     PCA9685 channel, reversal, trim (us) and allocation weight."""
@@ -132,7 +131,6 @@ class ThrusterConfig(Section):
     PREFIX: ClassVar[str] = "thrusters.<thruster>"  # per instance: thrusters.<name> (KeyError messages)
 
 
-@dataclass(frozen=True, repr=False)
 class ThrustersConfig(Section):
     """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] eq. 1, Table 2).
 
