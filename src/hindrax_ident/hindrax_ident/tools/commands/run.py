@@ -55,7 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="levels per DOF (default identification.levels_per_dof)")
     parser.add_argument("--rtf", type=float, default=0.0, help="real-time factor, 0 = as fast as possible (default)")
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default simulation.seed)")
-    parser.add_argument("--out", default=None, help="output directory (default runs/<UTC timestamp>/)")
+    parser.add_argument("--out", default=None, help="output directory, new or empty (default: "
+                        "<recording.output_root>/sim_<DOFs>_<time>/)")
     results_doc.add_argument(parser)
     add_config_argument(parser)
     parser.add_argument("--truth", default=None,
