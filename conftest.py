@@ -48,7 +48,7 @@ _domain_ctx = None
 #: with the seconds of the whole group (its parts of 5 s and more).
 LONGEST_FIRST = """
 348 test_pool_day.py::test_pool_day_as_the_readme_writes_it
- 95 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
+ 64 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
  54 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
  32 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
  32 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
@@ -57,8 +57,6 @@ LONGEST_FIRST = """
  23 test_gateway.py::test_a_command_aimed_at_one_vehicle_never_moves_the_other
  21 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
  20 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
- 20 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
- 18 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
  18 test_pool_day.py::test_pool_day
  18 test_ident_timing_cv.py::test_the_equation_error_delay_goes_wrong_and_the_cross_validated_one_does_not
  18 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
@@ -70,6 +68,8 @@ LONGEST_FIRST = """
  14 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
  13 test_ident_vehicle_graph.py::test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral
  12 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
+ 12 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
+ 12 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
  11 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
  11 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
  11 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
