@@ -1,6 +1,6 @@
 """Identification benchmark: wall time of the simulated campaign and the accuracy of each method.
 
-Surge + heave, 3 levels (the acceptance test's campaign), in both modes: ``make bench`` has to stay short; the
+Surge + heave, 3 levels (the acceptance tests run 2), in both modes: ``make bench`` has to stay short; the
 all-DOF campaign's wall time and accuracy are ``make run``'s, in docs/results.md (section ``run``). Rows: wall
 time (target < 600 s for the full campaign), pool time per DOF, and per DOF the relative error of the inertia and
 quadratic damping for the reported
