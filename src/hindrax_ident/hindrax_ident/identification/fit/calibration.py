@@ -1,35 +1,16 @@
-"""Known-force thrust calibration per thruster group and rotation direction, and the joint estimation
-([Hindrax-Drag] §6; docs/identification.md §6).
+"""Known-force thrust calibration per thruster group and rotation direction, and the joint
+estimation ([Hindrax-Drag] §6; the method, and which direction each manoeuvre turns:
+docs/identification.md §6.1-§6.2).
 
-A self-propelled test only sees force / inertia and force / damping: if the thrusters give s times their curve,
-inertia, damping and bias all come out s times too (docs/identification.md §6). A T200's forward and reverse
-thrust are two curves ([Hindrax-Drag] eq. 1, Table 2) that go wrong differently (a propeller mounted the other way,
-thruster-frame interaction, a curve measured on another unit), so the thrust model here has one scale per thruster
-group and rotation direction: ``vertical_forward``, ``vertical_reverse``, ``horizontal_forward``,
-``horizontal_reverse`` (forward = positive thrust along the thruster's configured direction, the curve_positive
-branch). The true force of thruster j is s_{g(j), d} F_j with d the sign of its commanded force F_j.
-
-* The calibration steps (:mod:`..online.steps.calibration_steps`) give, per hold, the parts P and N of the holding force
-  on the step's axis made by forward and reverse thrust; at rest ``s_forward P + s_reverse N + E = R`` with E the
-  known force (0 without it) and R the constant force the thrusters balance: for the vertical group the vehicle's
-  net buoyancy (rho V - m) g, whose weighed value (``calibration.net_buoyancy_std_n``) makes every hover hold a
-  measurement of the forward scale; for a line pull a free constant per step (current, tether).
-  :func:`scale_model` collects these linear Gaussian measurements; :func:`thrust_scales` is the scales' posterior
-  from them and the priors N(1, u_d^2) (u_d of the thruster fit per direction, :func:`scale_prior_stds`).
-* :func:`apply_thrust_calibration` rebuilds the record's thrust-model wrenches from the commanded thruster forces
-  with those point scales, per thruster and direction (first-order lag as the executive's), so that the fits come
-  out near physical units.
-* :func:`attach_thrust_sensitivities` measures, per DOF and parameter, how the fit moves with each scale (refits
-  with one scale raised); :func:`joint_estimate` then estimates the scales together with every DOF's parameters
-  (Bayesian least squares, [Tarantola2005] Ch. 3).
-
-Which direction turns in each manoeuvre (the allocation of ros_ws/config/hindrax.yaml, [Hindrax-Drag] Fig. 5, 55-degree
-horizontal layout): a pure surge, sway or yaw wrench is made by two horizontal thrusters turning forward and two in
-reverse with equal thrust (T1/T4 and T2/T3 are point-symmetric pairs with opposite directions), in either sense, so
-those DOFs and every line pull see the mean of the two horizontal scales only; surge and sway pulls share the
-horizontal group's two scales, and their difference stays at its prior, which none of these manoeuvres depends on.
-Heave down is forward thrust of all four vertical thrusters, heave up reverse; the hover (0.79 N down) is forward
-thrust; roll and pitch use two vertical thrusters each way.
+The thrust model has one scale per thruster group and rotation direction (``vertical_forward``,
+``vertical_reverse``, ``horizontal_forward``, ``horizontal_reverse``; forward = positive thrust
+along the thruster's configured direction, the curve_positive branch; [Hindrax-Drag] eq. 1, Table
+2): the true force of thruster j is s_{g(j), d} F_j with d the sign of its commanded force F_j.
+:func:`scale_model` collects the calibration steps' holds as linear Gaussian measurements of the
+scales, :func:`thrust_scales` is their posterior, :func:`apply_thrust_calibration` rebuilds a
+record's wrenches with the point scales, :func:`attach_thrust_sensitivities` measures how each fit
+moves with each scale and :func:`joint_estimate` estimates the scales with every DOF's parameters
+([Tarantola2005] Ch. 3).
 
 ASSUMPTION when only one group was measured: the other group's thrusters get the same two scales (``common_*``; a
 common cause such as the battery voltage, docs/devices.md §5.3). The RLS comparison values in ``record.online``
@@ -328,17 +309,13 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
     """Measure how each DOF's fit moves with each thrust scale: ``signals["thrust_sensitivity"]`` =
     {scale: (p,) d theta / d s} (the interface to :func:`joint_estimate`), in place.
 
-    ``identifications`` were fitted by ``identify(record', cfg)`` on ``record'`` = ``record`` rebuilt with the
-    calibration's point scales s_c (:func:`apply_thrust_calibration`). For each DOF, the scales whose thrusters push
-    on its axis during its manoeuvres are found from ``thrust_cmd_n`` (surge: the two horizontal directions; heave:
-    the two vertical ones; roll and pitch: all four); the fit is repeated with one of them raised by ``step``
-    (relative) and d theta / d s_n = (theta' - theta) / (step s_n) (forward difference; only the DOFs it affects are
-    refitted). The last one follows without a fit from the exact homogeneity of the model (every force times lambda
-    gives every parameter times lambda, docs/identification.md §6.2): sum_n s_n d theta / d s_n = theta. So a DOF
-    costs one fit per extra scale. The output-error fit's sensitivity is what this measures, not a model of it: on
-    the heave ladders a 5 % stronger forward thrust alone moves the downward quadratic damping by +14 %, the bias by
-    +37 % (reverse: -9 % and -31 %): the braking phases of each run use the other direction. Nothing is done
-    without a calibration or without ``thrust_cmd_n``."""
+    ``identifications`` were fitted by ``identify(record', cfg)`` on ``record'`` = ``record``
+    rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration`). For each DOF
+    and each scale whose thrusters push on its axis during its window (from ``thrust_cmd_n``), the
+    fit is repeated with that scale raised by ``step`` (relative): d theta / d s_n = (theta' -
+    theta) / (step s_n); the last scale follows from the model's homogeneity, sum_n s_n d theta / d
+    s_n = theta (docs/identification.md §6.2). Nothing is done without a calibration or without
+    ``thrust_cmd_n``."""
     cal = record.calibration if calibration is None else calibration
     model = scale_model(cal, cfg)
     if model is None or not _has_thrust(record) or not identifications:
@@ -374,11 +351,10 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
 
 def identify_calibrated(record: Any, cfg, identify) -> tuple[dict, dict]:
     """({dof: DofIdentification}, {dof: error}) of ``record`` with its calibration applied
-    (:func:`apply_thrust_calibration` with ``cfg``) and each DOF's sensitivity to the thrust scales measured
-    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through
-    :func:`~..assessment.results.build_results`). identify: the fit of every DOF with a window in the record, called as
-    identify(record, cfg) (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as campaign_fit depends on this
-    module through results)."""
+    (:func:`apply_thrust_calibration`) and each DOF's sensitivity to the thrust scales measured
+    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate`. identify: called as
+    identify(record, cfg) (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as
+    campaign_fit depends on this module through results)."""
     idents, errors = identify(apply_thrust_calibration(record, cfg=cfg), cfg)
     attach_thrust_sensitivities(record, idents, cfg, identify)
     return idents, errors
@@ -458,26 +434,16 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     """Bayesian (regularised) least squares of the thrust scales, the empirical priors and the manoeuvres' fits
     together (docs/identification.md §6.2-§6.3; [Tarantola2005] Ch. 3), written into the identifications.
 
-    ``identifications``: {dof: :class:`~.dof_model.DofIdentification`} fitted on the record whose thrust-model
-    force was rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration` with
-    ``calibration`` and ``cfg``; the record as recorded without one), each with its measured sensitivity
-    ``signals["thrust_sensitivity"]`` = G = d theta / d s (:func:`attach_thrust_sensitivities`; else the first-order
-    guess of :func:`_sensitivity_matrix`). To first order theta(s) = theta_0 + G (s - s_c), theta_0 the parameters
-    at s_c, and the fit is a Gaussian measurement of theta_0 (value and the fit covariance
-    ``signals["covariance"]``, no thrust term). The joint problem over x = [theta_0 of every DOF, the scales s, the
-    nuisance constants R of the calibration holds] minimises
-
-        sum_dof ||L^-1 (theta_0 - theta_fit)||^2 + sum_i ((theta_i(s) - mu_i) / sd_i)^2
-        + sum_k ((s_k - 1) / u_k)^2 + sum_holds ((sum_k c_k s_k - R - rhs) / sd)^2 + ((R_v - B_w) / sd_B)^2
-
-    (L L^T the fit covariance; mu_i, sd_i the empirical priors of :func:`~.posterior.theta_priors`; u_k per
-    direction, :func:`scale_prior_stds`; the holds of :func:`scale_model`; B_w the weighed net buoyancy) and its
-    covariance is (J^T J)^-1 at the optimum (Gauss-Newton, the Laplace approximation). The reported theta = theta_0
-    + G (s - s_c) has the covariance carried by the Jacobian [I, G] (the delta method): each interval contains the
-    calibration's own uncertainty in the directions the parameter depends on, and the priors' pull. For one scale
-    per DOF this is the reparametrisation theta = s phi of the single-scale model to first order (G = theta / s by
-    homogeneity). Without a calibration the scales stay 1 (only the empirical priors act) and the thrust-curve
-    uncertainty is added later by :func:`~..assessment.verdicts.assess_dof`, per direction, as before.
+    ``identifications``: {dof: :class:`~.dof_model.DofIdentification`} fitted on the record rebuilt
+    with the calibration's point scales s_c (:func:`apply_thrust_calibration`; the record as
+    recorded without one), each with its sensitivity ``signals["thrust_sensitivity"]`` = G = d theta
+    / d s (:func:`attach_thrust_sensitivities`; else the first-order guess of
+    :func:`_sensitivity_matrix`) and its fit covariance ``signals["covariance"]``. theta(s) =
+    theta_0 + G (s - s_c); the joint problem over [theta_0 of every DOF, the scales, the nuisance
+    constants of :func:`scale_model`] is the S(x) of docs/identification.md §6.2, its covariance
+    (J^T J)^-1 at the optimum and theta's by the delta method. Without a calibration the scales stay
+    1 and the problem separates into :func:`~.posterior.prior_posterior` per DOF; the thrust-curve
+    uncertainty is then added by :func:`~..assessment.verdicts.assess_dof`.
 
     ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`~.posterior.DEFAULT_PRIOR_STD_REL`); 0
     leaves the priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of

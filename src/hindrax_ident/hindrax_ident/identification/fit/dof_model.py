@@ -1,4 +1,4 @@
-"""The per-DOF model: parameters, units, regressors, measurement settings, the offline result and comparisons.
+"""The per-DOF model: parameters, units, regressors, the offline result and its comparisons.
 
 Model per DOF (docs/architecture.md §5; [Hindrax-Drag] eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
@@ -13,29 +13,12 @@ coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the a
 * roll: s = cos(theta) sin(phi); pitch: s = sin(theta); k_r = z_g W - z_b B (Fossen g(eta),
   docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
 
-Signals: velocity and acceleration come from filters, never raw differences (docs/architecture.md §5): surge/sway
-from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz accelerometer
-(:mod:`hindrax_ident.vehicle.fusion`); roll/pitch/yaw from the gyro rate
-(:func:`~...vehicle.uncertainty.measurement_settings`). Online:
-:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` (or the accelerometer-aided filter); offline the
-campaign reader :mod:`.campaign_fit` (RTS smoothers, gyro bias against the DVL attitude, restoring regressor).
-
-Methods:
-
-1. Online: the live indicator of :class:`~..online.estimators.OnlineDofEstimator` (RLS with forgetting on
-   :func:`regressor_matrix`), not the reported estimate.
-2. The reported offline estimate is the fit core's (:mod:`.fit_core`, docs/identification.md §7) on the campaign
-   reader's records (:mod:`.campaign_fit`), the same core and options as ``hindrax ident fit``;
-   :class:`DofIdentification` holds it with the comparisons below.
-3. Comparison: equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
-   :func:`~hindrax_ident.estimation.least_squares.fit_linear_model` on :func:`regressor_matrix`); its inertia is
-   biased low by the smoothing of the fast thrust transients (the thruster lag is 0.1 s), so it is reported, not
-   used.
-4. Comparison: the steady-state method of [Hindrax-Drag] (:func:`steady_state_fit`): steady windows detected
-   automatically (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity
-   per run, then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag]
-   eqs. 2-8). Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
-   separately and usually has too few windows (no steady state in the depth available, [Hindrax-Drag] §5).
+The reported offline estimate is the fit core's (:mod:`.fit_core`) on the campaign reader's
+records (:mod:`.campaign_fit`); :class:`DofIdentification` holds it beside the comparisons: the
+online RLS on :func:`regressor_matrix` (:class:`~..online.estimators.OnlineDofEstimator`, a live
+indicator), the equation-error batch LS ([Hindrax-Drag] eqs. 6-8; its inertia biased low by the
+smoothing of the fast thrust transients) and the steady-state method (:func:`steady_state_fit`,
+[Hindrax-Drag] eqs. 2-8; heave usually has too few steady windows, [Hindrax-Drag] §5).
 """
 from __future__ import annotations
 

@@ -1,17 +1,11 @@
 """The fit of bags of any topics: the fit core over the records of the any-topics reader, validated.
 
-The reading is :func:`..bag_input.reader.read_any_topics`; everything after it is the fit core shared with the
-campaign (:mod:`.fit_core`, docs/identification.md §7): per DOF the input delay and thrust lag (a commanded wrench; a
-ThrusterPwm force keeps the vehicle file's latency and lag), the segment-wise output-error fit with physical bounds and
-a robust loss, the model terms chosen by cross-validation (damping law, heave per direction, Coriolis and centripetal
-force of the other DOFs' inertias, cross-DOF coupling, reverse thrust gain), the cluster-robust intervals. Several bags
-are fitted jointly (their segments pooled; clusters never span two bags). The verdicts and identification.yaml are
-:mod:`..assessment.results`' (:func:`..assessment.results.build_document`).
-
-Validation: K-fold cross-validation on contiguous blocks of the moving validation segments and ``holdout`` bags. Per
-DOF ``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the measurements of the 10 s validation segments, v_pred
-simulated open loop from the recorded force and the smoothed initial velocity; ``nrmse_hold``: the initial velocity
-held; ``nrmse_zero``: 0.
+The reading is :func:`..bag_input.reader.read_any_topics`; everything after it is the fit core
+shared with the campaign (:mod:`.fit_core`, docs/identification.md §7). Several bags are fitted
+jointly (their segments pooled; clusters never span two bags). The verdicts and identification.yaml
+are :mod:`..assessment.results`' (:func:`..assessment.results.build_document`). Validation: the
+core's cross-validation and ``holdout`` bags, both measured by :func:`.fit_core.validation_measures`
+(``nrmse``, ``nrmse_hold``, ``nrmse_zero``).
 """
 from __future__ import annotations
 
