@@ -52,15 +52,6 @@ class FitResult:
     design: str
 
 
-def _holdout(rec: fit_core.DofRecord, res: fit_core.DofResult, opts: fit_core.CoreOptions,
-             inertia: np.ndarray | None) -> tuple[dict, fit_core.SegmentData, np.ndarray]:
-    """Validation measures of the chosen model on a holdout record (every segment of ``validation_s`` with
-    measurements, moving or not), its segments and predictions."""
-    sd = fit_core.build_segments(rec, res.terms, res.timing, opts.validation_s, inertia, excited_only=False)
-    vp = fit_core.predict_validation(sd, res.chosen.layout, res.theta)
-    return fit_core.validation_measures(sd, vp), sd, vp
-
-
 def fit_records(bags, opts: fit_core.CoreOptions, design: str) -> FitResult:
     """Fit the records of the any-topics reader (``bags``: :class:`..bag_input.reader.BagRecords`) with the fit core
     (module docstring), the core's options ``opts``; ``design`` describes the validation. A DOF the reader could not
@@ -99,9 +90,11 @@ def fit_records(bags, opts: fit_core.CoreOptions, design: str) -> FitResult:
             fit.plot = {"data": "cross-validation", "measured": cand.val.v_s, "segments": cand.val,
                         "predicted": fit_core.predict_validation(cand.val, cand.layout, r.theta)}
         if dof in hrecs and hrecs[dof].chunks:
-            try:
-                m, sd, vp = _holdout(hrecs[dof], r, opts, inertia)
-                fit.validation["holdout"] = m
+            try:  # every segment of validation_s with measurements, moving or not
+                sd = fit_core.build_segments(hrecs[dof], r.terms, r.timing, opts.validation_s,
+                                             inertia, excited_only=False)
+                vp = fit_core.predict_validation(sd, cand.layout, r.theta)
+                fit.validation["holdout"] = fit_core.validation_measures(sd, vp)
                 fit.plot = {"data": "holdout", "measured": sd.v_s, "predicted": vp, "segments": sd}
             except EstimationError as exc:
                 fit.validation["holdout_note"] = str(exc)
