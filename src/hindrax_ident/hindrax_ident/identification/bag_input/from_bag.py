@@ -108,10 +108,10 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     mount_t = mounting_rotation(cfg.sensors.icm20948.mounting_rpy_rad).T
     samples: list = []
     pwm: list = []
-    status: list = []
     online: dict[str, OnlineHistory] = {}
-    estimates: list = []
-    calibrations: list = []
+    status, estimates, calibrations = [], [], []  # (stamp, message) each
+    stamped = {"identification/status": status, "identification/estimates": estimates,
+               calibration_topic.TOPIC: calibrations}
     for topic, msg in messages:
         if topic == "dvl/data":
             samples.extend(samples_from_dvl(msg))
@@ -123,12 +123,8 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
             samples.append(sample_from_range(msg))
         elif topic == "thrusters/pulse_width":
             pwm.append((_stamp(msg), np.asarray(msg.pulse_width_us, dtype=float), bool(msg.armed)))
-        elif topic == "identification/status":
-            status.append((_stamp(msg), msg))
-        elif topic == "identification/estimates":
-            estimates.append((_stamp(msg), msg))
-        elif topic == calibration_topic.TOPIC:
-            calibrations.append((_stamp(msg), msg))
+        elif topic in stamped:
+            stamped[topic].append((_stamp(msg), msg))
     if not pwm:
         raise BagContentError("no thrusters/pulse_width messages (the widths the ESC wrote)")
     if not status:

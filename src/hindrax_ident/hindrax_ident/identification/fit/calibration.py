@@ -72,7 +72,8 @@ def scale_prior_stds(cfg) -> dict[str, float]:
 
 @dataclasses.dataclass
 class ScaleModel:
-    """The calibration steps as linear Gaussian measurements of the thrust scales (module docstring).
+    """The calibration steps as linear Gaussian measurements of the thrust scales
+    (docs/identification.md §6.2).
 
     names: scale parameters (``<group>_<direction>`` or ``common_<direction>``); nuisance: the constants R (the
     vertical group's ``net_buoyancy_n``, a free one per horizontal step); rows: (coefficients (n_names,), nuisance
@@ -127,11 +128,11 @@ def _entry(calibration: Mapping[str, Any], key: str) -> Mapping | None:
 def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel | None:
     """The :class:`ScaleModel` of the calibration steps' results (``record.calibration``: keys of
     :data:`KNOWN_FORCE_AXES`), None without any. A result with its holds' forward and reverse parts
-    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (module docstring); an older result with only
-    its single scale (``value``, ``std``) measures the mean of the group's two directions. Priors from ``cfg``
-    (:func:`scale_prior_stds`; the weighed net buoyancy (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without
-    ``cfg`` the default thrust uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or
-    a zero std."""
+    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2);
+    an older result with only its single scale (``value``, ``std``) measures the mean of the group's
+    two directions. Priors from ``cfg`` (:func:`scale_prior_stds`; the weighed net buoyancy (rho V -
+    m) g +- ``calibration.net_buoyancy_std_n``); without ``cfg`` the default thrust uncertainty and
+    a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a zero std."""
     cal = calibration or {}
     entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
     if not entries:
@@ -217,19 +218,12 @@ def lagged_parts(record: Any) -> tuple[np.ndarray, np.ndarray]:
     each, the value at each tick."""
     f = np.asarray(record.thrust_cmd_n, dtype=float)
     t = np.asarray(record.t_s, dtype=float)
-    tau = float(record.time_constant_s)
-    pos, neg = np.maximum(f, 0.0), np.minimum(f, 0.0)
-    lp, ln = np.zeros_like(f), np.zeros_like(f)
-    if f.shape[0] == 0:
-        return lp, ln
-    lag = ThrustLag(tau)
-    ap, an = np.zeros(f.shape[1]), np.zeros(f.shape[1])
-    for i in range(1, t.size):
-        dt = float(t[i] - t[i - 1])
-        ap = lag.advance(ap, pos[i - 1], dt)
-        an = lag.advance(an, neg[i - 1], dt)
-        lp[i], ln[i] = ap, an
-    return lp, ln
+    parts = np.stack([np.maximum(f, 0.0), np.minimum(f, 0.0)])  # (2, n, m)
+    out = np.zeros_like(parts)
+    lag = ThrustLag(float(record.time_constant_s))
+    for i in range(1, f.shape[0]):
+        out[:, i] = lag.advance(out[:, i - 1], parts[:, i - 1], float(t[i] - t[i - 1]))
+    return out[0], out[1]
 
 
 def _has_thrust(record: Any) -> bool:
@@ -237,13 +231,9 @@ def _has_thrust(record: Any) -> bool:
     return f is not None and np.ndim(f) == 2 and np.shape(f)[0] == np.size(record.t_s) and np.shape(f)[1] > 0
 
 
-def _matrix(cfg) -> np.ndarray:
-    return np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
-
-
 def _rebuild(record: Any, cfg, fwd: np.ndarray, rev: np.ndarray) -> Any:
     """``record`` with its wrenches rebuilt from ``thrust_cmd_n`` with per-thruster forward / reverse scales (m,)."""
-    b = _matrix(cfg)
+    b = np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
     f = np.asarray(record.thrust_cmd_n, dtype=float)
     lp, ln = lagged_parts(record)
     wc = (np.where(f >= 0.0, fwd, rev) * f) @ b.T
@@ -275,10 +265,9 @@ def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None 
 
 
 def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
-    """First-order guess of each parameter's weights on its group's two directions when the fit's sensitivity was
-    not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust uncertainty's weights
-    (:func:`~.dof_model.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse,
-    the rest half each; other DOFs half each)."""
+    """First-order guess of each parameter's weights on its group's two directions when the fit's
+    sensitivity was not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust
+    uncertainty's weights (:func:`~.dof_model.thrust_weights`)."""
     w = thrust_weights(dof, names)  # (p, 2): [positive, negative]
     g = _DOF_GROUP[dof]
     return {f"{g}_forward": w[:, 0].copy(), f"{g}_reverse": w[:, 1].copy()}
@@ -287,7 +276,7 @@ def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
 def _affecting(record: Any, cfg, model: ScaleModel, dofs) -> dict[str, list[str]]:
     """Per DOF, the scale parameters whose thrusters put force on the DOF's axis during its window (model order)."""
     f = np.asarray(record.thrust_cmd_n, dtype=float)
-    b = _matrix(cfg)
+    b = np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
     groups = thruster_groups(cfg)
     out = {}
     for dof in dofs:
@@ -459,21 +448,21 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     z_c = model.solve()[0] if model else np.zeros(0)   # the point scales (and constants) the record was rebuilt with
     s_c = z_c[:ns]
     todo = [d for d, r in identifications.items() if "joint" not in r.signals and "assessment" not in r.signals]
-    blocks = []  # (dof, names, theta_fit, Linv, priors, slice, G (p, ns) or None)
+    blocks = []  # (dof, names, theta_fit, Linv, priors, slice, G (p, ns) or None, fit covariance)
     k = 0
     for dof in todo:
         r = identifications[dof]
         names = list(r.names)
         y = np.array([r.values[n] for n in names], dtype=float)
-        cov = r.signals.get("covariance")
-        if cov is None or np.shape(cov) != (len(names), len(names)):
-            cov = np.diag([r.std[n] ** 2 for n in names])
-        cov = np.asarray(cov, dtype=float)
+        cov_y = r.signals.get("covariance")
+        if cov_y is None or np.shape(cov_y) != (len(names), len(names)):
+            cov_y = np.diag([r.std[n] ** 2 for n in names])
+        cov = np.asarray(cov_y, dtype=float)
         cov = 0.5 * (cov + cov.T) + np.eye(len(names)) * 1e-18 * max(1.0, float(np.max(np.abs(np.diag(cov)))))
         linv = np.linalg.inv(np.linalg.cholesky(cov))
         g = _sensitivity_matrix(r, model, s_c) if model else None
-        blocks.append((dof, names, y, linv, theta_priors(dof, names, cfg, prior_std_rel), slice(k, k + len(names)),
-                       g))
+        blocks.append((dof, names, y, linv, theta_priors(dof, names, cfg, prior_std_rel),
+                       slice(k, k + len(names)), g, cov_y))
         k += len(names)
     if not blocks:
         return {}
@@ -488,7 +477,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     def residuals(x):
         s, rr = x[n_th:n_th + ns], x[n_th + ns:]
         out = []
-        for _, names, y, linv, pri, sl, g in blocks:
+        for _, names, y, linv, pri, sl, g, _c in blocks:
             out.append(linv @ (x[sl] - y))
             th = theta_of(x, sl, g)
             for i, n in enumerate(names):
@@ -503,10 +492,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     if model is None:  # no scales: the problem separates into the per-DOF update of posterior.prior_posterior
         x = x0.copy()
         cx = np.zeros((n_th, n_th))
-        for dof, names, y, _, pri, sl, _g in blocks:
-            cov_y = identifications[dof].signals.get("covariance")
-            if cov_y is None or np.shape(cov_y) != (len(names), len(names)):
-                cov_y = np.diag([identifications[dof].std[n] ** 2 for n in names])
+        for _dof, names, y, _, pri, sl, _g, cov_y in blocks:
             x[sl], cx[sl, sl] = prior_posterior(names, y, cov_y, pri)
     else:
         sol = optimize.least_squares(residuals, x0, method="lm", xtol=1e-14, ftol=1e-14)
@@ -514,7 +500,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         cx = np.linalg.inv(J.T @ J)
         x = sol.x
     s = x[n_th:n_th + ns]
-    for dof, names, y, _, pri, sl, g in blocks:
+    for dof, names, y, _, pri, sl, g, _c in blocks:
         r = identifications[dof]
         p = len(names)
         idx = list(range(sl.start, sl.stop)) + list(range(n_th, n_th + ns))

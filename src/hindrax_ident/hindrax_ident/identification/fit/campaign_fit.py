@@ -115,12 +115,10 @@ def dof_records(record, cfg: VehicleConfig, dofs=DOFS) -> tuple[dict, dict, dict
 
 def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None
                       ) -> DofIdentification:
-    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the reported values,
-    covariance and intervals, unchanged) on the campaign reader's signals ``sig``
-    (:class:`CampaignSignals`), with the comparisons beside it: the equation-error batch LS
-    ([Hindrax-Drag] eqs. 6-8, :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`), the steady-state
-    method of [Hindrax-Drag] (:func:`steady_state_fit`) and the online RLS (``online``: the estimator or its recorded
-    history, or None).
+    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the
+    reported values, covariance and intervals, unchanged) on the campaign reader's signals ``sig``
+    (:class:`CampaignSignals`), with the comparisons of :mod:`.dof_model` beside it (``online``: the
+    online RLS estimator or its recorded history, or None).
 
     The values are in :func:`parameter_names` order: a damping term the chosen model leaves out is 0 with std 0,
     heave's one pair for both directions (chosen by cross-validation) gives both directions the same value; the
