@@ -4,8 +4,8 @@ docs/identification.md §6.1-§6.2).
 
 The thrust model has one scale per thruster group and rotation direction (``vertical_forward``,
 ``vertical_reverse``, ``horizontal_forward``, ``horizontal_reverse``; forward = positive thrust
-along the thruster's configured direction, the curve_positive branch; [Hindrax-Drag] eq. 1, Table
-2): the true force of thruster j is s_{g(j), d} F_j with d the sign of its commanded force F_j.
+along the thruster's configured direction, the curve_positive branch; [Hindrax-Drag] eq. 1,
+Table 2): the true force of thruster j is s_{g(j), d} F_j, d the sign of its commanded force F_j.
 :func:`scale_model` collects the calibration steps' holds as linear Gaussian measurements of the
 scales, :func:`thrust_scales` is their posterior, :func:`apply_thrust_calibration` rebuilds a
 record's wrenches with the point scales, :func:`attach_thrust_sensitivities` measures how each fit
@@ -130,9 +130,10 @@ def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel |
     :data:`KNOWN_FORCE_AXES`), None without any. A result with its holds' forward and reverse parts
     (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2);
     an older result with only its single scale (``value``, ``std``) measures the mean of the group's
-    two directions. Priors from ``cfg`` (:func:`scale_prior_stds`; the weighed net buoyancy (rho V -
-    m) g +- ``calibration.net_buoyancy_std_n``); without ``cfg`` the default thrust uncertainty and
-    a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a zero std."""
+    two directions. Priors from ``cfg`` (:func:`scale_prior_stds`; the weighed net buoyancy
+    (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without ``cfg`` the default thrust
+    uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a zero
+    std."""
     cal = calibration or {}
     entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
     if not entries:
@@ -301,10 +302,10 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
     ``identifications`` were fitted by ``identify(record', cfg)`` on ``record'`` = ``record``
     rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration`). For each DOF
     and each scale whose thrusters push on its axis during its window (from ``thrust_cmd_n``), the
-    fit is repeated with that scale raised by ``step`` (relative): d theta / d s_n = (theta' -
-    theta) / (step s_n); the last scale follows from the model's homogeneity, sum_n s_n d theta / d
-    s_n = theta (docs/identification.md §6.2). Nothing is done without a calibration or without
-    ``thrust_cmd_n``."""
+    fit is repeated with that scale raised by ``step`` (relative):
+    d theta / d s_n = (theta' - theta) / (step s_n); the last scale follows from the model's
+    homogeneity, sum_n s_n d theta / d s_n = theta (docs/identification.md §6.2). Nothing is done
+    without a calibration or without ``thrust_cmd_n``."""
     cal = record.calibration if calibration is None else calibration
     model = scale_model(cal, cfg)
     if model is None or not _has_thrust(record) or not identifications:
@@ -425,14 +426,14 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
 
     ``identifications``: {dof: :class:`~.dof_model.DofIdentification`} fitted on the record rebuilt
     with the calibration's point scales s_c (:func:`apply_thrust_calibration`; the record as
-    recorded without one), each with its sensitivity ``signals["thrust_sensitivity"]`` = G = d theta
-    / d s (:func:`attach_thrust_sensitivities`; else the first-order guess of
-    :func:`_sensitivity_matrix`) and its fit covariance ``signals["covariance"]``. theta(s) =
-    theta_0 + G (s - s_c); the joint problem over [theta_0 of every DOF, the scales, the nuisance
-    constants of :func:`scale_model`] is the S(x) of docs/identification.md §6.2, its covariance
-    (J^T J)^-1 at the optimum and theta's by the delta method. Without a calibration the scales stay
-    1 and the problem separates into :func:`~.posterior.prior_posterior` per DOF; the thrust-curve
-    uncertainty is then added by :func:`~..assessment.verdicts.assess_dof`.
+    recorded without one), each with its sensitivity ``signals["thrust_sensitivity"]``
+    = G = d theta / d s (:func:`attach_thrust_sensitivities`; else the first-order guess of
+    :func:`_sensitivity_matrix`) and its fit covariance ``signals["covariance"]``.
+    theta(s) = theta_0 + G (s - s_c); the joint problem over [theta_0 of every DOF, the scales,
+    the nuisance constants of :func:`scale_model`] is the S(x) of docs/identification.md §6.2, its
+    covariance (J^T J)^-1 at the optimum and theta's by the delta method. Without a calibration
+    the scales stay 1 and the problem separates into :func:`~.posterior.prior_posterior` per DOF;
+    the thrust-curve uncertainty is then added by :func:`~..assessment.verdicts.assess_dof`.
 
     ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`~.posterior.DEFAULT_PRIOR_STD_REL`); 0
     leaves the priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of

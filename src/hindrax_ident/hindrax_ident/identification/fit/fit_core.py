@@ -459,8 +459,8 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     """Velocities (B, m, L) (and positions with ``position``) of every segment for B parameter sets
     ``P`` (B, p) at once, from the segments' initial states (``v0`` (B, m) replaces the initial
     velocities). Classical RK4 for the velocity, Runge-Kutta-Nystrom for the position, inputs at the
-    start, middle and end of each tick. The states are kept within 1000 x (the largest measurement +
-    1): a diverging trial stays finite (floating-point warnings are off here)."""
+    start, middle and end of each tick. The states are kept within 1000 x (the largest
+    measurement + 1): a diverging trial stays finite (floating-point warnings are off here)."""
     P = np.atleast_2d(np.asarray(P, dtype=float))
     B = P.shape[0]
     kinds = _kinds(layout)
@@ -1441,12 +1441,11 @@ def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timin
 
 def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict,
                         opts: CoreOptions) -> dict:
-    """Score every chosen model with the inertias it is predicted with (docs/identification.md §7
-    step 4): selection fits a DOF's Coriolis force with preliminary inertias of the other DOFs
+    """Score every chosen model with the inertias it is predicted with (docs/identification.md
+    §7 step 4): selection fits a DOF's Coriolis force with preliminary inertias of the other DOFs
     (``used``: {dof: (6,)}); until they agree with the stated ones (:data:`COUPLING_RTOL`, at most
     :data:`COUPLING_PASSES` passes) each such model is refitted with those (:func:`refit_coupling`).
-    Updates ``chosen`` and ``tried`` in place; returns the inertias each DOF's model was fitted
-    with."""
+    Updates ``chosen`` and ``tried`` in place; returns the inertias each model was fitted with."""
     used = dict(used)
     for _ in range(COUPLING_PASSES):
         stated = inertia_vector(chosen)
