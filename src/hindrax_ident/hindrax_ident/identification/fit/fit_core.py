@@ -583,8 +583,7 @@ def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.nd
     ok = np.all(np.isfinite(A), axis=-1) & np.isfinite(y)
     A, y = A[ok], y[ok]
     scale = np.maximum(np.sqrt(np.mean(A ** 2, axis=0)), 1e-12)
-    lo = np.array([lb for _n, _k, lb, _ub in layout]) * scale
-    hi = np.array([ub for _n, _k, _lb, ub in layout]) * scale
+    lo, hi = np.array([(lb, ub) for _n, _k, lb, ub in layout], dtype=float).T * scale
     lo[0] = max(lo[0], 1e-9)
     res = optimize.lsq_linear(A / scale, y, bounds=(lo, hi), lsmr_tol="auto", method="bvls")
     return res.x / scale
@@ -608,8 +607,7 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     smoothed measurement."""
     from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
-    lower = np.array([lb for _n, _k, lb, _ub in layout], dtype=float)
-    upper = np.array([ub for _n, _k, _lb, ub in layout], dtype=float)
+    lower, upper = np.array([(lb, ub) for _n, _k, lb, ub in layout], dtype=float).T
     th0 = np.clip(np.asarray(theta0, dtype=float), lower, upper)
     th0[0] = max(th0[0], 1e-3 * max(abs(float(theta0[0])), 1.0), 1e-6)
     # start strictly inside the bounds (trust-region reflective needs it)
