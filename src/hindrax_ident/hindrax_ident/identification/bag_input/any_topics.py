@@ -75,7 +75,6 @@ ACCEPTED: dict[str, tuple[str, ...]] = {
 }
 
 
-
 class FitInputError(ValueError):
     """The bags cannot be used as given (one line saying what is wrong and what is accepted or needed)."""
 
@@ -92,10 +91,8 @@ class TopicChoice:
 
 @dataclass(frozen=True)
 class FitOptions:
-    """grid_s: resampling step, s; segment_s: output-error training segment, s; validation_s: horizon of the
-    validation predictions, s; max_delay_s: largest input delay searched (commanded wrench), s; gap_min_s: shortest
-    spacing treated as a gap, s; folds: K of the cross-validation; persistence_margin: the relative margin by which
-    a DOF's model must beat holding the velocity in cross-validation (:func:`..fit.fit_core.persistence`)."""
+    """grid_s: resampling step, s; gap_min_s: shortest spacing treated as a gap, s; the others as
+    :class:`..fit.fit_core.CoreOptions`."""
 
     grid_s: float = 0.05
     segment_s: float = fit_core.SEGMENT_S
@@ -180,16 +177,23 @@ class _Stream:
     val: list = field(default_factory=list)
     frames: set = field(default_factory=set)
 
-    def times(self) -> tuple[np.ndarray, str]:
-        """Seconds (float64, relative values kept exact enough) and the time base used."""
+    def series(self) -> tuple[np.ndarray, np.ndarray, str]:
+        """(times (n,) s, values (n, k)) in time order, a sample at a time already seen dropped,
+        and the time base used; seconds as float64 (relative values kept exact enough)."""
         hdr = np.asarray(self.hdr, dtype=np.int64)
         if hdr.size and np.all(hdr > 0):
-            return hdr.astype(np.float64) * 1e-9, "header stamps"
-        return np.asarray(self.log, dtype=np.int64).astype(np.float64) * 1e-9, "receive times (header stamps unset)"
+            t, base = hdr.astype(np.float64) * 1e-9, "header stamps"
+        else:
+            t = np.asarray(self.log, dtype=np.int64).astype(np.float64) * 1e-9
+            base = "receive times (header stamps unset)"
+        o = np.argsort(t, kind="stable")
+        t, v = t[o], np.asarray(self.val, dtype=float)[o]
+        keep = np.ones(len(t), dtype=bool)
+        keep[1:] = np.diff(t) > 0
+        return t[keep], v[keep], base
 
 
 def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) -> tuple[dict[str, _Stream], dict]:
-
     reader = BagReader(path)
     topics = reader.topics
     sel = {"wrench": _select(path, topics, "wrench", choice.wrench, True),
@@ -203,8 +207,7 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
         raise FitInputError(f"{path}: force from {sel['wrench'][0]} [{PWM}] needs the thrust curves: give --config")
     if sel["velocity"][1] in (DVL, TWIST_COV, TWIST) and sel["imu"] is None:
         # a DVL's velocity carries no angular rate: an IMU found by type gives it (an odometry has its own)
-        imu = _select(path, topics, "imu", None, False)
-        sel["imu"] = imu
+        sel["imu"] = _select(path, topics, "imu", None, False)
     by_topic: dict[str, list[str]] = {}
     for role, s in sel.items():
         if s is not None:
@@ -213,7 +216,6 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
     streams["attitude"] = _Stream(sel["velocity"][0], sel["velocity"][1])
     pwm = None
     if sel["wrench"][1] == PWM:
-
         core = AllocationCore(cfg)
         pwm = (core.allocator.curves[0], np.asarray(core.matrix_frd, dtype=float),
                np.full(len(cfg.thrusters.thrusters), float(cfg.thrusters.pulse_width_neutral_us)),
@@ -312,12 +314,9 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
             "body_frame": (next(iter(body)) if body else "(unset: assumed base_link)")}
     if imu_note:
         info["imu_frame"] = imu_note
-    if not streams["attitude"].val:
-        del streams["attitude"]
-    if "imu" in streams and not streams["imu"].val:
-        del streams["imu"]
-    if "allocation" in streams and not streams["allocation"].val:
-        del streams["allocation"]
+    for role in ("attitude", "imu", "allocation"):
+        if role in streams and not streams[role].val:
+            del streams[role]
     return streams, info
 
 
@@ -327,14 +326,6 @@ def _dedupe(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     fin = np.where(np.isfinite(v), v, 1e300)
     same[1:] = np.all(fin[1:] == fin[:-1], axis=1)
     return t[~same], v[~same], int(same.sum())
-
-
-def _sorted(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    o = np.argsort(t, kind="stable")
-    t, v = t[o], v[o]
-    keep = np.ones(len(t), dtype=bool)
-    keep[1:] = np.diff(t) > 0
-    return t[keep], v[keep]
 
 
 def _spans(t: np.ndarray, gap_s: float) -> list[tuple[float, float]]:
@@ -451,13 +442,10 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     path = Path(path)
     streams, info = _read_streams(path, choice, cfg)
     notes: dict[str, Any] = {"bag": str(path), **info, "time_base": {}}
-    ft, tb = streams["wrench"].times()
-    notes["time_base"]["force"] = tb
-    ft, fv = _sorted(ft, np.asarray(streams["wrench"].val, dtype=float))
+    ft, fv, notes["time_base"]["force"] = streams["wrench"].series()
     short = None
     if "allocation" in streams:  # the status in force at each force sample (0 before the first)
-        at, tb = streams["allocation"].times()
-        at, av = _sorted(at, np.asarray(streams["allocation"].val, dtype=float))
+        at, av, tb = streams["allocation"].series()
         j = np.searchsorted(at, ft + 1e-9, side="right") - 1
         short = np.where(j[:, None] >= 0, av[np.clip(j, 0, None)], 0.0)
         notes["saturation"] = (f"{streams['allocation'].topic} ({tb}): achieved less requested wrench, held from "
@@ -467,9 +455,7 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     if not known.any():
         raise FitInputError(f"{path}: every force sample of {streams['wrench'].topic} is unknown (NaN: ESC output "
                             "state OUTPUT_UNKNOWN)")
-    vt, tb = streams["velocity"].times()
-    notes["time_base"]["velocity"] = tb
-    vt, vv = _sorted(vt, np.asarray(streams["velocity"].val, dtype=float))
+    vt, vv, notes["time_base"]["velocity"] = streams["velocity"].series()
     n_pub = len(vt)
     lin_t, lin_v, n_rep = _dedupe(vt, vv[:, :3])
     ok = np.all(np.isfinite(lin_v), axis=1)  # an invalid DVL report (no lock) measures nothing
@@ -484,13 +470,11 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     if not np.isfinite(ang_v).any() or not np.any(ang_v != 0.0):
         ang_t, ang_v, source = vt, np.full_like(ang_v, np.nan), "none"
     if "imu" in streams:
-        it, tb = streams["imu"].times()
-        ang_t, ang_v = _sorted(it, np.asarray(streams["imu"].val, dtype=float))
+        ang_t, ang_v, tb = streams["imu"].series()
         source = f"IMU {streams['imu'].topic} ({tb})"
     attitude = None
     if "attitude" in streams:
-        at, _tb = streams["attitude"].times()
-        at, av = _sorted(at, np.asarray(streams["attitude"].val, dtype=float))
+        at, av, _tb = streams["attitude"].series()
         at, av, _n = _dedupe(at, av)
         if len(at) > 3:
             attitude = (at, av)
@@ -511,8 +495,7 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
         ang_on = np.full((len(lin_t), 3), np.nan)
     vel = np.column_stack([lin_v, ang_on])
     if "depth" in streams:
-        dt_, tb = streams["depth"].times()
-        dt_, dz = _sorted(dt_, np.asarray(streams["depth"].val, dtype=float)[:, 0:1])
+        dt_, dz, _tb = streams["depth"].series()  # dz (n, 1)
         h = float(np.median(np.diff(dt_)))
         wz = _savgol(dz[:, 0], h, 1.0, 1) if len(dt_) > 7 else np.gradient(dz[:, 0], h)
         zdot = np.interp(lin_t, dt_, wz, left=np.nan, right=np.nan)  # NED down rate of the body origin
@@ -569,12 +552,11 @@ def excitation(pres: Sequence[Preprocessed], dof: str) -> dict:
 # ------------------------------------------------------------------------------------------------ to the core
 def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions, moving: Sequence[str] = (),
                 force_from: Sequence[str] | None = None) -> dict[str, fit_core.DofRecord]:
-    """One :class:`..fit.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags: per continuous stretch the
-    commanded force held over each grid step, the velocity samples at their own (delay-free) times, the velocity
-    smoothed by a Savitzky-Golay filter (0.5 s window; initial states, equation-error start) and its derivative,
-    the restoring regressor (roll, pitch), the Coriolis products of the six interpolated velocities, and the other
-    ``moving`` DOFs' velocities (cross-coupling candidates) and commanded forces (``force_from`` when given: the
-    other DOFs' forces as candidates, coupling through the allocation). A ThrusterPwm force keeps its known lag
+    """One :class:`..fit.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags (module
+    docstring, "Preprocessing"): per continuous stretch the force held over each grid step, the
+    velocity samples, the smoothed velocity and its derivative, the restoring regressor (roll,
+    pitch), the Coriolis products, and the other ``moving`` DOFs' velocities and commanded forces
+    (``force_from`` when given) as coupling candidates. A ThrusterPwm force keeps its known lag
     (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
     out: dict[str, fit_core.DofRecord] = {}
     h = opts.grid_s

@@ -1,14 +1,10 @@
 """The calibration steps' results as a standard message: topic ``identification/calibration``.
 
-The identification node (:mod:`..online.node`) publishes, when a calibration step of a goal ends (``ballast``,
-``float``, ``line_pull`` and ``line_pull_negative`` surge and sway, ``inclining`` roll and pitch, ``tilt_decay`` roll
-and pitch; docs/identification.md §6), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured
-since the node started, one ``DiagnosticStatus`` per result (a later result of the same name replaces the earlier one),
-with transient-local durability (depth 1), so a recorder or a tool that subscribes later still receives all of them.
-The recorder stores the topic with the campaign, and ``hindrax ident bag`` (:mod:`.from_bag`) reads it back into the
-:class:`~.campaign_record.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``, so identification.yaml gets
-the ``calibration`` and ``joint`` sections (and ``inclining`` / ``free_decay``) as ``hindrax run`` writes them from the
-node's record in-process.
+The identification node (:mod:`..online.node`) publishes, when a calibration step of a goal ends
+(docs/identification.md §6.1, "On the ROS graph"), one ``diagnostic_msgs/msg/DiagnosticArray``
+holding every step result measured since the node started, one ``DiagnosticStatus`` per result,
+transient-local (depth 1); ``hindrax ident bag`` (:mod:`.from_bag`) reads it back into the
+:class:`~.campaign_record.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``.
 
 Each status: ``level`` OK, ``hardware_id`` :data:`HARDWARE_ID`, ``name`` ``<kind>/<key>``, ``message`` a
 one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the float: exact round trip):

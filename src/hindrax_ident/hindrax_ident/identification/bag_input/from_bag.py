@@ -3,12 +3,8 @@
 ``hindrax ident bag BAG [--out DIR] [--config FILE]``
 (:mod:`hindrax_ident.tools.commands.ident_bag`), and ``hindrax ident fit`` on a bag with the
 campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
-:func:`~..assessment.pipeline.identify_bag` and write ``identification.yaml`` and
-``report/index.html`` with :func:`~..assessment.report.write_outputs`: the same analysis as the
-in-process campaign and ``hindrax run`` (:func:`~..fit.campaign_fit.identify_all_with_errors`: the
-campaign reader and the fit core shared with ``hindrax ident fit``, docs/identification.md §7; the
-equation-error LS of [Hindrax-Drag] eqs. 6-8, its steady-state LS and the online RLS as
-comparisons).
+:func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and
+``hindrax run`` (docs/identification.md §7).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
@@ -17,10 +13,7 @@ node, :mod:`...vehicle.signals`, into :class:`~hindrax_ident.vehicle.state.Senso
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
-the record's ``calibration``, ``inclining`` and ``decays``; :func:`~..assessment.pipeline.identify_bag` scales the
-thrust-model force by the measured scales, :func:`~..fit.calibration.apply_thrust_calibration`, and
-:func:`~..assessment.report.write_outputs` estimates them jointly
-with the fits and writes the ``calibration`` and ``joint`` sections, as ``hindrax run`` does from the node's record).
+the record's ``calibration``, ``inclining`` and ``decays``).
 
 Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10
 ms, the simulator's /clock period): the status is held from its stamps and the ESC widths from their
@@ -115,10 +108,10 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     mount_t = mounting_rotation(cfg.sensors.icm20948.mounting_rpy_rad).T
     samples: list = []
     pwm: list = []
-    status: list = []
     online: dict[str, OnlineHistory] = {}
-    estimates: list = []
-    calibrations: list = []
+    status, estimates, calibrations = [], [], []  # (stamp, message) each
+    stamped = {"identification/status": status, "identification/estimates": estimates,
+               calibration_topic.TOPIC: calibrations}
     for topic, msg in messages:
         if topic == "dvl/data":
             samples.extend(samples_from_dvl(msg))
@@ -130,12 +123,8 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
             samples.append(sample_from_range(msg))
         elif topic == "thrusters/pulse_width":
             pwm.append((_stamp(msg), np.asarray(msg.pulse_width_us, dtype=float), bool(msg.armed)))
-        elif topic == "identification/status":
-            status.append((_stamp(msg), msg))
-        elif topic == "identification/estimates":
-            estimates.append((_stamp(msg), msg))
-        elif topic == calibration_topic.TOPIC:
-            calibrations.append((_stamp(msg), msg))
+        elif topic in stamped:
+            stamped[topic].append((_stamp(msg), msg))
     if not pwm:
         raise BagContentError("no thrusters/pulse_width messages (the widths the ESC wrote)")
     if not status:
@@ -254,8 +243,7 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
         raise BagContentError(f"{bag_path}: missing topic(s) {', '.join(missing)}")
     wanted = [tp for tp in present if tp.lstrip("/") in TOPICS]
     # the installed types' lean decoder (a type changed since: from the bag's definition); a type
-    # not installed
-    # here: every topic from the bag's definitions (mcap_ros2)
+    # not installed here: every topic from the bag's definitions (mcap_ros2)
     try:
         return record_from_messages(((m.topic.lstrip("/"), obj)
                                      for m, obj in reader.installed_messages(wanted, lean=True)),

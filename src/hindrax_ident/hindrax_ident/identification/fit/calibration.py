@@ -1,35 +1,16 @@
-"""Known-force thrust calibration per thruster group and rotation direction, and the joint estimation
-([Hindrax-Drag] §6; docs/identification.md §6).
+"""Known-force thrust calibration per thruster group and rotation direction, and the joint
+estimation ([Hindrax-Drag] §6; the method, and which direction each manoeuvre turns:
+docs/identification.md §6.1-§6.2).
 
-A self-propelled test only sees force / inertia and force / damping: if the thrusters give s times their curve,
-inertia, damping and bias all come out s times too (docs/identification.md §6). A T200's forward and reverse
-thrust are two curves ([Hindrax-Drag] eq. 1, Table 2) that go wrong differently (a propeller mounted the other way,
-thruster-frame interaction, a curve measured on another unit), so the thrust model here has one scale per thruster
-group and rotation direction: ``vertical_forward``, ``vertical_reverse``, ``horizontal_forward``,
-``horizontal_reverse`` (forward = positive thrust along the thruster's configured direction, the curve_positive
-branch). The true force of thruster j is s_{g(j), d} F_j with d the sign of its commanded force F_j.
-
-* The calibration steps (:mod:`..online.steps.calibration_steps`) give, per hold, the parts P and N of the holding force
-  on the step's axis made by forward and reverse thrust; at rest ``s_forward P + s_reverse N + E = R`` with E the
-  known force (0 without it) and R the constant force the thrusters balance: for the vertical group the vehicle's
-  net buoyancy (rho V - m) g, whose weighed value (``calibration.net_buoyancy_std_n``) makes every hover hold a
-  measurement of the forward scale; for a line pull a free constant per step (current, tether).
-  :func:`scale_model` collects these linear Gaussian measurements; :func:`thrust_scales` is the scales' posterior
-  from them and the priors N(1, u_d^2) (u_d of the thruster fit per direction, :func:`scale_prior_stds`).
-* :func:`apply_thrust_calibration` rebuilds the record's thrust-model wrenches from the commanded thruster forces
-  with those point scales, per thruster and direction (first-order lag as the executive's), so that the fits come
-  out near physical units.
-* :func:`attach_thrust_sensitivities` measures, per DOF and parameter, how the fit moves with each scale (refits
-  with one scale raised); :func:`joint_estimate` then estimates the scales together with every DOF's parameters
-  (Bayesian least squares, [Tarantola2005] Ch. 3).
-
-Which direction turns in each manoeuvre (the allocation of ros_ws/config/hindrax.yaml, [Hindrax-Drag] Fig. 5, 55-degree
-horizontal layout): a pure surge, sway or yaw wrench is made by two horizontal thrusters turning forward and two in
-reverse with equal thrust (T1/T4 and T2/T3 are point-symmetric pairs with opposite directions), in either sense, so
-those DOFs and every line pull see the mean of the two horizontal scales only; surge and sway pulls share the
-horizontal group's two scales, and their difference stays at its prior, which none of these manoeuvres depends on.
-Heave down is forward thrust of all four vertical thrusters, heave up reverse; the hover (0.79 N down) is forward
-thrust; roll and pitch use two vertical thrusters each way.
+The thrust model has one scale per thruster group and rotation direction (``vertical_forward``,
+``vertical_reverse``, ``horizontal_forward``, ``horizontal_reverse``; forward = positive thrust
+along the thruster's configured direction, the curve_positive branch; [Hindrax-Drag] eq. 1,
+Table 2): the true force of thruster j is s_{g(j), d} F_j, d the sign of its commanded force F_j.
+:func:`scale_model` collects the calibration steps' holds as linear Gaussian measurements of the
+scales, :func:`thrust_scales` is their posterior, :func:`apply_thrust_calibration` rebuilds a
+record's wrenches with the point scales, :func:`attach_thrust_sensitivities` measures how each fit
+moves with each scale and :func:`joint_estimate` estimates the scales with every DOF's parameters
+([Tarantola2005] Ch. 3).
 
 ASSUMPTION when only one group was measured: the other group's thrusters get the same two scales (``common_*``; a
 common cause such as the battery voltage, docs/devices.md §5.3). The RLS comparison values in ``record.online``
@@ -91,7 +72,8 @@ def scale_prior_stds(cfg) -> dict[str, float]:
 
 @dataclasses.dataclass
 class ScaleModel:
-    """The calibration steps as linear Gaussian measurements of the thrust scales (module docstring).
+    """The calibration steps as linear Gaussian measurements of the thrust scales
+    (docs/identification.md §6.2).
 
     names: scale parameters (``<group>_<direction>`` or ``common_<direction>``); nuisance: the constants R (the
     vertical group's ``net_buoyancy_n``, a free one per horizontal step); rows: (coefficients (n_names,), nuisance
@@ -146,11 +128,12 @@ def _entry(calibration: Mapping[str, Any], key: str) -> Mapping | None:
 def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel | None:
     """The :class:`ScaleModel` of the calibration steps' results (``record.calibration``: keys of
     :data:`KNOWN_FORCE_AXES`), None without any. A result with its holds' forward and reverse parts
-    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (module docstring); an older result with only
-    its single scale (``value``, ``std``) measures the mean of the group's two directions. Priors from ``cfg``
-    (:func:`scale_prior_stds`; the weighed net buoyancy (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without
-    ``cfg`` the default thrust uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or
-    a zero std."""
+    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2);
+    an older result with only its single scale (``value``, ``std``) measures the mean of the group's
+    two directions. Priors from ``cfg`` (:func:`scale_prior_stds`; the weighed net buoyancy
+    (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without ``cfg`` the default thrust
+    uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a zero
+    std."""
     cal = calibration or {}
     entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
     if not entries:
@@ -236,19 +219,12 @@ def lagged_parts(record: Any) -> tuple[np.ndarray, np.ndarray]:
     each, the value at each tick."""
     f = np.asarray(record.thrust_cmd_n, dtype=float)
     t = np.asarray(record.t_s, dtype=float)
-    tau = float(record.time_constant_s)
-    pos, neg = np.maximum(f, 0.0), np.minimum(f, 0.0)
-    lp, ln = np.zeros_like(f), np.zeros_like(f)
-    if f.shape[0] == 0:
-        return lp, ln
-    lag = ThrustLag(tau)
-    ap, an = np.zeros(f.shape[1]), np.zeros(f.shape[1])
-    for i in range(1, t.size):
-        dt = float(t[i] - t[i - 1])
-        ap = lag.advance(ap, pos[i - 1], dt)
-        an = lag.advance(an, neg[i - 1], dt)
-        lp[i], ln[i] = ap, an
-    return lp, ln
+    parts = np.stack([np.maximum(f, 0.0), np.minimum(f, 0.0)])  # (2, n, m)
+    out = np.zeros_like(parts)
+    lag = ThrustLag(float(record.time_constant_s))
+    for i in range(1, f.shape[0]):
+        out[:, i] = lag.advance(out[:, i - 1], parts[:, i - 1], float(t[i] - t[i - 1]))
+    return out[0], out[1]
 
 
 def _has_thrust(record: Any) -> bool:
@@ -256,13 +232,9 @@ def _has_thrust(record: Any) -> bool:
     return f is not None and np.ndim(f) == 2 and np.shape(f)[0] == np.size(record.t_s) and np.shape(f)[1] > 0
 
 
-def _matrix(cfg) -> np.ndarray:
-    return np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
-
-
 def _rebuild(record: Any, cfg, fwd: np.ndarray, rev: np.ndarray) -> Any:
     """``record`` with its wrenches rebuilt from ``thrust_cmd_n`` with per-thruster forward / reverse scales (m,)."""
-    b = _matrix(cfg)
+    b = np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
     f = np.asarray(record.thrust_cmd_n, dtype=float)
     lp, ln = lagged_parts(record)
     wc = (np.where(f >= 0.0, fwd, rev) * f) @ b.T
@@ -294,10 +266,9 @@ def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None 
 
 
 def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
-    """First-order guess of each parameter's weights on its group's two directions when the fit's sensitivity was
-    not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust uncertainty's weights
-    (:func:`~.dof_model.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse,
-    the rest half each; other DOFs half each)."""
+    """First-order guess of each parameter's weights on its group's two directions when the fit's
+    sensitivity was not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust
+    uncertainty's weights (:func:`~.dof_model.thrust_weights`)."""
     w = thrust_weights(dof, names)  # (p, 2): [positive, negative]
     g = _DOF_GROUP[dof]
     return {f"{g}_forward": w[:, 0].copy(), f"{g}_reverse": w[:, 1].copy()}
@@ -306,7 +277,7 @@ def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
 def _affecting(record: Any, cfg, model: ScaleModel, dofs) -> dict[str, list[str]]:
     """Per DOF, the scale parameters whose thrusters put force on the DOF's axis during its window (model order)."""
     f = np.asarray(record.thrust_cmd_n, dtype=float)
-    b = _matrix(cfg)
+    b = np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
     groups = thruster_groups(cfg)
     out = {}
     for dof in dofs:
@@ -328,16 +299,12 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
     """Measure how each DOF's fit moves with each thrust scale: ``signals["thrust_sensitivity"]`` =
     {scale: (p,) d theta / d s} (the interface to :func:`joint_estimate`), in place.
 
-    ``identifications`` were fitted by ``identify(record', cfg)`` on ``record'`` = ``record`` rebuilt with the
-    calibration's point scales s_c (:func:`apply_thrust_calibration`). For each DOF, the scales whose thrusters push
-    on its axis during its manoeuvres are found from ``thrust_cmd_n`` (surge: the two horizontal directions; heave:
-    the two vertical ones; roll and pitch: all four); the fit is repeated with one of them raised by ``step``
-    (relative) and d theta / d s_n = (theta' - theta) / (step s_n) (forward difference; only the DOFs it affects are
-    refitted). The last one follows without a fit from the exact homogeneity of the model (every force times lambda
-    gives every parameter times lambda, docs/identification.md §6.2): sum_n s_n d theta / d s_n = theta. So a DOF
-    costs one fit per extra scale. The output-error fit's sensitivity is what this measures, not a model of it: on
-    the heave ladders a 5 % stronger forward thrust alone moves the downward quadratic damping by +14 %, the bias by
-    +37 % (reverse: -9 % and -31 %): the braking phases of each run use the other direction. Nothing is done
+    ``identifications`` were fitted by ``identify(record', cfg)`` on ``record'`` = ``record``
+    rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration`). For each DOF
+    and each scale whose thrusters push on its axis during its window (from ``thrust_cmd_n``), the
+    fit is repeated with that scale raised by ``step`` (relative):
+    d theta / d s_n = (theta' - theta) / (step s_n); the last scale follows from the model's
+    homogeneity, sum_n s_n d theta / d s_n = theta (docs/identification.md §6.2). Nothing is done
     without a calibration or without ``thrust_cmd_n``."""
     cal = record.calibration if calibration is None else calibration
     model = scale_model(cal, cfg)
@@ -374,11 +341,10 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
 
 def identify_calibrated(record: Any, cfg, identify) -> tuple[dict, dict]:
     """({dof: DofIdentification}, {dof: error}) of ``record`` with its calibration applied
-    (:func:`apply_thrust_calibration` with ``cfg``) and each DOF's sensitivity to the thrust scales measured
-    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through
-    :func:`~..assessment.results.build_results`). identify: the fit of every DOF with a window in the record, called as
-    identify(record, cfg) (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as campaign_fit depends on this
-    module through results)."""
+    (:func:`apply_thrust_calibration`) and each DOF's sensitivity to the thrust scales measured
+    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate`. identify: called as
+    identify(record, cfg) (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as
+    campaign_fit depends on this module through results)."""
     idents, errors = identify(apply_thrust_calibration(record, cfg=cfg), cfg)
     attach_thrust_sensitivities(record, idents, cfg, identify)
     return idents, errors
@@ -458,26 +424,16 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     """Bayesian (regularised) least squares of the thrust scales, the empirical priors and the manoeuvres' fits
     together (docs/identification.md §6.2-§6.3; [Tarantola2005] Ch. 3), written into the identifications.
 
-    ``identifications``: {dof: :class:`~.dof_model.DofIdentification`} fitted on the record whose thrust-model
-    force was rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration` with
-    ``calibration`` and ``cfg``; the record as recorded without one), each with its measured sensitivity
-    ``signals["thrust_sensitivity"]`` = G = d theta / d s (:func:`attach_thrust_sensitivities`; else the first-order
-    guess of :func:`_sensitivity_matrix`). To first order theta(s) = theta_0 + G (s - s_c), theta_0 the parameters
-    at s_c, and the fit is a Gaussian measurement of theta_0 (value and the fit covariance
-    ``signals["covariance"]``, no thrust term). The joint problem over x = [theta_0 of every DOF, the scales s, the
-    nuisance constants R of the calibration holds] minimises
-
-        sum_dof ||L^-1 (theta_0 - theta_fit)||^2 + sum_i ((theta_i(s) - mu_i) / sd_i)^2
-        + sum_k ((s_k - 1) / u_k)^2 + sum_holds ((sum_k c_k s_k - R - rhs) / sd)^2 + ((R_v - B_w) / sd_B)^2
-
-    (L L^T the fit covariance; mu_i, sd_i the empirical priors of :func:`~.posterior.theta_priors`; u_k per
-    direction, :func:`scale_prior_stds`; the holds of :func:`scale_model`; B_w the weighed net buoyancy) and its
-    covariance is (J^T J)^-1 at the optimum (Gauss-Newton, the Laplace approximation). The reported theta = theta_0
-    + G (s - s_c) has the covariance carried by the Jacobian [I, G] (the delta method): each interval contains the
-    calibration's own uncertainty in the directions the parameter depends on, and the priors' pull. For one scale
-    per DOF this is the reparametrisation theta = s phi of the single-scale model to first order (G = theta / s by
-    homogeneity). Without a calibration the scales stay 1 (only the empirical priors act) and the thrust-curve
-    uncertainty is added later by :func:`~..assessment.verdicts.assess_dof`, per direction, as before.
+    ``identifications``: {dof: :class:`~.dof_model.DofIdentification`} fitted on the record rebuilt
+    with the calibration's point scales s_c (:func:`apply_thrust_calibration`; the record as
+    recorded without one), each with its sensitivity ``signals["thrust_sensitivity"]``
+    = G = d theta / d s (:func:`attach_thrust_sensitivities`; else the first-order guess of
+    :func:`_sensitivity_matrix`) and its fit covariance ``signals["covariance"]``.
+    theta(s) = theta_0 + G (s - s_c); the joint problem over [theta_0 of every DOF, the scales,
+    the nuisance constants of :func:`scale_model`] is the S(x) of docs/identification.md §6.2, its
+    covariance (J^T J)^-1 at the optimum and theta's by the delta method. Without a calibration
+    the scales stay 1 and the problem separates into :func:`~.posterior.prior_posterior` per DOF;
+    the thrust-curve uncertainty is then added by :func:`~..assessment.verdicts.assess_dof`.
 
     ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`~.posterior.DEFAULT_PRIOR_STD_REL`); 0
     leaves the priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of
@@ -493,21 +449,21 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     z_c = model.solve()[0] if model else np.zeros(0)   # the point scales (and constants) the record was rebuilt with
     s_c = z_c[:ns]
     todo = [d for d, r in identifications.items() if "joint" not in r.signals and "assessment" not in r.signals]
-    blocks = []  # (dof, names, theta_fit, Linv, priors, slice, G (p, ns) or None)
+    blocks = []  # (dof, names, theta_fit, Linv, priors, slice, G (p, ns) or None, fit covariance)
     k = 0
     for dof in todo:
         r = identifications[dof]
         names = list(r.names)
         y = np.array([r.values[n] for n in names], dtype=float)
-        cov = r.signals.get("covariance")
-        if cov is None or np.shape(cov) != (len(names), len(names)):
-            cov = np.diag([r.std[n] ** 2 for n in names])
-        cov = np.asarray(cov, dtype=float)
+        cov_y = r.signals.get("covariance")
+        if cov_y is None or np.shape(cov_y) != (len(names), len(names)):
+            cov_y = np.diag([r.std[n] ** 2 for n in names])
+        cov = np.asarray(cov_y, dtype=float)
         cov = 0.5 * (cov + cov.T) + np.eye(len(names)) * 1e-18 * max(1.0, float(np.max(np.abs(np.diag(cov)))))
         linv = np.linalg.inv(np.linalg.cholesky(cov))
         g = _sensitivity_matrix(r, model, s_c) if model else None
-        blocks.append((dof, names, y, linv, theta_priors(dof, names, cfg, prior_std_rel), slice(k, k + len(names)),
-                       g))
+        blocks.append((dof, names, y, linv, theta_priors(dof, names, cfg, prior_std_rel),
+                       slice(k, k + len(names)), g, cov_y))
         k += len(names)
     if not blocks:
         return {}
@@ -522,7 +478,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     def residuals(x):
         s, rr = x[n_th:n_th + ns], x[n_th + ns:]
         out = []
-        for _, names, y, linv, pri, sl, g in blocks:
+        for _, names, y, linv, pri, sl, g, _c in blocks:
             out.append(linv @ (x[sl] - y))
             th = theta_of(x, sl, g)
             for i, n in enumerate(names):
@@ -537,10 +493,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     if model is None:  # no scales: the problem separates into the per-DOF update of posterior.prior_posterior
         x = x0.copy()
         cx = np.zeros((n_th, n_th))
-        for dof, names, y, _, pri, sl, _g in blocks:
-            cov_y = identifications[dof].signals.get("covariance")
-            if cov_y is None or np.shape(cov_y) != (len(names), len(names)):
-                cov_y = np.diag([identifications[dof].std[n] ** 2 for n in names])
+        for _dof, names, y, _, pri, sl, _g, cov_y in blocks:
             x[sl], cx[sl, sl] = prior_posterior(names, y, cov_y, pri)
     else:
         sol = optimize.least_squares(residuals, x0, method="lm", xtol=1e-14, ftol=1e-14)
@@ -548,7 +501,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         cx = np.linalg.inv(J.T @ J)
         x = sol.x
     s = x[n_th:n_th + ns]
-    for dof, names, y, _, pri, sl, g in blocks:
+    for dof, names, y, _, pri, sl, g, _c in blocks:
         r = identifications[dof]
         p = len(names)
         idx = list(range(sl.start, sl.stop)) + list(range(n_th, n_th + ns))

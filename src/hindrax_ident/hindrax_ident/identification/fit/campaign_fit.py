@@ -1,19 +1,16 @@
-"""The campaign front-end of the fit core: a :class:`~..bag_input.campaign_record.CampaignRecord` read into one
-:class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.dof_model.DofIdentification`
-(docs/identification.md §7).
+"""The campaign front-end of the fit core: a :class:`~..bag_input.campaign_record.CampaignRecord`
+read into one :class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as
+:class:`~.dof_model.DofIdentification`.
 
-``hindrax run``, ``hindrax ident bag`` and ``hindrax ident fit`` on a bag with the campaign's topics (the campaign
-adapter of :mod:`..bag_input.reader`) and the in-process campaign identify with :func:`identify_all_with_errors`.
-Everything after the reading (timing, segments, output-error fit, model terms by cross-validation, intervals) is
-:mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as ``hindrax ident fit``. What the campaign knows
-that an arbitrary bag does not, and this reader uses (docs/identification.md §7): the DOF windows
-(``identification/status``: one chunk per window on the record's tick grid, the thrust-model force of the widths the
-ESC wrote, the lag applied by the core); the vehicle's sensors conditioned as the identification node does (DVL
-velocity, pressure depth as a measured position, gyro rate; accelerometer-aided RTS smoothers give the initial states
-and the equation-error start); the gyro bias left after the still window (:func:`rate_bias_against_angle`); the
-design (the ladders' full model fixed, ``DofRecord.terms``, the window fitted whole, ``DofRecord.all_segments``); and
-the roll/pitch restoring regressor s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis] eq. 2.23) from the DVL
-attitude fused with the gyro (:func:`_smoothed_roll_pitch`).
+``hindrax run``, ``hindrax ident bag``, ``hindrax ident fit`` on a bag with the campaign's topics
+and the in-process campaign identify with :func:`identify_all_with_errors`, with the same
+:class:`~.fit_core.CoreOptions` as ``hindrax ident fit``. What the campaign knows that an arbitrary
+bag does not (docs/identification.md §7, "The campaign's topics"): the DOF windows (one chunk each,
+the thrust-model force of the widths the ESC wrote), the sensors conditioned by RTS smoothers
+(:func:`_smooth_on_ticks`), the gyro bias left after the still window
+(:func:`rate_bias_against_angle`), the design (``DofRecord.terms``, ``DofRecord.all_segments``) and
+the roll/pitch restoring regressor s(eta) ([NTNU-Thesis] eq. 2.23) from the DVL attitude fused with
+the gyro (:func:`_smoothed_roll_pitch`).
 
 All quantities SI, body FRD; times in s of the record's clock.
 """
@@ -88,7 +85,7 @@ def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord
         zm = zm - rate_bias[k - 3]
     elif dof == "yaw":
         # the same for yaw against the DVL heading (unwrapped): a rate bias b would otherwise appear as a moment
-        # bias of about linear damping x b (1.47 x 0.003 = 0.004 N m; measured over in-process campaigns)
+        # bias of about linear damping x b
         zm = zm - _yaw_rate_bias(record, t)
     x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
     if ms["measured"] != "position":
@@ -118,12 +115,10 @@ def dof_records(record, cfg: VehicleConfig, dofs=DOFS) -> tuple[dict, dict, dict
 
 def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None
                       ) -> DofIdentification:
-    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the reported values,
-    covariance and intervals, unchanged) on the campaign reader's signals ``sig``
-    (:class:`CampaignSignals`), with the comparisons beside it: the equation-error batch LS
-    ([Hindrax-Drag] eqs. 6-8, :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`), the steady-state
-    method of [Hindrax-Drag] (:func:`steady_state_fit`) and the online RLS (``online``: the estimator or its recorded
-    history, or None).
+    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the
+    reported values, covariance and intervals, unchanged) on the campaign reader's signals ``sig``
+    (:class:`CampaignSignals`), with the comparisons of :mod:`.dof_model` beside it (``online``: the
+    online RLS estimator or its recorded history, or None).
 
     The values are in :func:`parameter_names` order: a damping term the chosen model leaves out is 0 with std 0,
     heave's one pair for both directions (chosen by cross-validation) gives both directions the same value; the

@@ -1,4 +1,4 @@
-"""The per-DOF model: parameters, units, regressors, measurement settings, the offline result and comparisons.
+"""The per-DOF model: parameters, units, regressors, the offline result and its comparisons.
 
 Model per DOF (docs/architecture.md §5; [Hindrax-Drag] eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
@@ -13,29 +13,12 @@ coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the a
 * roll: s = cos(theta) sin(phi); pitch: s = sin(theta); k_r = z_g W - z_b B (Fossen g(eta),
   docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
 
-Signals: velocity and acceleration come from filters, never raw differences (docs/architecture.md §5): surge/sway
-from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz accelerometer
-(:mod:`hindrax_ident.vehicle.fusion`); roll/pitch/yaw from the gyro rate
-(:func:`~...vehicle.uncertainty.measurement_settings`). Online:
-:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` (or the accelerometer-aided filter); offline the
-campaign reader :mod:`.campaign_fit` (RTS smoothers, gyro bias against the DVL attitude, restoring regressor).
-
-Methods:
-
-1. Online: the live indicator of :class:`~..online.estimators.OnlineDofEstimator` (RLS with forgetting on
-   :func:`regressor_matrix`), not the reported estimate.
-2. The reported offline estimate is the fit core's (:mod:`.fit_core`, docs/identification.md §7) on the campaign
-   reader's records (:mod:`.campaign_fit`), the same core and options as ``hindrax ident fit``;
-   :class:`DofIdentification` holds it with the comparisons below.
-3. Comparison: equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
-   :func:`~hindrax_ident.estimation.least_squares.fit_linear_model` on :func:`regressor_matrix`); its inertia is
-   biased low by the smoothing of the fast thrust transients (the thruster lag is 0.1 s), so it is reported, not
-   used.
-4. Comparison: the steady-state method of [Hindrax-Drag] (:func:`steady_state_fit`): steady windows detected
-   automatically (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity
-   per run, then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag]
-   eqs. 2-8). Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
-   separately and usually has too few windows (no steady state in the depth available, [Hindrax-Drag] §5).
+The reported offline estimate is the fit core's (:mod:`.fit_core`) on the campaign reader's
+records (:mod:`.campaign_fit`); :class:`DofIdentification` holds it beside the comparisons: the
+online RLS on :func:`regressor_matrix` (:class:`~..online.estimators.OnlineDofEstimator`, a live
+indicator), the equation-error batch LS ([Hindrax-Drag] eqs. 6-8; its inertia biased low by the
+smoothing of the fast thrust transients) and the steady-state method (:func:`steady_state_fit`,
+[Hindrax-Drag] eqs. 2-8; heave usually has too few steady windows, [Hindrax-Drag] §5).
 """
 from __future__ import annotations
 
@@ -139,14 +122,10 @@ def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
     depth (+0.785 N for Hindrax), 0 otherwise; restoring: z_g W - z_b B (module docstring).
     """
     h = cfg.dof_hydrodynamics(dof)
-    rigid = rigid_inertia(cfg, dof)
-    out = {"inertia": rigid + float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)]),
-           "added_mass": float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)])}
-    if dof == "heave":
-        out.update(quadratic_damping_positive=h.quadratic_damping_positive,
-                   quadratic_damping_negative=h.quadratic_damping_negative,
-                   linear_damping_positive=h.linear_damping_positive,
-                   linear_damping_negative=h.linear_damping_negative,
+    added = float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)])
+    out = {"inertia": rigid_inertia(cfg, dof) + added, "added_mass": added}
+    if dof == "heave":  # its damping parameters are named as the fields of DofHydrodynamics
+        out.update({n: getattr(h, n) for n in parameter_names(dof)[1:5]},
                    bias=float(cfg.buoyancy_n - cfg.weight_n))
     else:
         out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive,
@@ -162,8 +141,8 @@ class DofIdentification:
     """Offline identification of one DOF.
 
     values/std/ci95 (dict name -> float / float / (low, high)): the reported (output-error) estimate of every
-    parameter of :func:`parameter_names` plus ``added_mass``; method: "output-error" (or "equation-error"
-    when the refinement failed). equation_error / online / steady: the other methods' {name: (value, std)}
+    parameter of :func:`parameter_names` plus ``added_mass``; method: "output-error" (fit core).
+    equation_error / online / steady: the other methods' {name: (value, std)}
     (steady: None when too few windows, with ``steady_note``). truth: configured values (simulation only).
     pool_time_s: duration of the DOF's manoeuvres; rls_time_s: pool time until the RLS converged (None:
     never); steady_time_s: pool time until the end of the last steady window used. signals: arrays for the
@@ -199,6 +178,10 @@ class DofIdentification:
         return (est - tr) / abs(tr)
 
 
+#: The parameters of :func:`~...estimation.least_squares.fit_drag` (each with its ``_std``)
+_DRAG = ("quadratic_damping", "linear_damping", "bias")
+
+
 def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, restoring_coefficient: float = 0.0,
                      min_duration_s: float = 2.0, max_std: float = 0.02, max_slope: float = 0.02):
     """The steady-state method: steady windows per run, fit_drag on window means ([Hindrax-Drag] eqs. 2-8).
@@ -229,16 +212,13 @@ def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, resto
                 if sel.sum() < 4:
                     return None, wins, f"{int(sel.sum())} steady windows in {suffix} heave (need 4)", t_end
                 fit = fit_drag(vm[sel], fm[sel])
-                out[f"quadratic_damping_{suffix}"] = (fit.quadratic_damping, fit.quadratic_damping_std)
-                out[f"linear_damping_{suffix}"] = (fit.linear_damping, fit.linear_damping_std)
-                out[f"bias_{suffix}"] = (fit.bias, fit.bias_std)
+                out.update({f"{k}_{suffix}": (getattr(fit, k), getattr(fit, f"{k}_std"))
+                            for k in _DRAG})
         else:
             if len(wins) < 4:
                 return None, wins, f"{len(wins)} steady windows (need 4)", t_end
             fit = fit_drag(vm, fm)
-            out = {"quadratic_damping": (fit.quadratic_damping, fit.quadratic_damping_std),
-                   "linear_damping": (fit.linear_damping, fit.linear_damping_std),
-                   "bias": (fit.bias, fit.bias_std)}
+            out = {k: (getattr(fit, k), getattr(fit, f"{k}_std")) for k in _DRAG}
     except EstimationError as exc:
         return None, wins, f"steady-state fit failed: {exc}", t_end
     return out, wins, f"{len(wins)} steady windows", t_end

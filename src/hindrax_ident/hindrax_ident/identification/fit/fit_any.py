@@ -1,17 +1,11 @@
 """The fit of bags of any topics: the fit core over the records of the any-topics reader, validated.
 
-The reading is :func:`..bag_input.reader.read_any_topics`; everything after it is the fit core shared with the
-campaign (:mod:`.fit_core`, docs/identification.md §7): per DOF the input delay and thrust lag (a commanded wrench; a
-ThrusterPwm force keeps the vehicle file's latency and lag), the segment-wise output-error fit with physical bounds and
-a robust loss, the model terms chosen by cross-validation (damping law, heave per direction, Coriolis and centripetal
-force of the other DOFs' inertias, cross-DOF coupling, reverse thrust gain), the cluster-robust intervals. Several bags
-are fitted jointly (their segments pooled; clusters never span two bags). The verdicts and identification.yaml are
-:mod:`..assessment.results`' (:func:`..assessment.results.build_document`).
-
-Validation: K-fold cross-validation on contiguous blocks of the moving validation segments and ``holdout`` bags. Per
-DOF ``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the measurements of the 10 s validation segments, v_pred
-simulated open loop from the recorded force and the smoothed initial velocity; ``nrmse_hold``: the initial velocity
-held; ``nrmse_zero``: 0.
+The reading is :func:`..bag_input.reader.read_any_topics`; everything after it is the fit core
+shared with the campaign (:mod:`.fit_core`, docs/identification.md §7). Several bags are fitted
+jointly (their segments pooled; clusters never span two bags). The verdicts and identification.yaml
+are :mod:`..assessment.results`' (:func:`..assessment.results.build_document`). Validation: the
+core's cross-validation and ``holdout`` bags, both measured by :func:`.fit_core.validation_measures`
+(``nrmse``, ``nrmse_hold``, ``nrmse_zero``).
 """
 from __future__ import annotations
 
@@ -58,15 +52,6 @@ class FitResult:
     design: str
 
 
-def _holdout(rec: fit_core.DofRecord, res: fit_core.DofResult, opts: fit_core.CoreOptions,
-             inertia: np.ndarray | None) -> tuple[dict, fit_core.SegmentData, np.ndarray]:
-    """Validation measures of the chosen model on a holdout record (every segment of ``validation_s`` with
-    measurements, moving or not), its segments and predictions."""
-    sd = fit_core.build_segments(rec, res.terms, res.timing, opts.validation_s, inertia, excited_only=False)
-    vp = fit_core.predict_validation(sd, res.chosen.layout, res.theta)
-    return fit_core.validation_measures(sd, vp), sd, vp
-
-
 def fit_records(bags, opts: fit_core.CoreOptions, design: str) -> FitResult:
     """Fit the records of the any-topics reader (``bags``: :class:`..bag_input.reader.BagRecords`) with the fit core
     (module docstring), the core's options ``opts``; ``design`` describes the validation. A DOF the reader could not
@@ -105,9 +90,11 @@ def fit_records(bags, opts: fit_core.CoreOptions, design: str) -> FitResult:
             fit.plot = {"data": "cross-validation", "measured": cand.val.v_s, "segments": cand.val,
                         "predicted": fit_core.predict_validation(cand.val, cand.layout, r.theta)}
         if dof in hrecs and hrecs[dof].chunks:
-            try:
-                m, sd, vp = _holdout(hrecs[dof], r, opts, inertia)
-                fit.validation["holdout"] = m
+            try:  # every segment of validation_s with measurements, moving or not
+                sd = fit_core.build_segments(hrecs[dof], r.terms, r.timing, opts.validation_s,
+                                             inertia, excited_only=False)
+                vp = fit_core.predict_validation(sd, cand.layout, r.theta)
+                fit.validation["holdout"] = fit_core.validation_measures(sd, vp)
                 fit.plot = {"data": "holdout", "measured": sd.v_s, "predicted": vp, "segments": sd}
             except EstimationError as exc:
                 fit.validation["holdout_note"] = str(exc)

@@ -1,31 +1,11 @@
 """The one fit core of ``hindrax ident bag`` and ``hindrax ident fit``; the method in full: docs/identification.md §7.
 
-The bag reader (:mod:`..bag_input.reader`) hands it one :class:`DofRecord` per DOF: continuous chunks on a uniform
-tick grid with the commanded force, the smoothed states and the raw measurements at their own times. Then:
-
-1. **Timing** (:func:`estimate_timing`): a thrust-model force keeps its known latency and lag; a commanded wrench
-   gets its delay and first-order lag from the cross-validated simulation error of the 1-DOF model over a grid of
-   both (:mod:`.timing_grid`), up to what the data resolve (:func:`resolvable_delay`; ``Timing.at_edge``).
-2. **Segments** (:func:`build_segments`): equal segments of ``segment_s``, those that move the DOF
-   (:data:`EXCITATION_MIN`), each simulated open loop from its smoothed initial state, the rule of the validation
-   and of ``hindrax ident predict``; the other training rules are scored under it and reported
-   (:func:`training_rules`).
-3. **Output-error fit** (:func:`fit_terms`): the model integrated by RK4 (Runge-Kutta-Nystrom for a measured
-   position), the force held or lagged exactly over each tick, compared with each measurement at its own time;
-   ``scipy.optimize.least_squares`` with physical bounds and the soft-L1 loss (scale 3 sigma of the MAD); a
-   diverging trial step costs a large finite value; the Jacobian in one vectorised simulation.
-4. **Model terms by cross-validation** (:func:`select_terms`): K folds of contiguous blocks of the moving validation
-   segments; stage 1 the damping law by the smallest CV error, stage 2 each addition (Coriolis, cross coupling,
-   other DOFs' forces, per-run bias, saturation, reverse gain) kept by the one-standard-error rule
-   ([Hastie-ESL2009] §7.10); the nested 1-DOF model (:data:`NESTED`) replaces a worse choice
-   (:func:`not_below_nested`); a model that does not beat holding the velocity by
-   :data:`PERSISTENCE_MARGIN` gives :data:`NO_MODEL_VERDICT` (:func:`persistence`); a Coriolis
-   force is scored with the inertias the result states (:func:`coupling_consistent`).
-5. **Intervals** (:func:`cluster_covariance`): the cluster-robust sandwich with contiguous blocks of segments as
-   clusters (lengthened while their scores correlate above :data:`CLUSTER_RHO_MAX`, at least :data:`MIN_CLUSTERS`),
-   G / (G - 1), Student t with G - 1 degrees of freedom ([Liang-Zeger1986]; [Bester-Conley-Hansen2011];
-   [Cameron-Miller2015] §VI), never below the model-based covariance widened for the residuals' lag-1
-   autocorrelation.
+The bag reader (:mod:`..bag_input.reader`) hands it one :class:`DofRecord` per DOF: continuous
+chunks on a uniform tick grid with the commanded force, the smoothed states and the raw measurements
+at their own times. :func:`identify_dofs` takes them through the steps of docs/identification.md §7:
+timing (:func:`estimate_timing`), segments (:func:`build_segments`, :func:`training_rules`), the
+output-error fit (:func:`fit_terms`), model terms by cross-validation (:func:`select_terms`,
+:func:`persistence`, :func:`coupling_consistent`) and intervals (:func:`cluster_covariance`).
 
 All quantities SI; forces N (N m for rotations), velocities m/s (rad/s); body FRD. Raises
 :class:`~hindrax_ident.estimation.least_squares.EstimationError` when a DOF has too little usable data.
@@ -76,10 +56,7 @@ SATURATION_MIN_REL = 0.02
 #: The kinds of the parameters whose regressors are time-dependent columns (:attr:`SegmentData.cols`), by prefix
 _COLUMN_PREFIXES = ("cross", "xforce", "runbias", "sat")
 #: Relative margin by which a model's cross-validated nrmse must be below holding the velocity
-#: (:func:`persistence`). 0.05: the smallest gain real pool data show a physical term to be worth (a
-#: per-run bias, 0.02-0.06 nrmse, on hold scores of 0.5-0.9) and about the fold-to-fold scatter of a CV nrmse
-#: over 4 folds of a few minutes each; a model within it of holding the velocity predicts nothing the last
-#: measurement does not.
+#: (:func:`persistence`; why 0.05: docs/identification.md §7 step 7)
 PERSISTENCE_MARGIN = 0.05
 #: The verdict of a DOF whose best model does not beat holding the velocity (:func:`persistence`)
 NO_MODEL_VERDICT = "no model beats holding the velocity"
@@ -166,19 +143,15 @@ class DofRecord:
 
 @dataclass(frozen=True)
 class Terms:
-    """The model's terms: damping ``"linear"``, ``"quadratic"`` or ``"both"``; by_direction: heave's damping per
-    sign of w; coriolis: the Coriolis and centripetal force of the other DOFs' inertias subtracted from the input;
-    cross: linear coupling to the other moving DOFs' velocities (free coefficients); reverse_gain: the force of
-    negative commands times a free gain (a propeller weaker in reverse); cross_force: the other DOFs' commanded
-    forces, each times a free coefficient, added to this DOF's force (coupling through the allocation: thrusters that
-    do not deliver the force the allocation assumes put part of one DOF's command into another; they act with this
-    DOF's delay and lag); run_bias: a constant force per run (bag) around the mean ``bias`` (tether lay, trim,
-    buoyancy drift between runs; effects coding: ``bias_run_<k>`` for runs 1..R-1, run R the negative of their
-    sum, a run not fitted gets the mean); saturation: the commanded force plus a free gain times the allocation's
-    shortfall (the force it achieved less the commanded one, :attr:`Chunk.shortfall`): a heave command beyond what
-    the vertical thrusters can push is clipped at their limits (the allocation's saturation), and the gain says how
-    much of that clipping the motion shows (1: the vehicle file's thrust limits; it acts with this DOF's delay and
-    lag)."""
+    """The model's terms (their physics: docs/identification.md §7 steps 4 and 8): damping
+    ``"linear"``, ``"quadratic"`` or ``"both"``; by_direction: heave's damping per sign of w;
+    coriolis: the Coriolis and centripetal force of the other DOFs' inertias subtracted from the
+    input; cross: free coefficients on the other moving DOFs' velocities; reverse_gain: the force of
+    negative commands times a free gain; cross_force: the other DOFs' commanded forces times free
+    coefficients, with this DOF's delay and lag; run_bias: a constant force per run (bag), effects
+    coding around the mean ``bias`` (``bias_run_<k>`` for runs 1..R-1, run R the negative of their
+    sum, a run not fitted gets the mean); saturation: the commanded force plus a free gain times
+    :attr:`Chunk.shortfall`, with this DOF's delay and lag (1: the vehicle file's thrust limits)."""
 
     damping: str = "both"
     by_direction: bool = False
@@ -193,12 +166,10 @@ class Terms:
     def label(self) -> str:
         parts = [{"both": "linear + quadratic", "linear": "linear", "quadratic": "quadratic"}[self.damping]
                  + " damping" + (" per direction" if self.by_direction else "")]
-        for flag, name in ((self.coriolis, "Coriolis"), (self.cross, "cross-DOF coupling"),
-                           (self.cross_force, "other DOFs' forces"), (self.run_bias, "per-run bias"),
-                           (self.saturation, "thrust saturation"),
-                           (self.reverse_gain, "reverse thrust gain")):
-            if flag:
-                parts.append(name)
+        added = ((self.coriolis, "Coriolis"), (self.cross, "cross-DOF coupling"),
+                 (self.cross_force, "other DOFs' forces"), (self.run_bias, "per-run bias"),
+                 (self.saturation, "thrust saturation"), (self.reverse_gain, "reverse thrust gain"))
+        parts += [name for flag, name in added if flag]
         return " + ".join(parts)
 
 
@@ -254,7 +225,7 @@ def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequ
     (heave per direction: ``_positive`` (w > 0, down) and ``_negative``); bias; restoring (roll, pitch); cross
     terms ``cross_<dof>``; other DOFs' force coefficients ``force_from_<dof>``; per-run biases ``bias_run_<k>``;
     ``saturation_gain`` (:data:`SATURATION_GAIN_BOUNDS`); ``reverse_thrust_gain``. Bounds keep
-    them physical (module docstring)."""
+    them physical (docs/identification.md §7 step 3)."""
     out = [("inertia", "inertia", 1e-6, np.inf)]
     split = dof == "heave" and terms.by_direction
     for kind, name in (("kq", "quadratic_damping"), ("kl", "linear_damping")):
@@ -377,47 +348,46 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     k_dof = DOFS.index(rec.dof)
     U, C, V0, X0, G, SP, EX, VS, AS, FF = [], [], [], [], [], [], [], [], [], []
     s_seg, s_j, s_a, s_z = [], [], [], []
+    lag = ThrustLag(timing.lag_s)
+
+    def tick_points(x):  # x at the start, middle and end of each tick (held after the last one)
+        x1 = np.concatenate([x[1:], x[-1:]])
+        return x, 0.5 * (x + x1), x1
+
     for ci, ch in enumerate(rec.chunks):
         n = ch.force.size
         f = _shift(ch.force, timing.delay_s / h)
-        fs, fm, fe = ThrustLag(timing.lag_s).over_ticks(f, h, ch.force_start if timing.delay_s <= 0 else None)
+        fs, fm, fe = lag.over_ticks(f, h, ch.force_start if timing.delay_s <= 0 else None)
         inputs = [fs, fm, fe]
         extra = []  # time-dependent regressors (start, middle, end) of the parameters after the restoring
         if rec.dof in ("roll", "pitch"):
             r = ch.restoring if ch.restoring is not None else np.zeros(n)
-            r1 = np.concatenate([r[1:], r[-1:]])
-            extra.append((-r, -0.5 * (r + r1), -r1))
+            extra.append(tuple(-x for x in tick_points(r)))
         if terms.cross:
             for i in range(len(rec.cross_names)):
                 c = ch.cross[:, i] if ch.cross is not None else np.zeros(n)
-                c1 = np.concatenate([c[1:], c[-1:]])
-                extra.append((-c, -0.5 * (c + c1), -c1))
+                extra.append(tuple(-x for x in tick_points(c)))
         if terms.cross_force:  # the other DOFs' forces through this DOF's delay and lag
             for i in range(len(rec.force_names)):
                 g = ch.cross_force[:, i] if ch.cross_force is not None else np.zeros(n)
-                extra.append(ThrustLag(timing.lag_s).over_ticks(_shift(g, timing.delay_s / h), h, None))
+                extra.append(lag.over_ticks(_shift(g, timing.delay_s / h), h, None))
         if terms.run_bias and rec.run_count >= 2:  # effects coding; the force is less the run's bias
-            R = rec.run_count
-            for k in range(R - 1):
-                val = 0.0
-                if rec.runs_known and ch.group == k:
-                    val = -1.0
-                elif rec.runs_known and ch.group == R - 1:
-                    val = 1.0
-                col = np.full(n, val)
-                extra.append((col, col, col))
+            code = np.zeros(rec.run_count - 1)  # run k < R - 1: -1 in column k; the last: +1 in all
+            if rec.runs_known and 0 <= ch.group < code.size:
+                code[ch.group] = -1.0
+            elif rec.runs_known and ch.group == code.size:
+                code[:] = 1.0
+            extra += [(np.full(n, c),) * 3 for c in code]
         if terms.saturation:  # the allocation's shortfall through this DOF's delay and lag, as the force
             g = ch.shortfall if ch.shortfall is not None else np.zeros(n)
-            extra.append(ThrustLag(timing.lag_s).over_ticks(_shift(g, timing.delay_s / h), h, None))
+            extra.append(lag.over_ticks(_shift(g, timing.delay_s / h), h, None))
         if terms.reverse_gain:
             extra.append(tuple(np.minimum(x, 0.0) for x in inputs))
             inputs = [np.maximum(x, 0.0) for x in inputs]
         if terms.coriolis and ch.coupling is not None and coupling_inertia is not None:
             mi = np.where(np.isfinite(coupling_inertia), coupling_inertia, 0.0).copy()
             mi[k_dof] = 0.0
-            cf = ch.coupling @ mi
-            cf1 = np.concatenate([cf[1:], cf[-1:]])
-            inputs = [inputs[0] - cf, inputs[1] - 0.5 * (cf + cf1), inputs[2] - cf1]
+            inputs = [u - c for u, c in zip(inputs, tick_points(ch.coupling @ mi))]
         pos = ch.sample_pos
         order = np.argsort(pos)
         pos, zs = pos[order], ch.sample_z[order]
@@ -485,11 +455,12 @@ def _column_params(layout: list) -> list[int]:
 
 
 def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None = None,
-             position: bool = False, bound: float | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-    """Velocities (B, m, L) (and positions with ``position``) of every segment for B parameter sets ``P`` (B, p) at
-    once, from the segments' initial states (``v0`` (B, m) replaces the initial velocities). Classical RK4 for the
-    velocity, Runge-Kutta-Nystrom for the position, inputs at the start, middle and end of each tick. The states
-    are kept within +-``bound`` (a diverging trial stays finite; floating-point warnings are off here)."""
+             position: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Velocities (B, m, L) (and positions with ``position``) of every segment for B parameter sets
+    ``P`` (B, p) at once, from the segments' initial states (``v0`` (B, m) replaces the initial
+    velocities). Classical RK4 for the velocity, Runge-Kutta-Nystrom for the position, inputs at the
+    start, middle and end of each tick. The states are kept within 1000 x (the largest
+    measurement + 1): a diverging trial stays finite (floating-point warnings are off here)."""
     P = np.atleast_2d(np.asarray(P, dtype=float))
     B = P.shape[0]
     kinds = _kinds(layout)
@@ -509,8 +480,7 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     if tk:
         U = U + np.einsum("smlc,bc->sbml", sd.cols, P[:, tk])
     U = U - b[None, :, :, None]
-    if bound is None:
-        bound = 1e3 * (float(np.max(np.abs(sd.s_z))) + 1.0) if sd.s_z.size else 1e6
+    bound = 1e3 * (float(np.max(np.abs(sd.s_z))) + 1.0) if sd.s_z.size else 1e6
     v = np.broadcast_to(sd.v0, (B, sd.m)).copy() if v0 is None else np.array(v0, dtype=float)
     x = np.broadcast_to(sd.x0, (B, sd.m)).copy()
     L = sd.L
@@ -527,22 +497,16 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
         def damp(vv, out):
             pos = vv > 0
             return np.abs(vv) * vv * np.where(pos, kqp_, kqn_) + vv * np.where(pos, klp_, kln_)
-    elif kq is not None and kl is not None:
-        def damp(vv, out):  # (kq |v| + kl) v, in place
-            np.abs(vv, out=out)
-            out *= kq
-            out += kl
-            out *= vv
-            return out
-    elif kq is not None:
-        def damp(vv, out):
-            np.abs(vv, out=out)
-            out *= kq
-            out *= vv
-            return out
     else:
-        def damp(vv, out):
-            return np.multiply(kl, vv, out=out)
+        def damp(vv, out):  # (kq |v| + kl) v, in place, without a term the layout lacks
+            if kq is None:
+                return np.multiply(kl, vv, out=out)
+            np.abs(vv, out=out)
+            out *= kq
+            if kl is not None:
+                out += kl
+            out *= vv
+            return out
 
     def stage(u, vv, out):  # (u - damp(vv)) / M, in place
         d = damp(vv, out)
@@ -619,8 +583,7 @@ def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.nd
     ok = np.all(np.isfinite(A), axis=-1) & np.isfinite(y)
     A, y = A[ok], y[ok]
     scale = np.maximum(np.sqrt(np.mean(A ** 2, axis=0)), 1e-12)
-    lo = np.array([lb for _n, _k, lb, _ub in layout]) * scale
-    hi = np.array([ub for _n, _k, _lb, ub in layout]) * scale
+    lo, hi = np.array([(lb, ub) for _n, _k, lb, ub in layout], dtype=float).T * scale
     lo[0] = max(lo[0], 1e-9)
     res = optimize.lsq_linear(A / scale, y, bounds=(lo, hi), lsmr_tol="auto", method="bvls")
     return res.x / scale
@@ -636,13 +599,15 @@ def _mad_sigma(r: np.ndarray) -> float:
 
 def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robust: bool = True,
               f_scale: float | None = None, max_nfev: int | None = None, free_v0: bool | None = None) -> FitOutcome:
-    """Output-error fit of ``layout`` on ``sd`` from ``theta0`` (module docstring, step 3). ``f_scale``: the robust
-    loss's scale (default 3 x the MAD sigma of the residuals at ``theta0``). ``free_v0``: fit each segment's initial
-    velocity too (default: for a measured position), else start each from its smoothed measurement."""
+    """Output-error fit of ``layout`` on ``sd`` from ``theta0`` (docs/identification.md §7 step 3):
+    ``scipy.optimize.least_squares`` within the bounds of ``layout``, soft-L1 loss with scale
+    ``f_scale`` (default 3 x the MAD sigma of the residuals at ``theta0``); a diverging trial step
+    costs a large finite value; the Jacobian in one vectorised simulation. ``free_v0``: fit each
+    segment's initial velocity too (default: for a measured position), else start each from its
+    smoothed measurement."""
     from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
-    lower = np.array([lb for _n, _k, lb, _ub in layout], dtype=float)
-    upper = np.array([ub for _n, _k, _lb, ub in layout], dtype=float)
+    lower, upper = np.array([(lb, ub) for _n, _k, lb, ub in layout], dtype=float).T
     th0 = np.clip(np.asarray(theta0, dtype=float), lower, upper)
     th0[0] = max(th0[0], 1e-3 * max(abs(float(theta0[0])), 1.0), 1e-6)
     # start strictly inside the bounds (trust-region reflective needs it)
@@ -702,11 +667,9 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     r0 = fun(x0)
     if f_scale is None:
         f_scale = 3.0 * _mad_sigma(r0)
-    kwargs = {}
-    if max_nfev is not None:
-        kwargs["max_nfev"] = max_nfev
-    sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lo_all, hi_all), method="trf", x_scale="jac",
-                                 loss="soft_l1" if robust else "linear", f_scale=f_scale, **kwargs)
+    sol = optimize.least_squares(fun, x0, jac=jac, bounds=(lo_all, hi_all), method="trf",
+                                 x_scale="jac", loss="soft_l1" if robust else "linear",
+                                 f_scale=f_scale, max_nfev=max_nfev)
     r = sol.fun
     w = (1.0 + (r / f_scale) ** 2) ** -0.5 if robust else np.ones_like(r)
     th, v0 = split(sol.x)
@@ -748,7 +711,11 @@ def _blocks(group: np.ndarray, b: int) -> np.ndarray:
 
 
 def cluster_covariance(fit: FitOutcome, sd: SegmentData, min_clusters: int = MIN_CLUSTERS) -> Covariance:
-    """Cluster-robust covariance of the fit with blocks of segments as clusters (module docstring, step 5)."""
+    """Cluster-robust covariance of the fit with blocks of segments as clusters
+    (docs/identification.md §7 step 5): blocks lengthened while their scores correlate above
+    :data:`CLUSTER_RHO_MAX`, at least ``min_clusters``; G / (G - 1), Student t with G - 1 degrees of
+    freedom ([Liang-Zeger1986]; [Bester-Conley-Hansen2011]; [Cameron-Miller2015] §VI); never below
+    the model-based covariance widened for the residuals' lag-1 autocorrelation."""
     p = fit.theta.size
     J, r, w = fit.jac, fit.residuals, fit.weights
     Jw = J * w[:, None]
@@ -853,13 +820,12 @@ BANDWIDTH_POWER = 0.9
 
 
 def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S) -> tuple[float, str]:
-    """The largest input delay + lag (s) the record can resolve, and what set it: the smallest of ``max_delay_s``
-    (the option), :data:`DELAY_SEGMENT_FRACTION` of the training segment (record length), and a quarter period of
-    the excitation bandwidth f_b, the frequency below which :data:`BANDWIDTH_POWER` of the detrended velocity's
-    power lies (Welch periodogram of each chunk, pooled): a pure delay d shifts the phase by 2 pi f d, and at a
-    quarter period of the highest frequency the response carries, d trades against the inertia-to-damping phase lag
-    of the dynamics (at most 90 degrees), so the data no longer tell them apart. Never below two grid steps (the
-    sample rate's resolution; the fine grid steps 25 ms)."""
+    """The largest input delay + lag (s) the record can resolve, and what set it
+    (docs/identification.md §7 step 7): the smallest of ``max_delay_s`` (the option),
+    :data:`DELAY_SEGMENT_FRACTION` of the training segment and a quarter period of the excitation
+    bandwidth, below which :data:`BANDWIDTH_POWER` of the detrended velocity's power lies (Welch
+    periodogram of each chunk, pooled): there a delay trades against the dynamics' own phase lag
+    (at most 90 degrees). Never below two grid steps (the sample rate's resolution)."""
     from scipy import signal as _signal
 
     h = rec.h
@@ -937,13 +903,13 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
 
 
 def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
-    """The input delay and first-order thrust lag of a commanded wrench (module docstring, step 1), chosen by the
-    cross-validated simulation error of the 1-DOF model ``M v' = u(t - d) - k_q |v| v - k_l v - b`` with the lag
-    (:func:`_timing_scores`, each grid point a full fit per fold): a coarse grid (delay every
-    :data:`DELAY_STEP_S`, lags :data:`LAGS_S`, delay + lag within :func:`resolvable_delay`), then
-    :data:`FINE_DELAYS_S` around its best delay with the best lag and its neighbours halfway to the next coarse
-    lags. ``curve``: [(delay, lag, cv mse)] of every point. A thrust-model force keeps its known timing
-    (``rec.lag_s``, no delay). Raises :class:`EstimationError` when no segment moves the DOF."""
+    """The input delay and first-order thrust lag of a commanded wrench with the smallest
+    cross-validated simulation error of the 1-DOF model (docs/identification.md §7 step 1;
+    :func:`_timing_scores`): a coarse grid (delay every :data:`DELAY_STEP_S`, lags :data:`LAGS_S`,
+    delay + lag within :func:`resolvable_delay`), then :data:`FINE_DELAYS_S` around its best delay
+    with the best lag and the lags halfway to its neighbours. ``curve``: [(delay, lag, cv mse)] of
+    every point. A thrust-model force keeps its known timing (``rec.lag_s``, no delay). Raises
+    :class:`EstimationError` when no segment moves the DOF."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
     bound, why = resolvable_delay(rec, opts.max_delay_s, opts.segment_s)
@@ -1154,11 +1120,11 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     if key not in folds_cache:
         folds_cache[key] = make_folds(sd, sv, opts.folds)
     folds = folds_cache[key]
-    th, sse, nn, sst, notes = _cv(sd, sv, folds, rec.dof, layout, fit, opts.robust, free_v0) if folds.held else \
-        (np.zeros((0, len(layout))), np.zeros(0), np.zeros(0), np.zeros(0), list(folds.notes))
-    cv = (_cv_summary(sv, folds, sse, nn, sst) if folds.held
-          else {"nrmse": math.nan, "samples": 0, "folds": 0})
-    return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, notes, free_v0)
+    # without folds: no fold estimates, no score, and the reason in the notes (make_folds)
+    th, sse, nn, sst, notes = _cv(sd, sv, folds, rec.dof, layout, fit, opts.robust, free_v0)
+    cv = _cv_summary(sv, folds, sse, nn, sst)
+    return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, list(folds.notes) + notes,
+                     free_v0)
 
 
 def persistence(cv: dict, margin: float = PERSISTENCE_MARGIN) -> dict:
@@ -1211,8 +1177,9 @@ def not_below_nested(chosen: Candidate, tried: list[Candidate]) -> Candidate:
 
 def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.ndarray | None,
                  stage: int = 0, base: Candidate | None = None) -> tuple[Candidate, list[Candidate]]:
-    """Stage 1 (``stage`` 1): damping; stage 2: the additions on ``base`` (module docstring, step 4); 0: both.
-    Returns (chosen, every candidate evaluated)."""
+    """Stage 1 (``stage`` 1): damping by the smallest CV error; stage 2: the additions on ``base``,
+    each kept by the one-standard-error rule ([Hastie-ESL2009] §7.10); 0: both
+    (docs/identification.md §7 step 4). Returns (chosen, every candidate evaluated)."""
     folds_cache: dict = {}
     tried: list[Candidate] = []
 
@@ -1240,19 +1207,14 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
             return base, tried
     assert base is not None
     chosen = base
-    changes = []  # the Coriolis force is physics (the other DOFs' inertias): tried without it, not added
-    if base.terms.coriolis:
-        changes.append(("coriolis", False))
-    if rec.cross_names:
-        changes.append(("cross", True))
-    if rec.force_names:
-        changes.append(("cross_force", True))
-    if rec.run_count >= 2 and rec.runs_known:
-        changes.append(("run_bias", True))
-    if rec.saturates:
-        changes.append(("saturation", True))
-    if rec.force_source == "wrench":
-        changes.append(("reverse_gain", True))
+    # (term, value, when it is a candidate); the Coriolis force is physics (the other DOFs'
+    # inertias): tried without it, not added
+    candidates = (("coriolis", False, base.terms.coriolis), ("cross", True, bool(rec.cross_names)),
+                  ("cross_force", True, bool(rec.force_names)),
+                  ("run_bias", True, rec.run_count >= 2 and rec.runs_known),
+                  ("saturation", True, rec.saturates),
+                  ("reverse_gain", True, rec.force_source == "wrench"))
+    changes = [(name, value) for name, value, when in candidates if when]
     keep = []
     for name, value in changes:
         c = run(replace(base.terms, **{name: value}))
@@ -1319,19 +1281,15 @@ INITIAL_STATES = {False: "smoothed measurement", True: "fitted per segment"}
 
 
 def training_rules(rec: DofRecord, chosen: Candidate, timing: Timing, opts: CoreOptions,
-                   inertia: np.ndarray | None) -> tuple[Candidate, dict]:
-    """Fit what is scored: the chosen terms refitted under the other training rules, each cross-validated on the same
-    validation segments, which (like ``hindrax ident predict``, also with ``--segment-s``) start from the smoothed
-    measurement at each segment's start; both are reported and the verdict's named.
+                   inertia: np.ndarray | None) -> dict:
+    """Fit what is scored (docs/identification.md §7 step 2): the chosen terms refitted under the
+    other training rules, each cross-validated on the same validation segments (which start from the
+    smoothed measurement): for a measured position, the initial state (each training segment's
+    initial velocity fitted, the verdict's, or the smoothed measurement); for a record fitted on its
+    moving segments only (:func:`_excited_only`), the fit on every segment beside it.
 
-    * initial state (a measured position only: a velocity always starts from the smoothed measurement, as scored):
-      each training segment's initial velocity fitted (the verdict's, even where the other predicts
-      better: without them the intervals lose their spread), or the smoothed measurement;
-    * segments (a record fitted on its moving segments only, :func:`_excited_only`): the fit on every segment beside
-      it; the moving segments' fit stays the verdict's.
-
-    Returns (``chosen``, {initial_state: {used, cv_nrmse: {rule: nrmse}}, segments: {used, moving_only,
-    all_segments: {cv_nrmse, segments, parameters}}})."""
+    Returns {initial_state: {used, cv_nrmse: {rule: nrmse}}, segments: {used, moving_only,
+    all_segments: {cv_nrmse, segments, parameters}}}."""
     def refit(**kw):
         try:
             return _candidate(rec, chosen.terms, timing, opts, inertia, {}, chosen.fit.theta, **kw)
@@ -1349,15 +1307,16 @@ def training_rules(rec: DofRecord, chosen: Candidate, timing: Timing, opts: Core
 
         out["segments"] = {"used": "moving_only", "moving_only": row(chosen),
                            "all_segments": row(refit(free_v0=chosen.free_v0, excited_only=False))}
-    return chosen, out
+    return out
 
 
 def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts: CoreOptions,
-           training: dict | None = None) -> DofResult:
-    """Intervals (:func:`cluster_covariance`) of the chosen candidate and the result (``training``: what
-    :func:`training_rules` reports)."""
+           inertia: np.ndarray | None) -> DofResult:
+    """The result: :func:`training_rules` (``inertia`` (6,) as the chosen model's) and the intervals
+    (:func:`cluster_covariance`) of the chosen candidate."""
     from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
+    training = training_rules(rec, chosen, timing, opts, inertia)
     cov = cluster_covariance(chosen.fit, chosen.train, opts.min_clusters)
     if rec.measured == "position":
         cov = replace(cov, input_corr=input_correlation(chosen.fit.residuals, chosen.train))
@@ -1382,8 +1341,7 @@ def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.
     else:
         c = _candidate(rec, rec.terms or opts.terms, timing, opts, inertia, {})
         chosen, tried = c, [c]
-    chosen, training = training_rules(rec, chosen, timing, opts, inertia)
-    return finish(rec, chosen, tried, timing, opts, training)
+    return finish(rec, chosen, tried, timing, opts, inertia)
 
 
 def inertia_vector(results: dict) -> np.ndarray:
@@ -1397,12 +1355,9 @@ def inertia_vector(results: dict) -> np.ndarray:
 
 def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dict, dict]:
     """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the
-    others' inertias: timing and a first fit (linear + quadratic damping) of every DOF for the
-    inertias, then per DOF stage 1 (damping, with the Coriolis force of those inertias), stage 2
-    (without it; cross coupling; reverse gain), the chosen Coriolis models refitted with the
-    inertias the result states (:func:`coupling_consistent`) and the intervals.
+    others' inertias (from a first fit of every DOF; :func:`coupling_consistent`).
     Returns ({dof: DofResult}, {dof: error message})."""
-    timings, base, tried, errors, first = {}, {}, {}, {}, {}
+    timings, errors, first = {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
             tm = timings[dof] = estimate_timing(rec, opts)
@@ -1430,36 +1385,25 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
             inertia1[DOFS.index(dof)] = float(f1.theta[0])
         except (EstimationError, ValueError, np.linalg.LinAlgError):
             pass
-    inertia0 = inertia1
-    for dof in first:
-        rec = records[dof]
-        tm = timings[dof]
-        try:
-            if opts.select and rec.terms is None:
-                base[dof], tried[dof] = select_terms(rec, tm, opts, inertia0, stage=1)
-            else:
-                c = _candidate(rec, rec.terms or opts.terms, tm, opts, inertia0, {})
-                base[dof], tried[dof] = c, [c]
-        except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
-            errors[dof] = str(exc)
     chosen, allc = {}, {}
-    for dof, b in base.items():
-        rec = records[dof]
+    for dof in first:  # stage 1 (damping), then stage 2 (the additions) on its choice
+        rec, tm = records[dof], timings[dof]
         try:
             if opts.select and rec.terms is None:
-                c, more = select_terms(rec, timings[dof], opts, inertia0, stage=2, base=b)
-                allc[dof] = tried[dof] + [t for t in more if t not in tried[dof]]
+                base, tried = select_terms(rec, tm, opts, inertia1, stage=1)
+                c, more = select_terms(rec, tm, opts, inertia1, stage=2, base=base)
+                allc[dof] = tried + [t for t in more if t not in tried]
                 chosen[dof] = not_below_nested(c, allc[dof])
             else:
-                chosen[dof], allc[dof] = b, tried[dof]
+                c = _candidate(rec, rec.terms or opts.terms, tm, opts, inertia1, {})
+                chosen[dof], allc[dof] = c, [c]
         except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
             errors[dof] = str(exc)
-    used = coupling_consistent(records, timings, chosen, allc, {d: inertia0 for d in chosen}, opts)
+    used = coupling_consistent(records, timings, chosen, allc, {d: inertia1 for d in chosen}, opts)
     results = {}
     for dof, c in chosen.items():
         try:
-            c, training = training_rules(records[dof], c, timings[dof], opts, used[dof])
-            results[dof] = finish(records[dof], c, allc[dof], timings[dof], opts, training)
+            results[dof] = finish(records[dof], c, allc[dof], timings[dof], opts, used[dof])
         except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
             errors[dof] = str(exc)
     return results, errors
@@ -1495,15 +1439,11 @@ def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timin
 
 def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict,
                         opts: CoreOptions) -> dict:
-    """Score every chosen model with the inertias it is predicted with. A DOF's Coriolis force
-    C(nu) nu uses the other DOFs' inertias; selection fits it with preliminary ones (``used``:
-    {dof: (6,)}), while the result states each DOF's chosen inertia and prediction (``hindrax ident
-    predict``, the holdout) uses those; they differ most where the data determine an inertia poorly
-    (the yaw Munk moment (M2 - M1) u v is a small difference of two large inertias). Until they
-    agree (:data:`COUPLING_RTOL`, at most :data:`COUPLING_PASSES` passes) each chosen model with a
-    Coriolis force whose inertias moved is refitted and cross-validated with the stated ones
-    (:func:`refit_coupling`), kept only when it still beats the nested 1-DOF model. Updates
-    ``chosen`` and ``tried`` in place; returns the inertias each DOF's model was fitted with."""
+    """Score every chosen model with the inertias it is predicted with (docs/identification.md
+    §7 step 4): selection fits a DOF's Coriolis force with preliminary inertias of the other DOFs
+    (``used``: {dof: (6,)}); until they agree with the stated ones (:data:`COUPLING_RTOL`, at most
+    :data:`COUPLING_PASSES` passes) each such model is refitted with those (:func:`refit_coupling`).
+    Updates ``chosen`` and ``tried`` in place; returns the inertias each model was fitted with."""
     used = dict(used)
     for _ in range(COUPLING_PASSES):
         stated = inertia_vector(chosen)

@@ -120,7 +120,7 @@ def _cost(tw, V, w):
 
 
 def fit_batch(U: np.ndarray, v0: np.ndarray, samples: tuple, masks: np.ndarray, theta0: np.ndarray, h: float,
-              cols: np.ndarray | None = None, iterations: int = ITERATIONS) -> np.ndarray:
+              cols: np.ndarray | None = None) -> np.ndarray:
     """Least-squares simulation-error fits (G, K, p) of every grid point's input U[:, g] on every fold's training
     segments ``masks`` (K, m) from ``theta0`` (G, p), p = 4 + the columns of ``cols`` (bounded below by 0, as the
     restoring stiffness) (module docstring)."""
@@ -142,7 +142,7 @@ def fit_batch(U: np.ndarray, v0: np.ndarray, samples: tuple, masks: np.ndarray, 
     lam = np.full((G, K), 1e-3)
     eye = np.eye(p)
     wk = np.repeat(w, L, axis=1)[None, :, None, :]  # (1, K, 1, m L)
-    for _ in range(iterations):
+    for _ in range(ITERATIONS):
         d = 1e-6 * np.maximum(np.abs(th), 1e-3 * np.maximum(np.abs(th[..., :1]), 1e-6))
         P = th[:, :, None, :] + d[:, :, None, :] * eye  # (G, K, p, p) one parameter stepped per set
         VP = simulate_batch(U, v0, P.reshape(G, K * p, p), h, cols).reshape(G, K, p, m, L)
