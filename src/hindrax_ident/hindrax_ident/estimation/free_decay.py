@@ -182,11 +182,6 @@ def displacement_from_acceleration(t_s, acceleration_m_s2, highpass_hz: Optional
                                    remove_bias: bool = True) -> Tuple[np.ndarray, np.ndarray]:
     """Displacement and velocity by double integration with drift removal (module docstring).
 
-    Steps: subtract the trapezoid-weighted mean acceleration (bias; exact for a record from rest
-    to rest) -> cumulative trapezoid to velocity (0 at the first sample) -> optional zero-phase
-    high-pass (Butterworth order 2, odd padding) -> cumulative trapezoid to displacement ->
-    subtract its mean -> optional zero-phase high-pass (even padding).
-
     Args:
         t_s: (n,) strictly increasing times in s (should start at the release, from rest).
         acceleration_m_s2: (n,) measured acceleration along the oscillation axis in m/s^2.
@@ -335,10 +330,9 @@ class FreeDecayResult:
     velocity_m_s: np.ndarray = field(repr=False)
     envelope_m: np.ndarray = field(repr=False)
 
-    def to_dict(self, include_signals: bool = False) -> dict:
+    def to_dict(self) -> dict:
         """JSON-friendly dict: every scalar attribute (same keys), ``peaks`` (list of indices),
-        ``peak_times_s`` and ``peak_amplitudes_m`` (lists); with ``include_signals`` also the
-        plot arrays as lists."""
+        ``peak_times_s`` and ``peak_amplitudes_m`` (lists)."""
         out: dict[str, Any] = {}
         for f in fields(self):
             if f.repr:  # the scalars (the arrays are repr=False)
@@ -347,9 +341,6 @@ class FreeDecayResult:
         out["peaks"] = [int(i) for i in self.peaks]
         out["peak_times_s"] = [float(x) for x in self.peak_times_s]
         out["peak_amplitudes_m"] = [float(x) for x in self.peak_amplitudes_m]
-        if include_signals:
-            for k in ("t_s", "acceleration_m_s2", "displacement_m", "velocity_m_s", "envelope_m"):
-                out[k] = [float(x) for x in getattr(self, k)]
         return out
 
 

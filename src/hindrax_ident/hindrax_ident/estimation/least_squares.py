@@ -111,7 +111,7 @@ class LsResult:
         residuals: (n,) y - X theta.
         n: number of samples.
         p: number of parameters.
-        names: optional parameter names (length p), used by :meth:`to_dict`.
+        names: optional parameter names (length p), used by :meth:`index`.
     """
 
     theta: np.ndarray
@@ -138,20 +138,6 @@ class LsResult:
         if self.names is None or name not in self.names:
             raise KeyError(f"no parameter named {name!r} (names: {self.names})")
         return self.names.index(name)
-
-    def to_dict(self) -> dict:
-        """JSON/YAML-friendly dict: per-parameter value/std plus n, p, sigma2, residual_std."""
-        names = self.names or tuple(f"theta_{i}" for i in range(self.p))
-        return {
-            "parameters": {
-                nm: {"value": float(v), "std": float(s)}
-                for nm, v, s in zip(names, self.theta, self.std)
-            },
-            "n": int(self.n),
-            "p": int(self.p),
-            "sigma2": float(self.sigma2),
-            "residual_std": self.residual_std,
-        }
 
 
 class _Param:
@@ -189,16 +175,6 @@ class DragFit:
     bias = _Param("Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net "
                    "buoyancy in heave).")
     bias_std = _Param("Standard deviation of b.")
-
-    def to_dict(self) -> dict:
-        """``{name: value, name_std: std, ..., "n": n, "residual_std": s}`` (plain floats)."""
-        out: dict = {}
-        for nm, v, s in zip(self.ls.names or (), self.ls.theta, self.ls.std):
-            out[nm] = float(v)
-            out[f"{nm}_std"] = float(s)
-        out["n"] = int(self.ls.n)
-        out["residual_std"] = self.ls.residual_std
-        return out
 
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""

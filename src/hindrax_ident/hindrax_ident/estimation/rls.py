@@ -84,7 +84,7 @@ Everything is a few small dense numpy operations per sample (p = 4..6), fast eno
 from __future__ import annotations
 
 from collections import deque
-from typing import Optional, Sequence
+from typing import Optional
 
 import numpy as np
 
@@ -105,7 +105,6 @@ class RecursiveLeastSquares:
             effective memory is about 1 / (1 - lambda) samples.
         initial_covariance: P0 = initial_covariance * I (scalar > 0) or a (p, p) SPD matrix.
         initial_theta: optional (p,) start value (default zeros).
-        names: optional p parameter names (for :meth:`to_dict`).
         max_covariance: upper bound on the eigenvalues of P (anti wind-up); ``None`` (default)
             means the largest eigenvalue of P0; pass ``float('inf')`` to disable bounding.
         directional: directional forgetting instead of exponential (module docstring).
@@ -121,7 +120,6 @@ class RecursiveLeastSquares:
 
     def __init__(self, n_params: int, forgetting: float = 0.995,
                  initial_covariance=1e3, initial_theta=None,
-                 names: Optional[Sequence[str]] = None,
                  max_covariance: Optional[float] = None, directional: bool = False,
                  min_excitation: float = 0.0, lower_bounds=None,
                  change_threshold: Optional[float] = None, change_samples: int = 50):
@@ -156,11 +154,6 @@ class RecursiveLeastSquares:
             if theta0.size != self._p:
                 raise EstimationError(f"initial_theta must have {self._p} entries")
         self._theta0 = theta0.copy()
-        if names is not None:
-            names = tuple(str(s) for s in names)
-            if len(names) != self._p:
-                raise EstimationError(f"names has {len(names)} entries for {self._p} parameters")
-        self.names = names
         self.directional = bool(directional)
         self.min_excitation = float(min_excitation)
         if not (0.0 <= self.min_excitation <= 1.0):
@@ -444,17 +437,3 @@ class RecursiveLeastSquares:
     def covariance_resets(self) -> int:
         """Number of :meth:`reset_covariance` calls."""
         return self._covariance_resets
-
-    def to_dict(self) -> dict:
-        """Plain-float snapshot: parameters (value/std), n_samples, sigma2, excitation."""
-        names = self.names or tuple(f"theta_{i}" for i in range(self._p))
-        std = self.std
-        return {
-            "parameters": {nm: {"value": float(v), "std": float(s)}
-                           for nm, v, s in zip(names, self.theta, std)},
-            "n_samples": self._n,
-            "forgetting": self._lambda,
-            "sigma2": self.sigma2,
-            "excitation": self.excitation,
-            "excitation_normalised": self.excitation_normalised,
-        }

@@ -33,7 +33,7 @@ accelerations (force / inertia). [Hindrax-Drag]'s heave runs never became steady
 
 from __future__ import annotations
 
-from dataclasses import dataclass, asdict
+from dataclasses import dataclass
 from typing import List, Tuple
 
 import numpy as np
@@ -69,16 +69,6 @@ class SteadyWindow:
     force_mean: float
     force_std: float
     n: int
-
-    @property
-    def duration_s(self) -> float:
-        """t_stop_s - t_start_s."""
-        return self.t_stop_s - self.t_start_s
-
-    def to_dict(self) -> dict:
-        """Plain dict of the fields (JSON/YAML friendly)."""
-        return {k: (int(v) if isinstance(v, (int, np.integer)) else float(v))
-                for k, v in asdict(self).items()}
 
 
 def constant_force_segments(force, force_tolerance: float = 0.05) -> List[Tuple[int, int]]:

@@ -99,7 +99,7 @@ def online_rls(cfg: VehicleConfig, dof: str) -> RecursiveLeastSquares:
         theta0, p0 = prior[0], np.diag((prior[1] / RLS_PRIOR_NOISE_STD[dof]) ** 2)
     return RecursiveLeastSquares(
         len(names), forgetting=float(cfg.identification.forgetting_factor), initial_covariance=p0,
-        initial_theta=theta0, names=names, directional=bool(rls_setting(cfg, "directional_forgetting")),
+        initial_theta=theta0, directional=bool(rls_setting(cfg, "directional_forgetting")),
         min_excitation=float(rls_setting(cfg, "min_excitation")),
         lower_bounds=[math.nan if n == "bias" else 0.0 for n in names],
         change_threshold=thr if thr > 1.0 else None,
