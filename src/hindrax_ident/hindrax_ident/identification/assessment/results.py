@@ -146,9 +146,8 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
                   calibration: Mapping[str, Any] | None = None) -> dict:
     """The identification.yaml document from :class:`~..fit.dof_model.DofIdentification` objects (per DOF).
 
-    The intervals are the honest ones of :func:`~.verdicts.apply_verdicts` (fit covariance + thrust-curve
-    uncertainty, Student t on the independent segments; applied here if not yet), each parameter with ``std_fit``
-    (the fit alone), ``verdict`` (trusted | suspect) and ``reasons``; each DOF with ``verdict`` and ``reasons``.
+    The intervals, verdicts and reasons are :func:`~.verdicts.apply_verdicts`' (applied here if not
+    yet; the schema in the module docstring).
 
     Before the verdicts the empirical priors (``identification.prior_std_rel``) and, with ``calibration`` (the
     record's calibration steps; the identifications then come from the record scaled by
@@ -404,10 +403,8 @@ def _param_entries(r: Any, a: dict) -> dict:
         else:
             entries[name] = put(i, units.get(name, ""))
     # damping terms the chosen model leaves out: 0 exactly in that model
-    wanted = (["quadratic_damping_positive", "quadratic_damping_negative", "linear_damping_positive",
-               "linear_damping_negative"] if r.dof == "heave" else ["quadratic_damping", "linear_damping"])
-    for n in wanted:
-        if n not in entries:
+    for n in REQUIRED_PARAMETERS(r.dof):
+        if "damping" in n and n not in entries:
             no_model = a["verdict"] == NO_MODEL_VERDICT
             entries[n] = {"value": 0.0, "std": 0.0, "unit": units.get(n, ""), "ci95": [0.0, 0.0],
                           "model_term": "excluded", "verdict": "suspect" if no_model else "trusted",
