@@ -12,8 +12,10 @@ This module is the offline estimation core of the identification package:
   both signs of the velocity.
 
 Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a
-rank diagnosis we can turn into a clear error; we use an SVD of the column-equilibrated
-regressor (numerically equivalent to lstsq) and build the covariance from the same SVD.
+rank diagnosis we can turn into a clear error; we use an SVD of the regressor with its columns
+scaled to unit norm (numerically equivalent to lstsq; regressors of very different magnitudes,
+such as P^3 and 1 of a thruster curve, then trigger no false rank deficiency) and build the
+covariance from the same SVD, mapped back exactly to the original columns.
 
 The module also hosts :class:`EstimationError` and the small input-validation helpers shared
 by the other estimation modules (one place, no copy-paste).
@@ -186,12 +188,8 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
     """Ordinary least squares with parameter covariance ([Hindrax-Drag] eqs. 4-8).
 
     theta = (X^T X)^-1 X^T y (eq. 6), sigma2 = |y - X theta|^2 / (n - p) (eq. 8),
-    covariance = sigma2 (X^T X)^-1 and std = sqrt(diag(covariance)) (eq. 7).
-
-    Numerics: the columns of X are scaled to unit Euclidean norm before an SVD (column
-    equilibration), so regressors with very different magnitudes (e.g. P^3 and 1 for thruster
-    curves) do not trigger false rank deficiency; theta and the covariance are mapped back
-    exactly to the original columns.
+    covariance = sigma2 (X^T X)^-1 and std = sqrt(diag(covariance)) (eq. 7); numerics in the
+    module docstring.
 
     Args:
         X: (n, p) regressor matrix (finite).
@@ -253,8 +251,7 @@ def _drag_regressors(v: np.ndarray) -> np.ndarray:
 def fit_drag(velocity, force) -> DragFit:
     """Fit [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, by least squares (eqs. 3-8).
 
-    The regressor row is [|v| v, v, 1]: eq. 3 prints x^2, but eq. 2 and its text use |v| v to
-    keep the sign, which is what we fit (see module docstring).
+    The regressor row is [|v| v, v, 1], not eq. 3's x^2 (module docstring).
 
     Args:
         velocity: (n,) steady velocity samples in m/s (rad/s for roll/pitch/yaw), body frame.

@@ -313,11 +313,6 @@ class RecursiveLeastSquares:
 
     # ------------------------------------------------------------------ estimates
     @property
-    def n_params(self) -> int:
-        """Number of parameters p."""
-        return self._p
-
-    @property
     def theta(self) -> np.ndarray:
         """(p,) current estimate (copy), constrained to the lower bounds when given (module docstring)."""
         if self._lb is None:

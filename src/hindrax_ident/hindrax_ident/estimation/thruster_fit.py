@@ -168,10 +168,8 @@ class ThrusterCurveFit:
         return float(out[0]) if P.ndim == 0 else out.reshape(P.shape)
 
     def relative_std(self) -> Tuple[float, float]:
-        """(negative, positive) :meth:`CubicFit.relative_std`.
-
-        The value for ``thrusters.thrust_fit_uncertainty_rel``.
-        """
+        """(negative, positive) :meth:`CubicFit.relative_std`, the value for
+        ``thrusters.thrust_fit_uncertainty_rel``."""
         return (self.negative.relative_std(), self.positive.relative_std())
 
     def to_dict(self) -> dict:
@@ -231,7 +229,7 @@ def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
         deadband_us: drop samples with neutral_tolerance_us < |P - neutral| <= deadband_us.
 
     Returns:
-        :class:`ThrusterCurveFit`; ``.to_dict()`` gives ``{"negative": {...}, "positive": {...}}``.
+        :class:`ThrusterCurveFit`.
 
     Raises:
         EstimationError: bad input or too few samples on one side (see :func:`fit_cubic`).
