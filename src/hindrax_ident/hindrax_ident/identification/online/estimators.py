@@ -32,10 +32,9 @@ __all__ = ["OnlineDofEstimator", "online_rls", "rls_setting", "rls_prior"]
 #: Online RLS defaults when the vehicle file omits ``identification.rls_*`` (docs/identification.md §1.D).
 RLS_DEFAULTS = {"directional_forgetting": True, "min_excitation": 0.001, "change_threshold": 6.0,
                 "change_window_s": 10.0, "prior_std_rel": 1.0}
-#: Reference force noise (N; N m for roll, pitch, yaw) that scales the prior std into the RLS's P0 = diag(std^2) /
-#: sigma_ref^2 (P is the inverse information without sigma^2). The online residual std measured in a no-disturbance
-#: campaign (seed 1, 3 levels) was 1.9-2.7 N and 0.15-0.29 N m; taking about half of it makes the prior weaker than
-#: its stated std, never stronger.
+#: Reference force noise (N; N m for roll, pitch, yaw) that scales the prior std into the RLS's
+#: P0 = diag(std^2) / sigma_ref^2 (P is the inverse information without sigma^2): about half the
+#: online residual std of a campaign without disturbances: the prior is never stronger than stated.
 RLS_PRIOR_NOISE_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pitch": 0.1, "yaw": 0.1}
 #: Prior 1-sigma of the bias (N; N m), centred on the expected bias (0; heave: the net buoyancy).
 RLS_PRIOR_BIAS_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pitch": 0.1, "yaw": 0.1}

@@ -522,15 +522,9 @@ class Executive:
         self._last_level = (dof, i)
         return dof, i, len(ladder), float(ctx.level)
 
-    def progress_fraction(self) -> float:
-        """Fraction 0-1 of the campaign done: DOFs finished plus the middle of the current level."""
-        n = max(1, len(self.dofs))
-        dof, i, count, _ = self.level_position()
-        inner = (i + 0.5) / count if (dof and count and dof not in self.windows) else 0.0
-        return float(min(1.0, (len(self.windows) + inner) / n))
-
     def status(self) -> ExecutiveStatus:
-        """:class:`ExecutiveStatus` of the current tick."""
+        """:class:`ExecutiveStatus` of the current tick; progress: the DOFs finished plus the middle
+        of the current level."""
         dof, i, count, cmd = self.level_position()
         if self.finished:
             phase = "aborted" if self.aborted else "done"
@@ -539,7 +533,9 @@ class Executive:
         else:
             phase = "running" if self.ctx.run >= 0 else ("returning" if dof else "positioning")
             message = STILL_MESSAGE if self.state.collecting_gyro_bias else self.message
-        progress = 1.0 if phase == "done" else self.progress_fraction()
+        inner = (i + 0.5) / count if (dof and count and dof not in self.windows) else 0.0
+        done = (len(self.windows) + inner) / max(1, len(self.dofs))
+        progress = 1.0 if phase == "done" else min(1.0, done)
         return ExecutiveStatus(phase, dof, i, count, cmd, progress, message)
 
     # ------------------------------------------------------------------ checks

@@ -68,8 +68,7 @@ class BroadbandRun(DofStep):
             half = 0.5 * math.pi
         else:
             # half the test angle: near the roll/pitch natural frequency (inside the band) the restoring moment
-            # resonates and the 10 Hz attitude lags, so the braking guard needs the room (full angle overshot the
-            # pitch limit in a first in-process trial)
+            # resonates and the 10 Hz attitude lags, so the braking guard needs the room
             half = 0.5 * float(tilt_test_angle_rad(ctx.cfg, dof))
         shaping = BoxShaping(half, m, lim, math.pi * band.f_min_hz, ctx.tick_s)
         return sig, band, shaping
