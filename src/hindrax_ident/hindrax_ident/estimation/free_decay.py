@@ -703,15 +703,13 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
                                    output="acceleration",
                                    initial_total_inertia=res.mass_kg + res.added_mass_kg,
                                    initial_linear_damping=res.damping_n_s_per_m)
-    return {
-        "linear_damping_n_s_per_m": fit.linear_damping,
-        "linear_damping_n_s_per_m_std": fit.linear_damping_std,
-        "quadratic_damping_n_s2_per_m2": fit.quadratic_damping,
-        "quadratic_damping_n_s2_per_m2_std": fit.quadratic_damping_std,
-        "added_mass_ode_kg": fit.added_inertia,
-        "added_mass_ode_kg_std": fit.added_inertia_std,
-        "ode_rms_residual_m_s2": fit.rms_residual,
-    }
+    out = {}
+    for key, name in (("linear_damping_n_s_per_m", "linear_damping"),
+                      ("quadratic_damping_n_s2_per_m2", "quadratic_damping"),
+                      ("added_mass_ode_kg", "added_inertia")):
+        out[key], out[f"{key}_std"] = getattr(fit, name), getattr(fit, f"{name}_std")
+    out["ode_rms_residual_m_s2"] = fit.rms_residual
+    return out
 
 
 # Inclining test: hydrostatic restoring stiffness in roll/pitch from a known moment

@@ -53,17 +53,9 @@ def positive(value: float, name: str) -> float:
 
 
 def as_float_array(value, name: str, ndim: int, allow_nan: bool = False) -> np.ndarray:
-    """Convert ``value`` to a float ndarray with ``ndim`` dimensions or raise EstimationError.
-
-    Args:
-        value: array-like input.
-        name: argument name used in the error message.
-        ndim: required number of dimensions (1 or 2).
-        allow_nan: when False, NaN and +-inf raise; when True, NaN is accepted (inf never is).
-
-    Raises:
-        EstimationError: not numeric, wrong number of dimensions, or non-finite values.
-    """
+    """``value`` as a float ndarray of ``ndim`` dimensions (1 or 2); EstimationError naming ``name``
+    when it is not numeric, has another number of dimensions, or holds non-finite values (NaN is
+    accepted with ``allow_nan``, inf never)."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -87,11 +79,8 @@ def check_same_length(**arrays: np.ndarray) -> int:
 
 
 def check_time_vector(t, name: str = "t_s", min_samples: int = 2) -> np.ndarray:
-    """Validate a time vector: 1-D, finite, strictly increasing, at least ``min_samples`` long.
-
-    Raises:
-        EstimationError: on any violation.
-    """
+    """``t`` checked as a time vector: 1-D, finite, strictly increasing, at least ``min_samples``
+    long; EstimationError naming ``name`` otherwise."""
     t = as_float_array(t, name, 1)
     if t.size < min_samples:
         raise EstimationError(f"{name}: need at least {min_samples} samples, got {t.size}")
