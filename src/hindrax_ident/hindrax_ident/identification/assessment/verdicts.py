@@ -502,8 +502,7 @@ def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg:
     the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
     suite.
     """
-    std = np.asarray(converged_std, dtype=float).copy()
-    theta = np.asarray(theta, dtype=float)
+    std = np.asarray(converged_std, dtype=float)
     keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
                     dtype=bool)
     thrust = np.diag(thrust_covariance(dof, names, theta, declared_rel(cfg)))

@@ -112,8 +112,7 @@ class OnlineDofEstimator:
     :class:`~..vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
     one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
     (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
-    first time the inertia, quadratic damping and restoring have std <= ``identification.converged_relative_std``
-    |value| and the bias std <= 0.1 N (0.02 N m) (:meth:`_converged`).
+    first time :meth:`_converged` holds.
     """
 
     _DEVICE = {"dvl": "dvl75", "depth": "ms5837", "gyro": "icm20948_gyro"}
@@ -181,8 +180,9 @@ class OnlineDofEstimator:
                 self.converged_at_s = t_s
 
     def _converged(self, std: np.ndarray) -> bool:
-        """Inertia, quadratic damping and restoring: std <= rel_tol |value|; bias: std <= 0.1 N (0.02 N m).
-        Linear damping is left out (small and weakly excited at the speeds of [Hindrax-Drag] Table 3)."""
+        """Inertia, quadratic damping and restoring: std <= ``converged_relative_std`` |value|;
+        bias: std <= 0.1 N (0.02 N m); after 500 samples. Linear damping is left out (small and
+        weakly excited at the speeds of [Hindrax-Drag] Table 3)."""
         if self.rls.n_samples < 500 or not np.all(np.isfinite(std)):
             return False
         th = self.rls.theta
@@ -196,9 +196,8 @@ class OnlineDofEstimator:
         return True
 
     def published_std(self) -> np.ndarray:
-        """The std to publish (:func:`~.verdicts.rls_published_std` of :meth:`converged_std`): damping parameters
-        of the DOFs the scenario suite measured, widened by the thrust uncertainty; NaN = not converged / not
-        trusted."""
+        """The std to publish: :func:`~.verdicts.rls_published_std` of :meth:`converged_std`
+        (NaN: not published)."""
         return rls_published_std(self.dof, self.names, self.rls.theta, self.converged_std(), self.cfg)
 
     def converged_std(self) -> np.ndarray:

@@ -161,13 +161,12 @@ def ordered_samples(samples: Iterable[tuple[str, Any]], not_before_s: float = -m
     """Samples sorted by stamp (stable), each stamped before ``not_before_s`` moved to it (a copy), those stamped
     after ``not_after_s`` or before ``drop_before_s`` (s) left out.
 
-    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion start, the
-    DVL time of validity): the online filters have already been predicted to the previous tick, ``not_before_s``;
-    the messages and the bag keep the original stamps, which the offline analysis uses. A sample stamped after
-    ``not_after_s`` cannot be valid (a stamp from the future of the node's clock: a publisher on another clock, such
-    as a second graph on the same ROS domain on the system clock while this one runs on simulated time), and so
-    cannot one stamped before ``drop_before_s`` (stale far beyond any sensor latency, or that same graph seen from
-    the other side); the caller counts the samples left out (``len(samples) - len(result)``)."""
+    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion
+    start, the DVL time of validity), the online filters have already been predicted to the previous
+    tick, ``not_before_s``; the messages and the bag keep the original stamps. Samples outside
+    [``drop_before_s``, ``not_after_s``] cannot be valid (a publisher on another clock, such as a
+    second graph on the same ROS domain; :mod:`.core`'s tolerances); the caller counts those left
+    out (``len(samples) - len(result)``)."""
     out = []
     for dev, s in sorted(samples, key=lambda ds: ds[1].stamp_s):
         if not drop_before_s <= s.stamp_s <= not_after_s:

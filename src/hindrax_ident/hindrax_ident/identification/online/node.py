@@ -124,10 +124,10 @@ __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
     """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
 
-    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`: a number only where the scenario suite
-    showed the online value's interval can cover the truth (converged damping of surge, sway, heave and yaw,
-    widened by the declared thrust uncertainty, :func:`~..assessment.verdicts.rls_published_std`); -1 means "not
-    converged or not trusted" (the message's float64 std has no NaN convention). ``covariance`` stays the raw RLS one.
+    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`
+    (:func:`~..assessment.verdicts.rls_published_std`), -1 where that is NaN ("not converged or
+    not trusted": the message's float64 std has no NaN convention). ``covariance`` stays the raw
+    RLS one.
     """
     rls = estimator.rls
     units = parameter_units(dof)
