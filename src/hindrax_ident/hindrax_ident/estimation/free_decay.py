@@ -250,14 +250,10 @@ def _alternating_extrema(sx: np.ndarray, distance: int):
     ext = sorted([(int(i), 1) for i in peaks] + [(int(i), -1) for i in troughs])
     seq: list = []
     for idx, kind in ext:
-        if not seq:
-            if kind == 1:
-                seq.append((idx, kind))
-            continue
-        if kind == seq[-1][1]:  # two of a kind in a row: keep the more extreme one
+        if seq and kind == seq[-1][1]:  # two of a kind in a row: keep the more extreme one
             if kind * sx[idx] > kind * sx[seq[-1][0]]:
                 seq[-1] = (idx, kind)
-        else:
+        elif seq or kind == 1:  # the sequence starts with a peak
             seq.append((idx, kind))
     return seq
 

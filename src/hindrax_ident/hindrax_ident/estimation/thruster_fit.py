@@ -138,13 +138,11 @@ class CubicFit:
         """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us,
         pulse_width_max_us}."""
         keys = ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std")
-        out = {k: float(getattr(self, k)) for k in keys}
-        out["n"] = int(self.n)
-        out["residual_std_n"] = float(self.residual_std_n)
-        out["thrust_relative_std"] = self.relative_std()
-        out["pulse_width_min_us"] = float(self.pulse_width_min_us)
-        out["pulse_width_max_us"] = float(self.pulse_width_max_us)
-        return out
+        return {**{k: float(getattr(self, k)) for k in keys}, "n": int(self.n),
+                "residual_std_n": float(self.residual_std_n),
+                "thrust_relative_std": self.relative_std(),
+                "pulse_width_min_us": float(self.pulse_width_min_us),
+                "pulse_width_max_us": float(self.pulse_width_max_us)}
 
 
 @dataclass(frozen=True, eq=False)

@@ -342,7 +342,9 @@ def assessment(r: Any, cfg: VehicleConfig | None) -> dict:
     (:func:`.posterior.prior_posterior`, ``identification.prior_std_rel``), the thrust-curve covariance
     (:func:`...vehicle.uncertainty.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
     degrees of freedom; the expected bias 0 (heave: the vehicle file's net buoyancy, unknown without one); no
-    whiteness check (its threshold is the designed campaign's). ``added_mass`` with a vehicle file. Returns
+    whiteness check (its threshold is the designed campaign's, docs/identification.md §7 step 6:
+    here the CV nrmse judges the model and the intervals carry the residual correlation).
+    ``added_mass`` with a vehicle file. Returns
     :func:`..assessment.verdicts.assess`'s dict with ``fit_values`` (the core's, before the priors) and ``priors``
     ({name: [mean, std]})."""
     c = r.core
@@ -353,10 +355,8 @@ def assessment(r: Any, cfg: VehicleConfig | None) -> dict:
         theta, cov = prior_posterior(c.names, theta, cov, pri)
     expected = (None if cfg is None else float(cfg.buoyancy_n - cfg.weight_n)) if r.dof == "heave" else 0.0
     ev = FitEvidence(dof=r.dof, names=list(c.names), theta=theta, cov=cov, t_dof=int(c.covariance.t_dof),
-                     units=_units(r.dof, c.names),
-                     # the whiteness threshold is the designed campaign's (docs/identification.md §7 step 6); here
-                     # the CV nrmse judges the model, and the intervals carry the residual correlation
-                     residual_rho=None, expected_bias=expected, **core_evidence(c))
+                     units=_units(r.dof, c.names), residual_rho=None, expected_bias=expected,
+                     **core_evidence(c))
     a = assess(ev, declared_rel(cfg))
     if cfg is not None:
         with_added_mass(a, a["parameters"]["inertia"]["value"] - rigid_inertia(cfg, r.dof))
