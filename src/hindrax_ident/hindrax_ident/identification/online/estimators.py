@@ -172,10 +172,9 @@ class OnlineDofEstimator:
         self._n += 1
         if self._n % self.history_every == 0:
             std = self.rls.std
-            self.history["t"].append(t_s)
-            self.history["theta"].append(self.rls.theta.copy())
-            self.history["std"].append(std.copy())
-            self.history["excitation"].append(self.rls.excitation_normalised)
+            row = (t_s, self.rls.theta.copy(), std.copy(), self.rls.excitation_normalised)
+            for column, value in zip(self.history.values(), row):  # t, theta, std, excitation
+                column.append(value)
             if self.converged_at_s is None and self._converged(std):
                 self.converged_at_s = t_s
 

@@ -273,11 +273,8 @@ class IdentificationNode(VehicleNode):
         return GoalResponse.ACCEPT
 
     def _on_accepted(self, goal_handle) -> None:
-        """Accepted goal: set it up and return; the control timer runs it (once the ESC reports armed, within
-        :data:`~.core.ARMED_GRACE_S`) and ends it (:meth:`_end_goal`).
-
-        The goal is not executed here: its action state stays ACCEPTED while the campaign runs and becomes
-        EXECUTING, then SUCCEEDED, ABORTED or CANCELED when it ends (module docstring, "Action execution")."""
+        """Accepted goal: set it up and return, not executed here (module docstring, "Action
+        execution"); the control timer runs it and ends it (:meth:`_end_goal`)."""
         self.get_logger().info(self.core.accept(goal_handle, goal_handle.request, self._now_s()))
         self._set_active(True)
 
