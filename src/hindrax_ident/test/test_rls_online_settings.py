@@ -11,7 +11,8 @@ import pytest
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.estimation.priors import priors_from_config
 from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.fit.dof_model import parameter_names, rigid_inertia, truth_parameters
+from hindrax_ident.identification.fit.dof_model import (parameter_names, rigid_inertia,
+                                                        truth_parameters)
 from hindrax_ident.identification.online.estimators import online_rls
 
 
