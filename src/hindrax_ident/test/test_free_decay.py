@@ -310,7 +310,7 @@ def test_free_decay_result_to_dict_and_envelope():
         assert key in d
     assert d["c_m"] == pytest.approx(d["added_mass_kg"] / (RHO * MODEL_VOLUME_M3))
     assert isinstance(d["peaks"], list) and len(d["peaks"]) == r.n_periods + 1
-    assert "t_s" not in d and len(r.to_dict(include_signals=True)["t_s"]) == r.t_s.size
+    assert "t_s" not in d
     # envelope passes through the peak amplitudes (exponential decay of a linear oscillator)
     env_at_peaks = r.envelope_m[r.peaks]
     np.testing.assert_allclose(env_at_peaks, r.peak_amplitudes_m, rtol=0.05)

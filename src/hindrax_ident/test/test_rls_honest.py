@@ -11,7 +11,7 @@ from hindrax_ident.estimation.rls import RecursiveLeastSquares
 
 def _feed(rls, rng, theta, n, cols=(0, 1), noise=0.05):
     for _ in range(n):
-        phi = np.zeros(rls.n_params)
+        phi = np.zeros(len(theta))
         for c in cols:
             phi[c] = rng.normal()
         rls.update(phi, float(phi @ theta) + rng.normal(0.0, noise))

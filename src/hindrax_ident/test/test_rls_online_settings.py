@@ -11,7 +11,8 @@ import pytest
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.estimation.priors import priors_from_config
 from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.fit.dof_model import rigid_inertia, truth_parameters
+from hindrax_ident.identification.fit.dof_model import (parameter_names, rigid_inertia,
+                                                        truth_parameters)
 from hindrax_ident.identification.online.estimators import online_rls
 
 
@@ -42,7 +43,7 @@ def test_the_start_is_the_empirical_prior_with_the_stated_weight(cfg):
     for k, dof in enumerate(("surge", "sway", "heave", "roll", "pitch", "yaw")):
         r = online_rls(cfg, dof)
         am, lin, quad = pri["added_mass"][k], pri["linear_damping"][k], pri["quadratic_damping"][k]
-        th = dict(zip(r.names, r.theta))
+        th = dict(zip(parameter_names(dof), r.theta))
         assert th["inertia"] == pytest.approx(rigid_inertia(cfg, dof) + am)
         for n, v in th.items():
             if n.startswith("quadratic"):

@@ -46,7 +46,7 @@ def test_one_window_per_level_after_the_transient():
         assert isinstance(w, SteadyWindow)
         t0 = k * HOLD_S
         assert t0 <= w.t_start_s and w.t_stop_s < t0 + HOLD_S
-        assert w.duration_s >= 2.0
+        assert w.t_stop_s - w.t_start_s >= 2.0
         assert w.force_mean == pytest.approx(level) and w.force_std == 0.0
         assert w.velocity_mean == pytest.approx(steady_velocity(level), abs=0.005)
         assert w.velocity_std <= 0.01 and abs(w.velocity_slope) <= 0.01
@@ -59,7 +59,6 @@ def test_one_window_per_level_after_the_transient():
             # transient has not decayed below 0.036 m/s in the first 0.3 s
             assert w.t_start_s > t0 + 0.3
         assert w.n == w.stop - w.start
-        assert w.to_dict()["start"] == w.start
 
 
 def test_steady_state_ls_on_the_windows_recovers_table3_surge():

@@ -9,8 +9,7 @@ implement (and what we cannot verify against the paper):
   C_D = 2 k_q / (rho A_p), A_p the projected area normal to the motion (m^2). Valid when C_D
   does not depend on Re (prisms above Re ~ 1e4, docs/identification.md §1.A flow physics).
   :func:`drag_coefficient` propagates the std of k_q linearly. Rotational DOFs get none:
-  [Hindrax-Drag]
-  defines neither their area nor their radius.
+  [Hindrax-Drag] defines neither their area nor their radius.
 * Reynolds number Re = U L / nu ([T] eq. 2.60; [Hindrax-AM] section 4 uses U_m V^(1/3) / nu with
   nu = 1.01e-6 m^2/s). Default characteristic length: L = V^(1/3) ([Hindrax-AM] eq. 10 choice;
   0.2483 m for the Hindrax prototype). [Hindrax-Drag] does not state its L;

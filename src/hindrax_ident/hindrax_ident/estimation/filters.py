@@ -11,10 +11,10 @@ acceleration driven by continuous white jerk of power spectral density ``jerk_ps
     F(dt) = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]
     Q(dt) = jerk_psd * [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]]
 
-(what ``filterpy.common.Q_continuous_white_noise(3, dt, jerk_psd)`` returns, written out: filterpy builds it
-through ``scipy.linalg.block_diag``, about 90 us per call against 7 us here, and the online filters of the
-identification node rebuild Q for every IMU sample). F and Q are rebuilt from every sample interval, so
-non-uniform sampling is handled exactly. Measurements:
+(``filterpy.common.Q_continuous_white_noise(3, dt, jerk_psd)`` written out: the online filters
+rebuild Q for every IMU sample, and filterpy's ``scipy.linalg.block_diag`` costs about 13 times
+more). F and Q are rebuilt from every sample interval, so non-uniform sampling is handled exactly.
+Measurements:
 
 * ``measured='position'``: H = [1, 0, 0] (altitude/depth in m, roll/pitch/yaw angle in rad);
 * ``measured='velocity'``: H = [0, 1, 0] (DVL velocity in m/s, gyro rate in rad/s); the
@@ -27,9 +27,9 @@ Tuning: ``jerk_psd`` has units (measured unit)^2/s^5 (e.g. m^2/s^5); the filter 
 grows roughly as (jerk_psd / measurement_std^2)^(1/6) for position and ^(1/4) for velocity
 measurements. ``measurement_std`` is the sensor noise standard deviation in the measured unit.
 
-The offline smoother uses filterpy's ``KalmanFilter`` (batch_filter/rts_smoother); the online filter steps with
-:class:`~.kalman.LinearKalman` (filterpy's predict/update equations; why: that module's docstring, 66 MB per process);
-this module only builds F, Q, H, R and handles time stamps and missing data.
+The offline smoother uses filterpy's ``KalmanFilter``; the online filter steps with
+:class:`~.kalman.LinearKalman` (why: that module's docstring). This module builds F, Q, H, R and
+handles time stamps and missing data.
 """
 
 from __future__ import annotations
@@ -90,10 +90,6 @@ def _initial_state(measured: str, z0: float, measurement_std: float,
 
 def _measurement_matrix(measured: str) -> np.ndarray:
     return np.array([[1.0, 0.0, 0.0]]) if measured == "position" else np.array([[0.0, 1.0, 0.0]])
-
-
-def _is_missing(z) -> bool:
-    return z is None or not np.isfinite(float(z))
 
 
 class KinematicKalmanFilter:
@@ -158,7 +154,7 @@ class KinematicKalmanFilter:
         t = float(t_s)
         if not np.isfinite(t):
             raise EstimationError(f"t_s must be finite, got {t_s}")
-        missing = _is_missing(z)
+        missing = z is None or not np.isfinite(float(z))
         if not self._initialised:
             if missing:
                 return (np.nan, np.nan, np.nan)

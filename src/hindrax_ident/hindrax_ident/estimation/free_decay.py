@@ -4,23 +4,8 @@
 from an initial displacement A and records its acceleration at 330 Hz for 10 s. The model is
 the 1-DOF damped oscillator m x'' + c x' + k_eq x = 0 with m = m_b + m_ad (eq. 1). From the
 displacement (double integral of the acceleration) it measures the damped frequency omega_d and
-the log decrement delta, and computes:
-
-    eq. 2   omega_d = omega_n sqrt(1 - zeta^2)
-    eq. 3   delta = ln(x_1 / x_2) = 2 pi zeta / sqrt(1 - zeta^2)
-            -> zeta = delta / sqrt(4 pi^2 + delta^2)            (docs/identification.md §1.D)
-    eq. 4   omega_n = sqrt(k_eq / (m_b + m_ad))
-    eq. 5   m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b           ("exact", based on omega_d)
-    eq. 6   c = 2 zeta sqrt(k_eq (m_b + m_ad))                    (N s/m; [Hindrax-AM] prints N.m.s)
-    eq. 7   m_ad = k_eq / omega_n^2 - m_b with damping omitted, i.e. the measured frequency taken
-            as omega_n: m_ad = k_eq / omega_d^2 - m_b ("simplified"; this is how the sixth
-            column of [Hindrax-AM] Tables 3-5 is computed, e.g. surge 1127.7 / 36.7824^2 - 0.39
-            = 0.4435 kg)
-    eq. 8   C_M = m_ad / (rho V)
-    eq. 9   KC = 2 pi A / D with D = V^(1/3) (section 3) and A = the initial displacement
-            (in :func:`analyse_free_decay`: the first peak, i.e. the release displacement)
-    eq. 11  error % = (m_ad,eq7 - m_ad,eq5) / m_ad,eq5 * 100
-    Re = U_m V^(1/3) / nu, nu = 1.01e-6 m^2/s (section 4)
+the log decrement delta; the closed-form relations below (eqs. 2-11, each function names its
+equation; docs/identification.md §2.2) give the added mass, damping, C_M, KC and Re.
 
 Signal processing (our choices; [Hindrax-AM] only says "double integration" in MATLAB):
 
@@ -147,7 +132,7 @@ def added_mass_error_percent(added_mass_simplified_kg: float, added_mass_exact_k
 
 
 def damping_coefficient(zeta: float, stiffness_n_per_m: float, total_mass_kg: float) -> float:
-    """c = 2 zeta sqrt(k_eq m) in N s/m, m = m_b + m_ad ([Hindrax-AM] eq. 6)."""
+    """c = 2 zeta sqrt(k_eq m) in N s/m ([Hindrax-AM] prints N.m.s), m = m_b + m_ad (eq. 6)."""
     return 2.0 * _zeta(zeta) * np.sqrt(positive(stiffness_n_per_m, "stiffness_n_per_m")
                                        * positive(total_mass_kg, "total_mass_kg"))
 
@@ -181,11 +166,6 @@ def _highpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, padtype: str) -> np
 def displacement_from_acceleration(t_s, acceleration_m_s2, highpass_hz: Optional[float] = None,
                                    remove_bias: bool = True) -> Tuple[np.ndarray, np.ndarray]:
     """Displacement and velocity by double integration with drift removal (module docstring).
-
-    Steps: subtract the trapezoid-weighted mean acceleration (bias; exact for a record from rest
-    to rest) -> cumulative trapezoid to velocity (0 at the first sample) -> optional zero-phase
-    high-pass (Butterworth order 2, odd padding) -> cumulative trapezoid to displacement ->
-    subtract its mean -> optional zero-phase high-pass (even padding).
 
     Args:
         t_s: (n,) strictly increasing times in s (should start at the release, from rest).
@@ -270,14 +250,10 @@ def _alternating_extrema(sx: np.ndarray, distance: int):
     ext = sorted([(int(i), 1) for i in peaks] + [(int(i), -1) for i in troughs])
     seq: list = []
     for idx, kind in ext:
-        if not seq:
-            if kind == 1:
-                seq.append((idx, kind))
-            continue
-        if kind == seq[-1][1]:  # two of a kind in a row: keep the more extreme one
+        if seq and kind == seq[-1][1]:  # two of a kind in a row: keep the more extreme one
             if kind * sx[idx] > kind * sx[seq[-1][0]]:
                 seq[-1] = (idx, kind)
-        else:
+        elif seq or kind == 1:  # the sequence starts with a peak
             seq.append((idx, kind))
     return seq
 
@@ -335,10 +311,9 @@ class FreeDecayResult:
     velocity_m_s: np.ndarray = field(repr=False)
     envelope_m: np.ndarray = field(repr=False)
 
-    def to_dict(self, include_signals: bool = False) -> dict:
+    def to_dict(self) -> dict:
         """JSON-friendly dict: every scalar attribute (same keys), ``peaks`` (list of indices),
-        ``peak_times_s`` and ``peak_amplitudes_m`` (lists); with ``include_signals`` also the
-        plot arrays as lists."""
+        ``peak_times_s`` and ``peak_amplitudes_m`` (lists)."""
         out: dict[str, Any] = {}
         for f in fields(self):
             if f.repr:  # the scalars (the arrays are repr=False)
@@ -347,9 +322,6 @@ class FreeDecayResult:
         out["peaks"] = [int(i) for i in self.peaks]
         out["peak_times_s"] = [float(x) for x in self.peak_times_s]
         out["peak_amplitudes_m"] = [float(x) for x in self.peak_amplitudes_m]
-        if include_signals:
-            for k in ("t_s", "acceleration_m_s2", "displacement_m", "velocity_m_s", "envelope_m"):
-                out[k] = [float(x) for x in getattr(self, k)]
         return out
 
 
@@ -583,12 +555,10 @@ def _simulate_decay(tt: np.ndarray, theta: np.ndarray, k: float, output: str):
     s = sol.y[2:].reshape(5, 2, -1)            # (param, x|v, time)
     n = tt.size
     J = np.zeros((n, 6))
-    if output == "displacement":
-        y = x + bias
-        J[:, :5] = s[:, 0, :].T
-    elif output == "velocity":
-        y = v + bias
-        J[:, :5] = s[:, 1, :].T
+    if output in ("displacement", "velocity"):
+        j = 0 if output == "displacement" else 1   # state x or v
+        y = sol.y[j] + bias
+        J[:, :5] = s[:, j, :].T
     else:
         f = -(k * x + b1 * v + b2 * np.abs(v) * v) / M
         y = f + bias
@@ -729,15 +699,13 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
                                    output="acceleration",
                                    initial_total_inertia=res.mass_kg + res.added_mass_kg,
                                    initial_linear_damping=res.damping_n_s_per_m)
-    return {
-        "linear_damping_n_s_per_m": fit.linear_damping,
-        "linear_damping_n_s_per_m_std": fit.linear_damping_std,
-        "quadratic_damping_n_s2_per_m2": fit.quadratic_damping,
-        "quadratic_damping_n_s2_per_m2_std": fit.quadratic_damping_std,
-        "added_mass_ode_kg": fit.added_inertia,
-        "added_mass_ode_kg_std": fit.added_inertia_std,
-        "ode_rms_residual_m_s2": fit.rms_residual,
-    }
+    out = {}
+    for key, name in (("linear_damping_n_s_per_m", "linear_damping"),
+                      ("quadratic_damping_n_s2_per_m2", "quadratic_damping"),
+                      ("added_mass_ode_kg", "added_inertia")):
+        out[key], out[f"{key}_std"] = getattr(fit, name), getattr(fit, f"{name}_std")
+    out["ode_rms_residual_m_s2"] = fit.rms_residual
+    return out
 
 
 # Inclining test: hydrostatic restoring stiffness in roll/pitch from a known moment

@@ -2,15 +2,10 @@
 ``KalmanFilter.predict`` / ``KalmanFilter.update`` ([Bar-Shalom2001] §5.2; Joseph-form covariance update, as
 filterpy writes it).
 
-Used by the filters that run in the node processes, sample by sample: the kinematic filters of the identification
-node (:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter`,
-:class:`~hindrax_ident.vehicle.fusion.AccelAidedFilter`) and the controller's floor plane
-(:class:`~hindrax_ident.control.law.FloorEstimator`). The offline smoothers
-(:func:`~hindrax_ident.estimation.filters.smooth_kinematics`, :mod:`hindrax_ident.vehicle.fusion`'s) keep filterpy's
-``batch_filter`` and ``rts_smoother``.
-
-Why our own step for the online filters: importing ``filterpy.kalman`` pulls in ``scipy.stats``,
-``scipy.sparse`` and ``scipy.linalg`` (tens of MB per process) for the two equations below.
+Used by the filters that run in the node processes, sample by sample; the offline smoothers keep
+filterpy's ``batch_filter`` and ``rts_smoother``. Why our own step for the online filters: importing
+``filterpy.kalman`` pulls in ``scipy.stats``, ``scipy.sparse`` and ``scipy.linalg`` (tens of MB per
+process) for the two equations below.
 
 Shapes: state x (n, 1), covariance P (n, n); F, Q (n, n); measurement z (m, 1), H (m, n), R (m, m).
 """

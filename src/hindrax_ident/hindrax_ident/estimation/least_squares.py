@@ -12,8 +12,10 @@ This module is the offline estimation core of the identification package:
   both signs of the velocity.
 
 Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a
-rank diagnosis we can turn into a clear error; we use an SVD of the column-equilibrated
-regressor (numerically equivalent to lstsq) and build the covariance from the same SVD.
+rank diagnosis we can turn into a clear error; we use an SVD of the regressor with its columns
+scaled to unit norm (numerically equivalent to lstsq; regressors of very different magnitudes,
+such as P^3 and 1 of a thruster curve, then trigger no false rank deficiency) and build the
+covariance from the same SVD, mapped back exactly to the original columns.
 
 The module also hosts :class:`EstimationError` and the small input-validation helpers shared
 by the other estimation modules (one place, no copy-paste).
@@ -51,17 +53,9 @@ def positive(value: float, name: str) -> float:
 
 
 def as_float_array(value, name: str, ndim: int, allow_nan: bool = False) -> np.ndarray:
-    """Convert ``value`` to a float ndarray with ``ndim`` dimensions or raise EstimationError.
-
-    Args:
-        value: array-like input.
-        name: argument name used in the error message.
-        ndim: required number of dimensions (1 or 2).
-        allow_nan: when False, NaN and +-inf raise; when True, NaN is accepted (inf never is).
-
-    Raises:
-        EstimationError: not numeric, wrong number of dimensions, or non-finite values.
-    """
+    """``value`` as a float ndarray of ``ndim`` dimensions (1 or 2); EstimationError naming ``name``
+    when it is not numeric, has another number of dimensions, or holds non-finite values (NaN is
+    accepted with ``allow_nan``, inf never)."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -85,11 +79,8 @@ def check_same_length(**arrays: np.ndarray) -> int:
 
 
 def check_time_vector(t, name: str = "t_s", min_samples: int = 2) -> np.ndarray:
-    """Validate a time vector: 1-D, finite, strictly increasing, at least ``min_samples`` long.
-
-    Raises:
-        EstimationError: on any violation.
-    """
+    """``t`` checked as a time vector: 1-D, finite, strictly increasing, at least ``min_samples``
+    long; EstimationError naming ``name`` otherwise."""
     t = as_float_array(t, name, 1)
     if t.size < min_samples:
         raise EstimationError(f"{name}: need at least {min_samples} samples, got {t.size}")
@@ -111,7 +102,7 @@ class LsResult:
         residuals: (n,) y - X theta.
         n: number of samples.
         p: number of parameters.
-        names: optional parameter names (length p), used by :meth:`to_dict`.
+        names: optional parameter names (length p), used by :meth:`index`.
     """
 
     theta: np.ndarray
@@ -138,20 +129,6 @@ class LsResult:
         if self.names is None or name not in self.names:
             raise KeyError(f"no parameter named {name!r} (names: {self.names})")
         return self.names.index(name)
-
-    def to_dict(self) -> dict:
-        """JSON/YAML-friendly dict: per-parameter value/std plus n, p, sigma2, residual_std."""
-        names = self.names or tuple(f"theta_{i}" for i in range(self.p))
-        return {
-            "parameters": {
-                nm: {"value": float(v), "std": float(s)}
-                for nm, v, s in zip(names, self.theta, self.std)
-            },
-            "n": int(self.n),
-            "p": int(self.p),
-            "sigma2": float(self.sigma2),
-            "residual_std": self.residual_std,
-        }
 
 
 class _Param:
@@ -190,16 +167,6 @@ class DragFit:
                    "buoyancy in heave).")
     bias_std = _Param("Standard deviation of b.")
 
-    def to_dict(self) -> dict:
-        """``{name: value, name_std: std, ..., "n": n, "residual_std": s}`` (plain floats)."""
-        out: dict = {}
-        for nm, v, s in zip(self.ls.names or (), self.ls.theta, self.ls.std):
-            out[nm] = float(v)
-            out[f"{nm}_std"] = float(s)
-        out["n"] = int(self.ls.n)
-        out["residual_std"] = self.ls.residual_std
-        return out
-
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
         return _drag_regressors(np.asarray(velocity, dtype=float)) @ self.ls.theta
@@ -210,12 +177,8 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
     """Ordinary least squares with parameter covariance ([Hindrax-Drag] eqs. 4-8).
 
     theta = (X^T X)^-1 X^T y (eq. 6), sigma2 = |y - X theta|^2 / (n - p) (eq. 8),
-    covariance = sigma2 (X^T X)^-1 and std = sqrt(diag(covariance)) (eq. 7).
-
-    Numerics: the columns of X are scaled to unit Euclidean norm before an SVD (column
-    equilibration), so regressors with very different magnitudes (e.g. P^3 and 1 for thruster
-    curves) do not trigger false rank deficiency; theta and the covariance are mapped back
-    exactly to the original columns.
+    covariance = sigma2 (X^T X)^-1 and std = sqrt(diag(covariance)) (eq. 7); numerics in the
+    module docstring.
 
     Args:
         X: (n, p) regressor matrix (finite).
@@ -277,8 +240,7 @@ def _drag_regressors(v: np.ndarray) -> np.ndarray:
 def fit_drag(velocity, force) -> DragFit:
     """Fit [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, by least squares (eqs. 3-8).
 
-    The regressor row is [|v| v, v, 1]: eq. 3 prints x^2, but eq. 2 and its text use |v| v to
-    keep the sign, which is what we fit (see module docstring).
+    The regressor row is [|v| v, v, 1], not eq. 3's x^2 (module docstring).
 
     Args:
         velocity: (n,) steady velocity samples in m/s (rad/s for roll/pitch/yaw), body frame.

@@ -72,11 +72,6 @@ UNITS = {
 }
 
 
-def _columns(rows: Sequence[Sequence[float]]) -> tuple[list[float], list[float]]:
-    """The two columns (x, y) of a table given as rows."""
-    return [float(r[0]) for r in rows], [float(r[1]) for r in rows]
-
-
 def not_a_knot_spline(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray):
     """The not-a-knot cubic spline through the points (x, y) (MATLAB ``spline``; ``scipy.interpolate.CubicSpline``
     with ``bc_type="not-a-knot"``): a function of a scalar returning a float, extrapolating with the end cubics.
@@ -114,10 +109,12 @@ def not_a_knot_spline(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.n
 
 
 class _Table:
-    """MATLAB ``spline``/``ppval`` on one table column; records out-of-range lookups in ``notes``."""
+    """MATLAB ``spline``/``ppval`` of column ``column`` of a table given as rows against its first
+    column; records out-of-range lookups in ``notes``."""
 
-    def __init__(self, name: str, x: Sequence[float], y: Sequence[float], notes: list):
-        xa, ya = np.asarray(x, float), np.asarray(y, float)
+    def __init__(self, name: str, rows: Sequence[Sequence[float]], notes: list, column: int = 1):
+        xa = np.array([r[0] for r in rows], float)
+        ya = np.array([r[column] for r in rows], float)
         order = np.argsort(xa)
         self.name, self.x, self.notes = name, xa[order], notes
         self.spline = not_a_knot_spline(xa[order], ya[order])
@@ -161,10 +158,9 @@ class Geometry:
 def added_mass_priors(g: Geometry, notes: Optional[list] = None) -> np.ndarray:
     """(6,) diagonal added mass, kg and kg m^2 ([NTNU-Thesis] App. A.1, Sec. 3.1.3 eqs. 3.2-3.4)."""
     notes = [] if notes is None else notes
-    ca3d = _Table("added-mass 3D table", *_columns(ADDED_MASS_3D), notes)
-    col = list(zip(*ADDED_MASS_2D))
-    ca2dt = _Table("added-mass 2D table (translation)", col[0], col[1], notes)
-    ca2dr = _Table("added-mass 2D table (rotation)", col[0], col[2], notes)
+    ca3d = _Table("added-mass 3D table", ADDED_MASS_3D, notes)
+    ca2dt = _Table("added-mass 2D table (translation)", ADDED_MASS_2D, notes)
+    ca2dr = _Table("added-mass 2D table (rotation)", ADDED_MASS_2D, notes, column=2)
     L, W, H, rho = g.length_m, g.width_m, g.height_m, g.fluid_density_kg_m3
     cxy, cyz, cxz = g.cp
     A = np.zeros(6)
@@ -179,23 +175,18 @@ def added_mass_priors(g: Geometry, notes: Optional[list] = None) -> np.ndarray:
     A[1] = rho * ca * ar * cxz**2 * cxy * cyz * H * lam
     A[2] = rho * ca * ar * cxy**2 * cxz * cyz * W * lam
     cp3 = cyz * cxy * cxz
-    b = H / W                                                # roll
-    r = W if b <= 1 else H
-    A[3] = L * rho * ca2dr(b, "roll 2D") * np.pi * (0.5 * r) ** 4 * cp3 * lam
-    b = L / H                                                # pitch
-    r = L if b >= 1 else H
-    A[4] = W * rho * ca2dr(b, "pitch 2D") * np.pi * (0.5 * r) ** 4 * cp3 * lam
-    b = W / L                                                # yaw
-    r = W if b >= 1 else L
-    A[5] = H * rho * ca2dr(b, "yaw 2D") * np.pi * (0.5 * r) ** 4 * cp3 * lam
+    # strip length, section sides (b / a, radius the larger side); rotations (eq. 3.4)
+    for i, (length, b, a, what) in enumerate(((L, H, W, "roll 2D"), (W, L, H, "pitch 2D"),
+                                              (H, W, L, "yaw 2D")), start=3):
+        A[i] = length * rho * ca2dr(b / a, what) * np.pi * (0.5 * max(b, a)) ** 4 * cp3 * lam
     return A
 
 
 def quadratic_damping_priors(g: Geometry, notes: Optional[list] = None) -> np.ndarray:
     """(6,) diagonal quadratic damping, kg/m and kg m^2 ([NTNU-Thesis] App. A.2, eqs. 3.6-3.10)."""
     notes = [] if notes is None else notes
-    d2 = _Table("drag 2D table", *_columns(DRAG_2D), notes)
-    d3 = _Table("drag 3D table", *_columns(DRAG_3D), notes)
+    d2 = _Table("drag 2D table", DRAG_2D, notes)
+    d3 = _Table("drag 3D table", DRAG_3D, notes)
     L, W, H, rho = g.length_m, g.width_m, g.height_m, g.fluid_density_kg_m3
     cxy, cyz, czx = g.cp
     a = 0.5 * (H + W)

@@ -43,39 +43,28 @@ P are clipped to it after each update (the eigen-decomposition is only computed 
 exceeds the bound, which is cheap to test). :meth:`RecursiveLeastSquares.reset_covariance`
 restarts P explicitly.
 
-Honesty options (all off by default in this class, so the plain algorithm above is unchanged; the
-identification executive switches all of them on, :func:`hindrax_ident.identification.online.estimators.online_rls`):
+Honesty options (all off by default in this class; the identification executive switches them on,
+:func:`hindrax_ident.identification.online.estimators.online_rls`; why each is needed:
+docs/identification.md §1.D):
 
-* ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least squares
-  identification algorithms with incomplete excitation", IEEE TAC 35(12); Kulhavy 1987): information is forgotten
-  only along the current regressor, ``P^-1 <- P^-1 + eps phi phi^T`` with ``eps = mu - (1 - mu) / (phi^T P phi)``
-  (mu = the forgetting factor), i.e. ``P <- P - P phi phi^T P / (1 / eps + phi^T P phi)``: directions the
-  manoeuvre does not excite keep their information instead of winding up. Its covariance is sigma2_hat * P
-  (P^-1 is the retained information).
-* ``min_excitation``: once :attr:`excitation_normalised` (which always accumulates) has reached this value, the
-  estimate and P are updated only while it stays at or above it: samples that cannot separate the parameters (a
-  long hold at one speed fills the forgetting window with collinear rows) do not move them. Before the gate has
-  opened for the first time every sample updates (nothing is published then, :meth:`converged_mask`): gating the
-  start would throw away the first levels, whose rows are what later lifts the excitation above the
-  threshold.
-* ``lower_bounds`` (p,): :attr:`theta` is the estimate constrained to theta >= lower bound (physical signs:
-  positive inertia, non-negative damping; NaN = unbounded): the projection of the unconstrained estimate in the
-  metric of the information matrix P^-1, min (t - theta_u)^T P^-1 (t - theta_u) subject to t >= lb, which is the
-  exact constrained minimiser of the (forgetting-weighted) least-squares cost, because that cost is this quadratic
-  form plus a constant (the projection used for least-squares estimates in adaptive control, e.g. Goodwin and Sin
-  1984, "Adaptive Filtering Prediction and Control", ch. 3: it must use the P^-1 metric). It is solved by an
-  active set (p <= 6: at most p small solves). The recursion keeps the unconstrained estimate (a
-  clip fed back diverges: the next gain K e pushes its error along the correlated directions).
-  :meth:`at_bound` says which parameters sit on their bound.
-* ``change_threshold``: a change detector on the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
-  (chi-square with 1 degree of freedom for a correct model): when its mean over ``change_samples`` consecutive
-  samples exceeds the threshold, the covariance is reset (:meth:`reset_covariance`) and the residual statistics
-  restart, so the estimate re-adapts to the changed parameters (:attr:`changes_detected` counts them). The model
-  errors of a real DOF (the causal filter's lag at every level step) lift that mean above 1 for a
-  few seconds, so the window must span several level steps.
-* :meth:`published_std`: the standard deviation where the estimate has converged (std <= rel_tol |theta| + abs_tol,
-  enough samples, excitation above ``min_excitation``), NaN elsewhere: "not converged" rather than a number that
-  does not cover the truth.
+* ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least
+  squares identification algorithms with incomplete excitation", IEEE TAC 35(12); Kulhavy 1987):
+  ``P^-1 <- P^-1 + eps phi phi^T`` with ``eps = mu - (1 - mu) / (phi^T P phi)`` (mu = the forgetting
+  factor), i.e. ``P <- P - P phi phi^T P / (1 / eps + phi^T P phi)``; covariance sigma2_hat * P.
+* ``min_excitation``: once :attr:`excitation_normalised` (which always accumulates) has reached this
+  value, theta and P are updated only while it stays at or above it; before that every sample
+  updates (nothing is published then, :meth:`converged_mask`).
+* ``lower_bounds`` (p,): :attr:`theta` is the unconstrained estimate projected onto theta >= lb
+  (NaN = unbounded) in the P^-1 metric, min (t - theta_u)^T P^-1 (t - theta_u), the exact
+  constrained minimiser of the forgetting-weighted cost (Goodwin and Sin 1984, "Adaptive Filtering
+  Prediction and Control", ch. 3), by an active set (p <= 6). The recursion keeps the
+  unconstrained estimate; :meth:`at_bound` says which parameters sit on their bound.
+* ``change_threshold``: when the mean of the normalised a-priori error
+  ``e^2 / (sigma2_hat (1 + phi^T P phi))`` (chi-square with 1 degree of freedom for a correct model)
+  over ``change_samples`` consecutive samples exceeds it, the covariance is reset
+  (:meth:`reset_covariance`) and the residual statistics restart (:attr:`changes_detected`).
+* :meth:`published_std`: the std where the estimate has converged (std <= rel_tol |theta| + abs_tol,
+  enough samples, excitation above ``min_excitation``), NaN ("not converged") elsewhere.
 
 Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for
 50-100 Hz per DOF.
@@ -84,7 +73,7 @@ Everything is a few small dense numpy operations per sample (p = 4..6), fast eno
 from __future__ import annotations
 
 from collections import deque
-from typing import Optional, Sequence
+from typing import Optional
 
 import numpy as np
 
@@ -105,7 +94,6 @@ class RecursiveLeastSquares:
             effective memory is about 1 / (1 - lambda) samples.
         initial_covariance: P0 = initial_covariance * I (scalar > 0) or a (p, p) SPD matrix.
         initial_theta: optional (p,) start value (default zeros).
-        names: optional p parameter names (for :meth:`to_dict`).
         max_covariance: upper bound on the eigenvalues of P (anti wind-up); ``None`` (default)
             means the largest eigenvalue of P0; pass ``float('inf')`` to disable bounding.
         directional: directional forgetting instead of exponential (module docstring).
@@ -121,7 +109,6 @@ class RecursiveLeastSquares:
 
     def __init__(self, n_params: int, forgetting: float = 0.995,
                  initial_covariance=1e3, initial_theta=None,
-                 names: Optional[Sequence[str]] = None,
                  max_covariance: Optional[float] = None, directional: bool = False,
                  min_excitation: float = 0.0, lower_bounds=None,
                  change_threshold: Optional[float] = None, change_samples: int = 50):
@@ -156,11 +143,6 @@ class RecursiveLeastSquares:
             if theta0.size != self._p:
                 raise EstimationError(f"initial_theta must have {self._p} entries")
         self._theta0 = theta0.copy()
-        if names is not None:
-            names = tuple(str(s) for s in names)
-            if len(names) != self._p:
-                raise EstimationError(f"names has {len(names)} entries for {self._p} parameters")
-        self.names = names
         self.directional = bool(directional)
         self.min_excitation = float(min_excitation)
         if not (0.0 <= self.min_excitation <= 1.0):
@@ -320,11 +302,6 @@ class RecursiveLeastSquares:
 
     # ------------------------------------------------------------------ estimates
     @property
-    def n_params(self) -> int:
-        """Number of parameters p."""
-        return self._p
-
-    @property
     def theta(self) -> np.ndarray:
         """(p,) current estimate (copy), constrained to the lower bounds when given (module docstring)."""
         if self._lb is None:
@@ -444,17 +421,3 @@ class RecursiveLeastSquares:
     def covariance_resets(self) -> int:
         """Number of :meth:`reset_covariance` calls."""
         return self._covariance_resets
-
-    def to_dict(self) -> dict:
-        """Plain-float snapshot: parameters (value/std), n_samples, sigma2, excitation."""
-        names = self.names or tuple(f"theta_{i}" for i in range(self._p))
-        std = self.std
-        return {
-            "parameters": {nm: {"value": float(v), "std": float(s)}
-                           for nm, v, s in zip(names, self.theta, std)},
-            "n_samples": self._n,
-            "forgetting": self._lambda,
-            "sigma2": self.sigma2,
-            "excitation": self.excitation,
-            "excitation_normalised": self.excitation_normalised,
-        }

@@ -33,7 +33,7 @@ accelerations (force / inertia). [Hindrax-Drag]'s heave runs never became steady
 
 from __future__ import annotations
 
-from dataclasses import dataclass, asdict
+from dataclasses import dataclass
 from typing import List, Tuple
 
 import numpy as np
@@ -70,16 +70,6 @@ class SteadyWindow:
     force_std: float
     n: int
 
-    @property
-    def duration_s(self) -> float:
-        """t_stop_s - t_start_s."""
-        return self.t_stop_s - self.t_start_s
-
-    def to_dict(self) -> dict:
-        """Plain dict of the fields (JSON/YAML friendly)."""
-        return {k: (int(v) if isinstance(v, (int, np.integer)) else float(v))
-                for k, v in asdict(self).items()}
-
 
 def constant_force_segments(force, force_tolerance: float = 0.05) -> List[Tuple[int, int]]:
     """Split a force record into constant-command segments (step 1 of the module algorithm).
@@ -111,11 +101,9 @@ def constant_force_segments(force, force_tolerance: float = 0.05) -> List[Tuple[
 def _window_stats(t: np.ndarray, v: np.ndarray, i: np.ndarray, j: np.ndarray):
     """Slope and std of v over windows [i, j) using cumulative sums (t centred per call)."""
     tc = t - t[0]
-    c1 = np.concatenate([[0.0], np.cumsum(tc)])
-    c2 = np.concatenate([[0.0], np.cumsum(tc * tc)])
-    cv = np.concatenate([[0.0], np.cumsum(v)])
-    cv2 = np.concatenate([[0.0], np.cumsum(v * v)])
-    ctv = np.concatenate([[0.0], np.cumsum(tc * v)])
+    # running sums from 0 of t, t^2, v, v^2 and t v
+    c1, c2, cv, cv2, ctv = (np.concatenate([[0.0], np.cumsum(x)])
+                            for x in (tc, tc * tc, v, v * v, tc * v))
     m = (j - i).astype(float)
     st, stt = c1[j] - c1[i], c2[j] - c2[i]
     sv, svv, stv = cv[j] - cv[i], cv2[j] - cv2[i], ctv[j] - ctv[i]

@@ -138,13 +138,11 @@ class CubicFit:
         """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us,
         pulse_width_max_us}."""
         keys = ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std")
-        out = {k: float(getattr(self, k)) for k in keys}
-        out["n"] = int(self.n)
-        out["residual_std_n"] = float(self.residual_std_n)
-        out["thrust_relative_std"] = self.relative_std()
-        out["pulse_width_min_us"] = float(self.pulse_width_min_us)
-        out["pulse_width_max_us"] = float(self.pulse_width_max_us)
-        return out
+        return {**{k: float(getattr(self, k)) for k in keys}, "n": int(self.n),
+                "residual_std_n": float(self.residual_std_n),
+                "thrust_relative_std": self.relative_std(),
+                "pulse_width_min_us": float(self.pulse_width_min_us),
+                "pulse_width_max_us": float(self.pulse_width_max_us)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,10 +166,8 @@ class ThrusterCurveFit:
         return float(out[0]) if P.ndim == 0 else out.reshape(P.shape)
 
     def relative_std(self) -> Tuple[float, float]:
-        """(negative, positive) :meth:`CubicFit.relative_std`.
-
-        The value for ``thrusters.thrust_fit_uncertainty_rel``.
-        """
+        """(negative, positive) :meth:`CubicFit.relative_std`, the value for
+        ``thrusters.thrust_fit_uncertainty_rel``."""
         return (self.negative.relative_std(), self.positive.relative_std())
 
     def to_dict(self) -> dict:
@@ -231,7 +227,7 @@ def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
         deadband_us: drop samples with neutral_tolerance_us < |P - neutral| <= deadband_us.
 
     Returns:
-        :class:`ThrusterCurveFit`; ``.to_dict()`` gives ``{"negative": {...}, "positive": {...}}``.
+        :class:`ThrusterCurveFit`.
 
     Raises:
         EstimationError: bad input or too few samples on one side (see :func:`fit_cubic`).

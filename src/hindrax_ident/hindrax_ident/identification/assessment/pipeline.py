@@ -47,8 +47,6 @@ def without_collector():
 
 
 @without_collector()
-
-
 def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig | None = None,
              dofs: Sequence[str] | None = None, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()
              ) -> FitResult:

@@ -146,9 +146,8 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
                   calibration: Mapping[str, Any] | None = None) -> dict:
     """The identification.yaml document from :class:`~..fit.dof_model.DofIdentification` objects (per DOF).
 
-    The intervals are the honest ones of :func:`~.verdicts.apply_verdicts` (fit covariance + thrust-curve
-    uncertainty, Student t on the independent segments; applied here if not yet), each parameter with ``std_fit``
-    (the fit alone), ``verdict`` (trusted | suspect) and ``reasons``; each DOF with ``verdict`` and ``reasons``.
+    The intervals, verdicts and reasons are :func:`~.verdicts.apply_verdicts`' (applied here if not
+    yet; the schema in the module docstring).
 
     Before the verdicts the empirical priors (``identification.prior_std_rel``) and, with ``calibration`` (the
     record's calibration steps; the identifications then come from the record scaled by
@@ -343,7 +342,9 @@ def assessment(r: Any, cfg: VehicleConfig | None) -> dict:
     (:func:`.posterior.prior_posterior`, ``identification.prior_std_rel``), the thrust-curve covariance
     (:func:`...vehicle.uncertainty.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
     degrees of freedom; the expected bias 0 (heave: the vehicle file's net buoyancy, unknown without one); no
-    whiteness check (its threshold is the designed campaign's). ``added_mass`` with a vehicle file. Returns
+    whiteness check (its threshold is the designed campaign's, docs/identification.md §7 step 6:
+    here the CV nrmse judges the model and the intervals carry the residual correlation).
+    ``added_mass`` with a vehicle file. Returns
     :func:`..assessment.verdicts.assess`'s dict with ``fit_values`` (the core's, before the priors) and ``priors``
     ({name: [mean, std]})."""
     c = r.core
@@ -354,10 +355,8 @@ def assessment(r: Any, cfg: VehicleConfig | None) -> dict:
         theta, cov = prior_posterior(c.names, theta, cov, pri)
     expected = (None if cfg is None else float(cfg.buoyancy_n - cfg.weight_n)) if r.dof == "heave" else 0.0
     ev = FitEvidence(dof=r.dof, names=list(c.names), theta=theta, cov=cov, t_dof=int(c.covariance.t_dof),
-                     units=_units(r.dof, c.names),
-                     # the whiteness threshold is the designed campaign's (docs/identification.md §7 step 6); here
-                     # the CV nrmse judges the model, and the intervals carry the residual correlation
-                     residual_rho=None, expected_bias=expected, **core_evidence(c))
+                     units=_units(r.dof, c.names), residual_rho=None, expected_bias=expected,
+                     **core_evidence(c))
     a = assess(ev, declared_rel(cfg))
     if cfg is not None:
         with_added_mass(a, a["parameters"]["inertia"]["value"] - rigid_inertia(cfg, r.dof))
@@ -404,10 +403,8 @@ def _param_entries(r: Any, a: dict) -> dict:
         else:
             entries[name] = put(i, units.get(name, ""))
     # damping terms the chosen model leaves out: 0 exactly in that model
-    wanted = (["quadratic_damping_positive", "quadratic_damping_negative", "linear_damping_positive",
-               "linear_damping_negative"] if r.dof == "heave" else ["quadratic_damping", "linear_damping"])
-    for n in wanted:
-        if n not in entries:
+    for n in REQUIRED_PARAMETERS(r.dof):
+        if "damping" in n and n not in entries:
             no_model = a["verdict"] == NO_MODEL_VERDICT
             entries[n] = {"value": 0.0, "std": 0.0, "unit": units.get(n, ""), "ci95": [0.0, 0.0],
                           "model_term": "excluded", "verdict": "suspect" if no_model else "trusted",

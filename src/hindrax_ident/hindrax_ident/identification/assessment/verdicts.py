@@ -47,9 +47,9 @@ and
      the net buoyancy (rho V - m) g known from the vehicle's mass and volume. When the identified heave bias
      differs from it significantly, the thrust curves are wrong, and every DOF identified with them is suspect
      (a thrust error in one direction cannot be seen in surge, sway or yaw, which use both directions at once).
-   * ``width``: the 95 % half-width is too wide to design a controller from: above :data:`WIDTH_MAX` of the value
-     (inertia, quadratic damping), or for linear damping and bias of the total damping force at the typical
-     speed of the test (the 75th percentile of |velocity|).
+   * ``width``: the 95 % half-width is too wide to design a controller from: above :data:`WIDTH_MAX`
+     of the value (inertia, quadratic damping, restoring, reverse gain), or for linear damping and
+     bias of the damping force at the typical speed of the test (the 75th percentile of |velocity|).
    * ``spread`` (scenario suite only, :func:`spread_reasons`): over repeated campaigns the estimates scatter more
      than their own intervals say.
    * ``free decay`` (roll and pitch inertia, :func:`apply_reference_verdicts`): the rigid + added inertia from a free
@@ -67,7 +67,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.config import ROTATIONAL_DOFS, VehicleConfig
 
 from ...vehicle.uncertainty import declared_rel
 from ..fit.dof_model import core_index, thrust_weights
@@ -75,7 +75,7 @@ from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, pers
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
            "WHITENESS_MAX", "INDEPENDENCE_Z", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
-           "segment_count", "FitEvidence", "core_signals", "core_evidence", "model_selection",
+           "FitEvidence", "core_signals", "core_evidence", "model_selection",
            "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
            "with_added_mass", "assess_dof",
            "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET",
@@ -106,15 +106,9 @@ def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float
     return cov
 
 
-def segment_count(dof: str, pool_time_s: float) -> int:
-    """Independent segments of the output-error fit (pool time / :data:`~..fit.fit_core.SEGMENT_S`, every DOF)."""
-    return max(1, int(pool_time_s // SEGMENT_S))
-
-
 @dataclass
 class FitEvidence:
     """What the verdicts of one DOF's fit are made from (:func:`assess`), whichever reader made the record.
-
 
     dof; names (p,) the fit's parameters (:func:`~..fit.dof_model.parameter_names`, or the fit core's chosen terms);
     theta (p,) their values (after the empirical priors, :mod:`..fit.posterior`); cov (p, p) their covariance without
@@ -174,20 +168,13 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
 
     The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit``
     (:func:`.results.assessment`). ``rel`` = [negative, positive] 1-sigma relative thrust uncertainty
-    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``. A check runs when
-    its evidence is there (the campaign reader gives the steady windows; both give the rest):
-
-    * DOF-wide: ``bias`` (off the expected force beyond the t quantile and by more than :data:`BIAS_MIN_REL` of the
-      damping force at the typical speed; beyond the t quantile alone: the bias itself suspect), ``methods``
-      (steady-state against transient quadratic damping),
-      ``direction`` (steady windows of the two directions), ``whiteness`` (residual lag-1 above
-      :data:`WHITENESS_MAX`), cross-validated nrmse at or above :data:`NRMSE_MAX`; with ``cv_nrmse_hold`` the model
-      must beat holding the velocity (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
-      :data:`~..fit.fit_core.NO_MODEL_VERDICT` and every parameter is suspect;
-    * per parameter: ``width`` (95 % half-width above :data:`WIDTH_MAX` of the value for inertia, quadratic
-      damping, restoring and the reverse gain; for linear damping and bias of the damping force at the typical
-      speed), on its physical bound 0, fold estimates spread by more than 3 fit std; each parameter with a reason
-      of its own gets ``advice`` (:func:`data_advice`).
+    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``.
+    The checks of the module docstring run when their evidence is there (the campaign reader gives
+    the steady windows), and also: cross-validated nrmse at or above :data:`NRMSE_MAX` (DOF-wide);
+    with ``cv_nrmse_hold`` the model must beat holding the velocity
+    (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
+    :data:`~..fit.fit_core.NO_MODEL_VERDICT`; per parameter, on a bound or fold estimates spread by
+    more than 3 fit std. A parameter with a reason of its own gets ``advice`` (:func:`data_advice`).
 
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
     (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
@@ -362,14 +349,13 @@ def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 
 
 def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
-    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives, for both readers
-    (``hindrax ident bag`` through :func:`assess_dof`, ``hindrax ident fit`` through
-    :func:`~.results.assessment`): the optimiser's bounds and the fold estimates of ``names`` (default the core's
-    own; heave's ``*_positive``/``*_negative`` map onto the one pair of both directions, absent ones get no bound and
-    then no fold estimates), the chosen model's cross-validated nrmse, holding the velocity's on the same samples and
-    the margin (:func:`~..fit.fit_core.persistence`), and the fitted segments' signals (:func:`core_signals`).
-    Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold, persistence_margin, velocity,
-    acceleration, force, h}."""
+    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives,
+    for :func:`assess_dof` and :func:`~.results.assessment`: the optimiser's bounds and fold
+    estimates of ``names`` (default the core's own; heave's ``*_positive``/``*_negative`` map onto
+    the one pair, absent ones get no bound and no fold estimates), the cross-validated nrmse,
+    holding the velocity's and the margin (:func:`~..fit.fit_core.persistence`), and
+    :func:`core_signals`. Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse,
+    cv_nrmse_hold, persistence_margin, velocity, acceleration, force, h}."""
     core_names = list(core.names)
     idx = core_index(core_names if names is None else list(names), core_names)
     lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
@@ -419,7 +405,7 @@ def assess_dof(r: Any, cfg: VehicleConfig) -> dict:
         cov_fit = np.diag([r.std[n] ** 2 for n in names])
     joint = r.signals.get("joint") or {}
     sig = r.signals
-    nseg = segment_count(r.dof, r.pool_time_s)
+    nseg = max(1, int(r.pool_time_s // SEGMENT_S))  # independent segments of the output-error fit
     t = np.asarray(sig.get("t") if sig.get("t") is not None else [], dtype=float)
     have = all(sig.get(k) is not None for k in ("velocity", "acceleration", "force")) and t.size > 1
     core = sig.get("core")
@@ -516,8 +502,7 @@ def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg:
     the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
     suite.
     """
-    std = np.asarray(converged_std, dtype=float).copy()
-    theta = np.asarray(theta, dtype=float)
+    std = np.asarray(converged_std, dtype=float)
     keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
                     dtype=bool)
     thrust = np.diag(thrust_covariance(dof, names, theta, declared_rel(cfg)))
@@ -616,10 +601,6 @@ RUN_KINDS = {
 }
 
 
-def _speed_unit(dof: str) -> str:
-    return "rad/s" if dof in ("roll", "pitch", "yaw") else "m/s"
-
-
 def format_advice(parameter: str, advice: dict) -> str:
     """One printed line of :func:`data_advice` for ``parameter`` (``hindrax ident fit`` and ``ident bag`` alike):
     runs of a named kind, their speed range and the pool time in minutes."""
@@ -635,32 +616,26 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     """What data would make the 95 % half-width of one parameter ``ADVICE_TARGET`` of its value, in the units a
     pool engineer plans in: runs of a named kind (:data:`RUN_KINDS`), a speed range, minutes.
 
-    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the ticks (``h`` s) of
-    the segments that were fitted. The variance of an estimate falls as 1 / (seconds of the manoeuvre that informs
-    it) (least-squares information adds over independent data), so ``seconds_more = T (w / w_target)^2 - T`` with
-    T the seconds of that manoeuvre already in the data (at least :data:`ADVICE_MIN_S`); the manoeuvre per
-    parameter (docs/identification.md §4, R1, R2, R15): inertia from accelerating and braking (the 30 % of the
-    ticks with the largest |acceleration|), quadratic damping from steady runs in the top half of the speeds
-    reached, linear damping from slow runs (below a third of the top speed), the bias from slow runs in both
-    directions, restoring from tilts, a reverse thrust gain from reverse commands; heave ``_positive`` is down
-    (w > 0), ``_negative`` up. The time is rounded up to whole runs, at least one, never above a pool day
-    (:data:`POOL_DAY_S`): when more of the same would take longer (or the data hold none of it while the interval
-    is already wide), no amount of it fixes the parameter, and the advice names the kind of run that would
-    (``feasible`` False: sharper accelerations for an inertia, a wider speed range for a quadratic damping, a speed
-    ladder for a linear one, holds at zero command for a bias, larger tilts for restoring, reverse commands for the
-    reverse gain, each DOF alone then together for a coupling), :data:`ALTERNATIVE_RUNS` runs of it. A parameter
-    at a bound gets as much again of its manoeuvre (at least :data:`ADVICE_MIN_S`); one whose interval is already
-    narrow (another reason: fold spread, bias, prediction) gets a repetition of its manoeuvre, which tells a real
-    effect from chance. ``scale``: the magnitude the half-width is judged against when not the value itself (a
-    bias, expected near 0, and a linear damping are judged against the damping force at the typical speed,
-    :func:`assess`). Returns {dof, manoeuvre, run_kind, runs, run_s, minutes, speed_range (low, high, unit),
+    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the
+    ticks (``h`` s) of the fitted segments. The variance of an estimate falls as 1 / (seconds of the
+    manoeuvre that informs it), so ``seconds_more = T (w / w_target)^2 - T`` with T the seconds of
+    that manoeuvre in the data (at least :data:`ADVICE_MIN_S`); the manoeuvre per parameter
+    (docs/identification.md §4, R1, R2, R15) is the branch's ``used`` mask below. The time is
+    rounded up to whole runs, at least one, never above :data:`POOL_DAY_S`: when more of the same
+    would take longer (or the data hold none of it while the interval is wide), the advice names
+    the kind of run that would fix it (``feasible`` False, the branch's ``alt``),
+    :data:`ALTERNATIVE_RUNS` runs of it. A parameter at a bound gets as much again of its manoeuvre;
+    one whose interval is already narrow (another reason) gets a repetition, which tells a real
+    effect from chance. ``scale``: the magnitude the half-width is judged against when not the value
+    (a bias and a linear damping: the damping force at the typical speed, :func:`assess`). Returns
+    {dof, manoeuvre, run_kind, runs, run_s, minutes, speed_range (low, high, unit),
     seconds_in_data, seconds_more, feasible, why}."""
     v = np.asarray(velocity, dtype=float)
     a = np.asarray(acceleration, dtype=float)
     f = np.asarray(force, dtype=float)
     ok = np.isfinite(v) & np.isfinite(a) & np.isfinite(f)
     v, a, f = v[ok], a[ok], f[ok]
-    unit = _speed_unit(dof)
+    unit = "rad/s" if dof in ROTATIONAL_DOFS else "m/s"
     sign = 1.0 if name.endswith("_positive") else -1.0 if name.endswith("_negative") else 0.0
     vv = v if sign == 0.0 else np.where(sign * v > 0, np.abs(v), 0.0)
     vmax = float(np.percentile(np.abs(vv), 98)) if vv.size else 0.0

@@ -32,10 +32,9 @@ __all__ = ["OnlineDofEstimator", "online_rls", "rls_setting", "rls_prior"]
 #: Online RLS defaults when the vehicle file omits ``identification.rls_*`` (docs/identification.md §1.D).
 RLS_DEFAULTS = {"directional_forgetting": True, "min_excitation": 0.001, "change_threshold": 6.0,
                 "change_window_s": 10.0, "prior_std_rel": 1.0}
-#: Reference force noise (N; N m for roll, pitch, yaw) that scales the prior std into the RLS's P0 = diag(std^2) /
-#: sigma_ref^2 (P is the inverse information without sigma^2). The online residual std measured in a no-disturbance
-#: campaign (seed 1, 3 levels) was 1.9-2.7 N and 0.15-0.29 N m; taking about half of it makes the prior weaker than
-#: its stated std, never stronger.
+#: Reference force noise (N; N m for roll, pitch, yaw) that scales the prior std into the RLS's
+#: P0 = diag(std^2) / sigma_ref^2 (P is the inverse information without sigma^2): about half the
+#: online residual std of a campaign without disturbances: the prior is never stronger than stated.
 RLS_PRIOR_NOISE_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pitch": 0.1, "yaw": 0.1}
 #: Prior 1-sigma of the bias (N; N m), centred on the expected bias (0; heave: the net buoyancy).
 RLS_PRIOR_BIAS_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pitch": 0.1, "yaw": 0.1}
@@ -99,7 +98,7 @@ def online_rls(cfg: VehicleConfig, dof: str) -> RecursiveLeastSquares:
         theta0, p0 = prior[0], np.diag((prior[1] / RLS_PRIOR_NOISE_STD[dof]) ** 2)
     return RecursiveLeastSquares(
         len(names), forgetting=float(cfg.identification.forgetting_factor), initial_covariance=p0,
-        initial_theta=theta0, names=names, directional=bool(rls_setting(cfg, "directional_forgetting")),
+        initial_theta=theta0, directional=bool(rls_setting(cfg, "directional_forgetting")),
         min_excitation=float(rls_setting(cfg, "min_excitation")),
         lower_bounds=[math.nan if n == "bias" else 0.0 for n in names],
         change_threshold=thr if thr > 1.0 else None,
@@ -113,8 +112,7 @@ class OnlineDofEstimator:
     :class:`~..vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
     one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
     (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
-    first time the inertia, quadratic damping and restoring have std <= ``identification.converged_relative_std``
-    |value| and the bias std <= 0.1 N (0.02 N m) (:meth:`_converged`).
+    first time :meth:`_converged` holds.
     """
 
     _DEVICE = {"dvl": "dvl75", "depth": "ms5837", "gyro": "icm20948_gyro"}
@@ -174,16 +172,16 @@ class OnlineDofEstimator:
         self._n += 1
         if self._n % self.history_every == 0:
             std = self.rls.std
-            self.history["t"].append(t_s)
-            self.history["theta"].append(self.rls.theta.copy())
-            self.history["std"].append(std.copy())
-            self.history["excitation"].append(self.rls.excitation_normalised)
+            row = (t_s, self.rls.theta.copy(), std.copy(), self.rls.excitation_normalised)
+            for column, value in zip(self.history.values(), row):  # t, theta, std, excitation
+                column.append(value)
             if self.converged_at_s is None and self._converged(std):
                 self.converged_at_s = t_s
 
     def _converged(self, std: np.ndarray) -> bool:
-        """Inertia, quadratic damping and restoring: std <= rel_tol |value|; bias: std <= 0.1 N (0.02 N m).
-        Linear damping is left out (small and weakly excited at the speeds of [Hindrax-Drag] Table 3)."""
+        """Inertia, quadratic damping and restoring: std <= ``converged_relative_std`` |value|;
+        bias: std <= 0.1 N (0.02 N m); after 500 samples. Linear damping is left out (small and
+        weakly excited at the speeds of [Hindrax-Drag] Table 3)."""
         if self.rls.n_samples < 500 or not np.all(np.isfinite(std)):
             return False
         th = self.rls.theta
@@ -197,9 +195,8 @@ class OnlineDofEstimator:
         return True
 
     def published_std(self) -> np.ndarray:
-        """The std to publish (:func:`~.verdicts.rls_published_std` of :meth:`converged_std`): damping parameters
-        of the DOFs the scenario suite measured, widened by the thrust uncertainty; NaN = not converged / not
-        trusted."""
+        """The std to publish: :func:`~.verdicts.rls_published_std` of :meth:`converged_std`
+        (NaN: not published)."""
         return rls_published_std(self.dof, self.names, self.rls.theta, self.converged_std(), self.cfg)
 
     def converged_std(self) -> np.ndarray:

@@ -92,21 +92,14 @@ class Multisine:
             raise ValueError(f"multisine: no line k / {p:g} s between {f_min_hz:g} and {f_max_hz:g} Hz")
         return cls(float(amplitude), p, tuple(range(k0, k1 + 1)))
 
-    @property
-    def frequencies_hz(self) -> np.ndarray:
-        """(N,) line frequencies, Hz."""
-        return np.asarray(self.harmonics, dtype=float) / self.period_s
-
-    @property
-    def phases_rad(self) -> np.ndarray:
-        """(N,) Schroeder phases -pi k (k - 1) / N, k = 1..N over the lines in order (Schroeder 1970 eq. 11)."""
+    def _raw(self, t) -> np.ndarray:
+        """Unscaled sum of the lines: frequencies k / period_s, Schroeder phases
+        -pi k (k - 1) / N over the lines in order (Schroeder 1970 eq. 11)."""
         n = len(self.harmonics)
         k = np.arange(1, n + 1, dtype=float)
-        return -math.pi * k * (k - 1.0) / n
-
-    def _raw(self, t) -> np.ndarray:
-        t = np.asarray(t, dtype=float)
-        arg = 2.0 * math.pi * np.multiply.outer(t, self.frequencies_hz) + self.phases_rad
+        freqs = np.asarray(self.harmonics, dtype=float) / self.period_s
+        phases = -math.pi * k * (k - 1.0) / n
+        arg = 2.0 * math.pi * np.multiply.outer(np.asarray(t, dtype=float), freqs) + phases
         return np.cos(arg).sum(axis=-1)
 
     def value(self, t):

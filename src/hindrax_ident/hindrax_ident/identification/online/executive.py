@@ -161,13 +161,12 @@ def ordered_samples(samples: Iterable[tuple[str, Any]], not_before_s: float = -m
     """Samples sorted by stamp (stable), each stamped before ``not_before_s`` moved to it (a copy), those stamped
     after ``not_after_s`` or before ``drop_before_s`` (s) left out.
 
-    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion start, the
-    DVL time of validity): the online filters have already been predicted to the previous tick, ``not_before_s``;
-    the messages and the bag keep the original stamps, which the offline analysis uses. A sample stamped after
-    ``not_after_s`` cannot be valid (a stamp from the future of the node's clock: a publisher on another clock, such
-    as a second graph on the same ROS domain on the system clock while this one runs on simulated time), and so
-    cannot one stamped before ``drop_before_s`` (stale far beyond any sensor latency, or that same graph seen from
-    the other side); the caller counts the samples left out (``len(samples) - len(result)``)."""
+    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion
+    start, the DVL time of validity), the online filters have already been predicted to the previous
+    tick, ``not_before_s``; the messages and the bag keep the original stamps. Samples outside
+    [``drop_before_s``, ``not_after_s``] cannot be valid (a publisher on another clock, such as a
+    second graph on the same ROS domain; :mod:`.core`'s tolerances); the caller counts those left
+    out (``len(samples) - len(result)``)."""
     out = []
     for dev, s in sorted(samples, key=lambda ds: ds[1].stamp_s):
         if not drop_before_s <= s.stamp_s <= not_after_s:
@@ -522,15 +521,9 @@ class Executive:
         self._last_level = (dof, i)
         return dof, i, len(ladder), float(ctx.level)
 
-    def progress_fraction(self) -> float:
-        """Fraction 0-1 of the campaign done: DOFs finished plus the middle of the current level."""
-        n = max(1, len(self.dofs))
-        dof, i, count, _ = self.level_position()
-        inner = (i + 0.5) / count if (dof and count and dof not in self.windows) else 0.0
-        return float(min(1.0, (len(self.windows) + inner) / n))
-
     def status(self) -> ExecutiveStatus:
-        """:class:`ExecutiveStatus` of the current tick."""
+        """:class:`ExecutiveStatus` of the current tick; progress: the DOFs finished plus the middle
+        of the current level."""
         dof, i, count, cmd = self.level_position()
         if self.finished:
             phase = "aborted" if self.aborted else "done"
@@ -539,7 +532,9 @@ class Executive:
         else:
             phase = "running" if self.ctx.run >= 0 else ("returning" if dof else "positioning")
             message = STILL_MESSAGE if self.state.collecting_gyro_bias else self.message
-        progress = 1.0 if phase == "done" else self.progress_fraction()
+        inner = (i + 0.5) / count if (dof and count and dof not in self.windows) else 0.0
+        done = (len(self.windows) + inner) / max(1, len(self.dofs))
+        progress = 1.0 if phase == "done" else min(1.0, done)
         return ExecutiveStatus(phase, dof, i, count, cmd, progress, message)
 
     # ------------------------------------------------------------------ checks

@@ -21,21 +21,18 @@ Run alone: ``python -m hindrax_ident.identification.online.node --ros-args --par
 Interfaces
 ----------
 Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
-    Goal: ``dofs`` (empty = all six, in SNAME order), ``levels_per_dof`` (0 = ``identification.levels_per_dof``),
-    ``level_fractions`` (optional explicit fractions of the DOF's authority, each in (0, 1]), ``calibrate``
-    (known-force steps after the dive, before the ladders: ballast, line_pull, tilt_decay, inclining; the known
-    forces are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`,
-    :func:`~.executive.inclining_load`), ``calibration_only`` (no ladders). Rejected when a goal is running or the
-    goal is invalid (unknown DOF or step, fraction out of range, calibration_only without a step). The goal fails,
-    commanding nothing, when the ESC output has not reported armed within :data:`~.core.ARMED_GRACE_S` of its
-    acceptance (an operator who arms and starts at once is not refused while the armed flag is on its way). Feedback
-    at every level change, at every operator prompt and once per second: DOF, level index and count, level command (N
-    or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel):
-    the node publishes a zero wrench every tick until the ESC node reports neutral widths (zero thrust on every
-    thruster, or disarmed) or ``stop_timeout_s`` has passed, and only then ends the action; afterwards it publishes no
-    wrench (the allocation's wrench timeout keeps the thrusters neutral). Result: success, message (abort
-    reason, ``cancelled``; after calibration steps also the thrust scales measured), the final online estimate of
-    every DOF.
+    Goal: ``dofs`` (empty = all six, in SNAME order), ``levels_per_dof`` (0 =
+    ``identification.levels_per_dof``), ``level_fractions`` (optional explicit fractions of the
+    DOF's authority, each in (0, 1]), ``calibrate`` (known-force steps after the dive, before the
+    ladders: ballast, line_pull, tilt_decay, inclining; the known forces are the ``calibration.*``
+    parameters, :func:`~.executive.calibration_forces`, :func:`~.executive.inclining_load`),
+    ``calibration_only`` (no ladders). Goals, arming, the start, the feedback's timing and the end
+    follow the rules of :mod:`.core` ("Goals", "Armed", "Sensors", "Feedback", "Stop"). Feedback:
+    DOF, level index and count, level command (N or N m, FRD), progress 0-1, ``prompt`` (see
+    ``identification/continue``). After the end the node publishes no wrench (the allocation's
+    wrench timeout keeps the thrusters neutral). Result: success, message (abort reason,
+    ``cancelled``; after calibration steps also the thrust scales measured), the final online
+    estimate of every DOF.
 Service ``identification/continue`` (std_srvs/Trigger)
     The operator's "done": while a calibration step waits (the feedback ``prompt`` and the status ``message``
     read ``[<what>] <instruction>, then call continue``, e.g. ``[attach_ballast] calibration: attach the ballast
@@ -49,20 +46,20 @@ Subscribes
     ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust, and why, for the result; :mod:`.core`;
     always).
 Publishes
-    ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz`` (the control tick
-    is ``identification.estimate_rate_hz``; executive module docstring, "Command rate") while a goal runs, every
-    tick during the neutral hold that ends it; ``identification/estimates`` (HydroEstimate, method ``rls``, one per
-    DOF with data) at ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) while
-    a goal runs at once when the phase, DOF, level or message (current step) changes and otherwise at
-    :data:`~.core.STATUS_PERIOD_S` (2 Hz: the progress of a level), once at its end (DONE or ABORTED with the
-    reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a goal aborts
-    on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety supervisor
+    ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz``
+    (the control tick is ``identification.estimate_rate_hz``; executive module docstring, "Command
+    rate") while a goal runs, every tick during the neutral hold that ends it;
+    ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
+    ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus,
+    :mod:`.core` rule "Status"; DONE or ABORTED with the reason at the end); ``supervisor/abort``
+    (std_msgs/String, data = the reason) once when a goal aborts on a limit, DVL lock loss or an
+    error (not on a cancel or a disarmed ESC output): the safety supervisor
     (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
-    ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local, depth 1) when a
-    calibration step ends (ballast, line pull surge / sway, inclining roll / pitch, tilt_decay roll / pitch): every
-    step result since the node started, one DiagnosticStatus each, KeyValue pairs named with their units
-    (:mod:`..bag_input.calibration_topic`); the recorder stores it with the campaign and ``hindrax ident bag`` applies
-    it.
+    ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local,
+    depth 1) when a calibration step ends (ballast, line pull surge / sway, inclining roll / pitch,
+    tilt_decay roll / pitch): every step result since the node started, one DiagnosticStatus each,
+    KeyValue pairs named with their units (:mod:`..bag_input.calibration_topic`); the recorder
+    stores it with the campaign and ``hindrax ident bag`` applies it.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
     aborts when the DVL had no valid velocity for this long (docs/architecture.md §8); ``sensor_timeout_s``
@@ -127,10 +124,10 @@ __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
     """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
 
-    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`: a number only where the scenario suite
-    showed the online value's interval can cover the truth (converged damping of surge, sway, heave and yaw,
-    widened by the declared thrust uncertainty, :func:`~..assessment.verdicts.rls_published_std`); -1 means "not
-    converged or not trusted" (the message's float64 std has no NaN convention). ``covariance`` stays the raw RLS one.
+    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`
+    (:func:`~..assessment.verdicts.rls_published_std`), -1 where that is NaN ("not converged or
+    not trusted": the message's float64 std has no NaN convention). ``covariance`` stays the raw
+    RLS one.
     """
     rls = estimator.rls
     units = parameter_units(dof)
@@ -179,8 +176,7 @@ class IdentificationNode(VehicleNode):
                                        sensor_timeout_s=self.sensor_timeout_s, stop_timeout_s=self.stop_timeout_s)
         self._ended: dict[bytes, GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
 
-        # no QoS event handlers (VehicleNode): a missing sensor fails the goal (sensor_timeout_s,
-        # DVL lock)
+        # no QoS event handlers (VehicleNode): a missing sensor fails the goal (timeouts, DVL lock)
         self._inputs: list = []  # the sensor subscriptions, open while a goal is accepted or runs
         # the ESC's armed flag while no goal runs (latched, on change; the goal's pulse_width reports carry it too)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
@@ -230,11 +226,6 @@ class IdentificationNode(VehicleNode):
         """The campaign record of the last goal that ended (None before)."""
         return self.core.last_record
 
-    @property
-    def last_result(self) -> str:
-        """The result message of the last goal that ended."""
-        return self.core.last_result
-
     # ------------------------------------------------------------------ inputs
     def _set_active(self, active: bool) -> None:
         """Open the sensor subscriptions and the control tick for a goal (``active``), or close them and tick at
@@ -282,11 +273,8 @@ class IdentificationNode(VehicleNode):
         return GoalResponse.ACCEPT
 
     def _on_accepted(self, goal_handle) -> None:
-        """Accepted goal: set it up and return; the control timer runs it (once the ESC reports armed, within
-        :data:`~.core.ARMED_GRACE_S`) and ends it (:meth:`_end_goal`).
-
-        The goal is not executed here: its action state stays ACCEPTED while the campaign runs and becomes
-        EXECUTING, then SUCCEEDED, ABORTED or CANCELED when it ends (module docstring, "Action execution")."""
+        """Accepted goal: set it up and return, not executed here (module docstring, "Action
+        execution"); the control timer runs it and ends it (:meth:`_end_goal`)."""
         self.get_logger().info(self.core.accept(goal_handle, goal_handle.request, self._now_s()))
         self._set_active(True)
 
@@ -349,8 +337,7 @@ class IdentificationNode(VehicleNode):
                 self.core.run.handle.publish_feedback(RunIdentification.Feedback(
                     dof=st.dof, level_index=st.level_index, level_count=st.level_count,
                     level_command=st.level_command, progress=st.progress, prompt=prompt,
-                    phase=st.phase,
-                    step=st.message))
+                    phase=st.phase, step=st.message))
             elif ev.kind == "estimates":
                 stamp = self.get_clock().now().to_msg()
                 for d, est in ev.data[0].online.items():

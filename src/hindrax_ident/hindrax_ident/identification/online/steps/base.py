@@ -1,10 +1,8 @@
 """The step protocol of the campaign sequencer, the dive, and the per-DOF manoeuvre frame.
 
-A :class:`Step` is one self-contained part of a campaign (the dive, a known-force calibration step, one DOF's
-ladder or broadband run): :meth:`Step.run` is a generator over control ticks on a
-:class:`~.context.StepContext` (each ``yield`` one FRD wrench (6,), N / N m). The sequencer
-(:class:`~hindrax_ident.identification.online.executive.Executive`) runs a list of steps one after the other, on the
-simulator stepped in-process or on the ROS graph; a step never sees the plant.
+A :class:`Step` is one self-contained part of a campaign (the dive, a known-force calibration step,
+one DOF's ladder or broadband run), run one after the other by the sequencer; :mod:`.context`
+describes its ticks and what it sees (never the plant).
 """
 from __future__ import annotations
 

@@ -49,10 +49,9 @@ class BroadbandRun(DofStep):
         lim = min(ctx.authority[dof])
         amp = self.amplitude_fraction * lim
         tp = truth_parameters(ctx.cfg, dof)  # the vehicle file's values (the belief, not the pool's truth)
-        kq = tp.get("quadratic_damping", 0.5 * (tp.get("quadratic_damping_positive", 0.0)
-                                               + tp.get("quadratic_damping_negative", 0.0)))
-        kl = tp.get("linear_damping", 0.5 * (tp.get("linear_damping_positive", 0.0)
-                                            + tp.get("linear_damping_negative", 0.0)))
+        # heave: the mean of its two directions
+        kl, kq = (tp.get(n, 0.5 * (tp.get(n + "_positive", 0.0) + tp.get(n + "_negative", 0.0)))
+                  for n in ("linear_damping", "quadratic_damping"))
         m = prior_inertia(ctx.cfg, dof)
         band = design_band(m, kl, kq, amp, ctx.time_constant_s)
         sig = design_signal(self.kind, amp, band, self.duration_s)
@@ -68,8 +67,7 @@ class BroadbandRun(DofStep):
             half = 0.5 * math.pi
         else:
             # half the test angle: near the roll/pitch natural frequency (inside the band) the restoring moment
-            # resonates and the 10 Hz attitude lags, so the braking guard needs the room (full angle overshot the
-            # pitch limit in a first in-process trial)
+            # resonates and the 10 Hz attitude lags, so the braking guard needs the room
             half = 0.5 * float(tilt_test_angle_rad(ctx.cfg, dof))
         shaping = BoxShaping(half, m, lim, math.pi * band.f_min_hz, ctx.tick_s)
         return sig, band, shaping

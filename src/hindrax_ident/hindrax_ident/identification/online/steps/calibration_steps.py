@@ -71,6 +71,10 @@ class KnownForceStep(Step):
     key = ""
     method = ""
     station = False
+    #: the messages' words: the load held without, what the holding force must do, the scale's name
+    load = "the known force"
+    change = "change against the known force"
+    scale_name = "thrust scale"
 
     def __init__(self, force_n: float, settle_s: float = CALIBRATION_SETTLE_S,
                  window_s: float = CALIBRATION_WINDOW_S) -> None:
@@ -92,14 +96,13 @@ class KnownForceStep(Step):
             return ctx.station(duration_s, centre)
         return ctx.hold(duration_s)
 
-    def _measure(self, ctx: StepContext, centre, means: list) -> Wrenches:
-        """Settle, then average: appends (X, std of X, P, N) of the window to ``means``."""
+    def _measure(self, ctx: StepContext, centre):
+        """Settle, then average: returns (X, std of X, P, N) of the window."""
         yield from self._holds(ctx, self.settle_s, centre)
         t1 = ctx.t_s
         yield from self._holds(ctx, self.window_s, centre)
-        x, s = ctx.mean_recorded_force(self.axis, t1)
-        p, n = ctx.mean_force_by_direction(self.axis, t1)
-        means.append((x, s, p, n))
+        return (*ctx.mean_recorded_force(self.axis, t1),
+                *ctx.mean_force_by_direction(self.axis, t1))
 
     def run(self, ctx: StepContext) -> Wrenches:
         yield from ctx.move_to_centre()
@@ -107,35 +110,25 @@ class KnownForceStep(Step):
         if not self.station:
             ctx.ctrl.depth_setpoint_m = ctx.depth_hold_m
         (apply_code, apply_text), (remove_code, remove_text) = self.prompts()
-        means: list = []
-        ctx.say(self.start_message())
-        yield from self._measure(ctx, c, means)
+        head = f"calibration ({self.label()}):"
+        ctx.say(f"{head} hold {'station' if self.station else 'depth'} without {self.load}")
+        x1, s1, p1, n1 = yield from self._measure(ctx, c)
         yield from ctx.wait_operator(apply_code, apply_text, undo=(remove_code, remove_text))
-        yield from self._measure(ctx, c, means)
+        x2, s2, p2, n2 = yield from self._measure(ctx, c)
         yield from ctx.wait_operator(remove_code, remove_text)
         yield from self._holds(ctx, self.settle_s, c)
-        (x1, s1, p1, n1), (x2, s2, p2, n2) = means
         e = self.sense * self.force_n
         dx = x1 - x2
         scale = e / dx if dx != 0.0 else math.nan
         if not scale > 0.0:
-            raise CampaignAbort(self.no_change_message(x1, x2))
+            raise CampaignAbort(f"{head} the holding force did not {self.change} "
+                                f"({x1:.3g} -> {x2:.3g} N)")
         ctx.calibration[self.key] = {
             "value": scale, "std": scale * math.hypot(s1, s2) / abs(dx), "known_force_n": self.force_n,
             "holding_force_n": [x1, x2], "holding_force_std_n": [s1, s2], "method": self.method,
             "direction": ("+" if self.sense > 0 else "-") + "xyz"[self.axis], "group": self.group,
             "forward_force_n": [p1, p2], "reverse_force_n": [n1, n2]}
-        ctx.say(self.result_message(scale))
-
-    def start_message(self) -> str:
-        return f"calibration ({self.label()}): hold without the known force"
-
-    def no_change_message(self, x1: float, x2: float) -> str:
-        return (f"calibration ({self.label()}): the holding force did not change against the known force "
-                f"({x1:.3g} -> {x2:.3g} N)")
-
-    def result_message(self, scale: float) -> str:
-        return f"calibration ({self.label()}): thrust scale {scale:.4f}"
+        ctx.say(f"{head} {self.scale_name} {scale:.4f}")
 
 
 class Ballast(KnownForceStep):
@@ -145,19 +138,13 @@ class Ballast(KnownForceStep):
     name = "ballast"
     key = "vertical"
     method = "ballast"
+    load = "the ballast"
+    change = "rise"
+    scale_name = "vertical thrust scale"
 
     def prompts(self):
         return (("attach_ballast", f"calibration: attach the ballast ({self.force_n:.3g} N in water)"),
                 ("remove_ballast", "calibration: remove the ballast"))
-
-    def start_message(self) -> str:
-        return "calibration (ballast): hold depth without the ballast"
-
-    def no_change_message(self, x1: float, x2: float) -> str:
-        return f"calibration (ballast): the holding force did not rise ({x1:.3g} -> {x2:.3g} N)"
-
-    def result_message(self, scale: float) -> str:
-        return f"calibration (ballast): vertical thrust scale {scale:.4f}"
 
 
 class Float(KnownForceStep):
@@ -167,17 +154,13 @@ class Float(KnownForceStep):
     name = "float"
     key = "vertical_negative"
     method = "float"
+    load = "the float"
+    change = "rise downwards"
 
     def prompts(self):
         return (("attach_float", f"calibration: tie the float ({self.force_n:.3g} N net buoyancy) above the "
                                  "centre of gravity"),
                 ("remove_float", "calibration: remove the float"))
-
-    def start_message(self) -> str:
-        return "calibration (float): hold depth without the float"
-
-    def no_change_message(self, x1: float, x2: float) -> str:
-        return f"calibration (float): the holding force did not rise downwards ({x1:.3g} -> {x2:.3g} N)"
 
 
 class LinePull(KnownForceStep):
@@ -186,6 +169,8 @@ class LinePull(KnownForceStep):
 
     method = "line_pull"
     station = True
+    load = "the line"
+    change = "change against the line"
 
     def __init__(self, axis: str, force_n: float, sense: int = 1, settle_s: float = CALIBRATION_SETTLE_S,
                  window_s: float = CALIBRATION_WINDOW_S) -> None:
@@ -196,24 +181,15 @@ class LinePull(KnownForceStep):
         self.name = f"line pull {'+' if sense > 0 else '-'}{'xy'[('surge', 'sway').index(axis)]}"
         super().__init__(force_n, settle_s, window_s)
 
-    def _suffix(self) -> str:
-        return self.axis_name if self.sense > 0 else f"{self.axis_name}_negative"
-
     def label(self) -> str:
         return f"line pull, {self.axis_name}" + ("" if self.sense > 0 else ", negative")
 
     def prompts(self):
         sign = "+" if self.sense > 0 else "-"
-        return ((f"apply_line_pull_{self._suffix()}", f"calibration: pull the line along {sign}{'xy'[self.axis]} "
-                                                      f"({self.force_n:.3g} N over the pulley)"),
-                (f"release_line_{self._suffix()}", "calibration: release the line"))
-
-    def start_message(self) -> str:
-        return f"calibration ({self.label()}): hold station without the line"
-
-    def no_change_message(self, x1: float, x2: float) -> str:
-        return (f"calibration ({self.label()}): the holding force did not change against the line "
-                f"({x1:.3g} -> {x2:.3g} N)")
+        return ((f"apply_line_pull_{self.key}",
+                 f"calibration: pull the line along {sign}{'xy'[self.axis]} "
+                 f"({self.force_n:.3g} N over the pulley)"),
+                (f"release_line_{self.key}", "calibration: release the line"))
 
 
 class Inclining(Step):
@@ -304,9 +280,6 @@ class TiltDecay(Step):
             w[k] = moment * min(1.0, i / max(n_ramp, 1))
             yield w
         t0 = ctx.t_s
-        for _ in range(int(round(TILT_DECAY_RECORD_S / ctx.tick_s))):
-            w = np.asarray(ctx.ctrl.wrench(ctx.state, (dof,), ctx.tick_s), dtype=float)
-            w[k] = 0.0
-            yield w
+        yield from ctx.hold_free(dof, TILT_DECAY_RECORD_S)
         ctx.decays[dof] = (t0, ctx.t_s)
         yield from ctx.wait_still(k, 0.05, 8.0)

@@ -67,7 +67,7 @@ class StepContext:
         self.t_s = math.nan
         self.message = ""
         self.depth_hold_m = math.nan
-        # tick log (one row per control tick, :meth:`log_tick`)
+        # tick log (one row per control tick, :meth:`log_tick`, in this key order)
         self.rec: dict[str, list] = {k: [] for k in ("t", "w", "wc", "wp", "wn", "fc", "active", "level", "run")}
         # run bookkeeping
         self.active = -1
@@ -103,16 +103,10 @@ class StepContext:
                  wrench_negative: np.ndarray, thrust_cmd_n: np.ndarray) -> None:
         """Append one tick: the lagged thrust-model wrench (6,), the commanded one (6,), the lagged wrench's parts
         from positive (forward) and negative (reverse) thrust (6,) each, the commanded thruster forces (m,) N."""
-        r = self.rec
-        r["t"].append(self.t_s)
-        r["w"].append(wrench_lag)
-        r["wc"].append(wrench_cmd)
-        r["wp"].append(wrench_positive)
-        r["wn"].append(wrench_negative)
-        r["fc"].append(thrust_cmd_n)
-        r["active"].append(self.active)
-        r["level"].append(self.level)
-        r["run"].append(self.run)
+        row = (self.t_s, wrench_lag, wrench_cmd, wrench_positive, wrench_negative, thrust_cmd_n,
+               self.active, self.level, self.run)
+        for column, value in zip(self.rec.values(), row):
+            column.append(value)
 
     def start_run(self, dof: str, level: float) -> None:
         """A run of ``dof`` at ``level`` (N or N m) begins: the following ticks carry it and a new run id."""

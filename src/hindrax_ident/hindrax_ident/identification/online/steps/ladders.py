@@ -55,10 +55,9 @@ class TranslationLadder(DofStep):
         box = ctx.box
         for i, lvl in enumerate(self.levels):
             p = ctx.state.position_ned_m
-            if k == 2:
-                signs = (1.0, -1.0)  # heave: down, then up
-            else:
-                signs = (1.0, -1.0) if box.room_m(p, axis) >= box.room_m(p, -axis) else (-1.0, 1.0)
+            # heave: down, then up; surge and sway: the larger room first
+            first = k == 2 or box.room_m(p, axis) >= box.room_m(p, -axis)
+            signs = (1.0, -1.0) if first else (-1.0, 1.0)
             for s in signs * repeats:
                 ctx.say(f"{dof}: level {i + 1}/{len(self.levels)} {s * lvl:+.2f} N")
                 ctx.start_run(dof, s * lvl)
