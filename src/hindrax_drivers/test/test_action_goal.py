@@ -100,7 +100,8 @@ def test_lost_goal_response_is_recovered_from_the_status_topic_and_the_goal_runs
 def test_lost_goal_request_is_sent_again_with_the_same_uuid(graph):
     node, client, server, spin = graph
     calls = _lose_first(client, "send_goal_async", send=False)
-    # 1.5 s: the resent request's answer must come within one period on a loaded machine, else a third is sent
+    # 1.5 s: the resent request's answer must come within one period on a loaded machine,
+    # else a third is sent
     sender = GoalSender(node, client, "run_identification", resend_every_s=1.5)
     handle, result = _run(sender, spin, ("heave",))
     assert handle.accepted and result.result.message == "done heave"
@@ -127,7 +128,8 @@ def test_lost_result_response_is_requested_again_after_the_goal_ended(graph, mon
 
 def test_a_rejected_goal_is_reported_as_rejected(graph):
     node, client, server, spin = graph
-    # 5 s: a rejection slower than the resend period is taken as lost and sent again (CI once took > 0.3 s)
+    # 5 s: a rejection slower than the resend period is taken as lost and sent again
+    # (CI once took > 0.3 s)
     sender = GoalSender(node, client, "run_identification", resend_every_s=5.0)
     handle, result = _run(sender, spin, ())
     assert not handle.accepted and result is None and server.accepted == 0 and sender.resends == 0
@@ -178,7 +180,8 @@ def test_lost_cancel_request_is_sent_again_until_the_goal_is_cancelling():
         spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
         try:
             wait_until(client.server_is_ready, 20, spin, "action server discovered")
-            # 1.5 s: the status showing the resent cancel must come within one period, else a third is sent
+            # 1.5 s: the status showing the resent cancel must come within one period,
+            # else a third is sent
             sender = GoalSender(client_node, client, "run_identification", resend_every_s=1.5)
             handle = sender.send(RunIdentification.Goal(dofs=["sway"]), spin, 20)
             assert handle.accepted

@@ -306,7 +306,8 @@ def read_ms5837(dev: I2CDevice, clock: ManualClock, variant_config: str | None,
 
 
 @pytest.mark.parametrize("variant, pressure_pa, temperature_c, tol_pa", [
-    ("30BA", 101_300.0 + 997.0 * 9.80665 * 12.5, 14.37, 6.0),  # 12.5 m; 0.1 mbar LSB -> 5 Pa + ADC step
+    # 12.5 m; 0.1 mbar LSB -> 5 Pa + ADC step
+    ("30BA", 101_300.0 + 997.0 * 9.80665 * 12.5, 14.37, 6.0),
     ("30BA", 101_325.0, -3.2, 6.0),
     ("02BA", 104_321.7, 22.81, 0.6),                       # 0.01 mbar LSB -> 0.5 Pa + ADC step
 ])

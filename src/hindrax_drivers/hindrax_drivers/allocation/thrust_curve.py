@@ -107,8 +107,8 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
 
 
 def check_positive(value: float, name: str, allow_zero: bool = False) -> float:
-    """``value`` as a float. Raises :class:`ThrustCurveError` (a ValueError) naming it when it is not
-    a finite number > 0 (>= 0 with ``allow_zero``)."""
+    """``value`` as a float. Raises :class:`ThrustCurveError` (a ValueError) naming it when it is
+    not a finite number > 0 (>= 0 with ``allow_zero``)."""
     kind = "a finite number >= 0" if allow_zero else "a finite positive number"
     try:
         out = float(value)

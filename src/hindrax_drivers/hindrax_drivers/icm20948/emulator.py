@@ -389,7 +389,8 @@ class Icm20948Emulator(RegisterPointerEmulator):
         addr = self._get(p.I2C_SLV4_ADDR)
         status = p.I2C_MST_STATUS_SLV4_DONE
         try:
-            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl, self._get(p.I2C_SLV4_DO), 1)
+            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl,
+                                  self._get(p.I2C_SLV4_DO), 1)
             if addr & p.I2C_SLV_ADDR_RNW:
                 self._set(p.I2C_SLV4_DI, data[0])
         except OSError:

@@ -7,8 +7,8 @@ Frame (little-endian, docs/devices.md §2.2): ``'B' 'R'``, u16 payload_length, u
 u8 src_device_id, u8 dst_device_id, payload, u16 checksum = (sum of every preceding byte) & 0xFFFF.
 
 Our own codec, not the PyPI package ``bluerobotics-ping``: its 0.2.x ``Ping1D`` class is broken
-(docs/devices.md §0 item 4, §2.7). This one is verified against the byte-exact vectors of §2.5, with a
-declared parse error and a streaming framer that resynchronises on ``BR``.
+(docs/devices.md §0 item 4, §2.7). This one is verified against the byte-exact vectors of §2.5,
+with a declared parse error and a streaming framer that resynchronises on ``BR``.
 
 Units: payload fields are converted to SI on decode (mm -> m, mm/s -> m/s, ms/µs -> s, mV -> V,
 centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution.

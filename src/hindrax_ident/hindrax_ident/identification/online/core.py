@@ -62,8 +62,8 @@ __all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem",
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
 #: the executive's abort reason when the thrust stopped under it
 DISARMED = "ESC output disarmed"
-#: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel, and a disarmed
-#: ESC output (the thrusters are already stopped, possibly by the supervisor itself)
+#: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel,
+#: and a disarmed ESC output (the thrusters are already stopped, possibly by the supervisor itself)
 NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", DISARMED})
 #: period of ``identification/status`` while a goal runs and nothing changes, s (2 Hz: the progress on a topside
 #: display; every change of phase, DOF, level or message goes out at once, so a bag's zero-order hold of the status
