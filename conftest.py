@@ -8,6 +8,8 @@
   10 N + 2 + pid % 7 first (gw0 2-8, gw1 12-18, gw2 22-28), then the next ones up; a taken domain is skipped.
 - A test that leaves SIGINT or SIGTERM ignored in its worker fails (:func:`_stop_signals_not_left_ignored`): every
   child the worker starts later would inherit the ignored signal, and ``kill`` or Ctrl-C could not end it.
+- Tests marked ``vehicle_launch`` (a vehicle launch, a live pool, the real-time safety processes) form one xdist
+  group, :data:`VEHICLE_LAUNCH_GROUP`: they run in a row on one worker and never overlap each other.
 - Scheduling over the workers (pytest.ini: ``--dist loadgroup --no-loadscope-reorder``): each test is a unit of
   its own, dealt in order to the worker that is free, so the longest tests (:data:`LONGEST_FIRST`) go first and no
   worker is left running one of them alone at the end; the tests of a module that uses a module-scoped fixture stay
@@ -92,6 +94,14 @@ LONGEST_FIRST = """
 """
 
 
+#: The xdist group of every test marked ``vehicle_launch`` (pytest.ini): tests that start a vehicle launch, a live
+#: pool or the safety processes with their real-time priorities run one after another on one worker, never beside
+#: each other. Beside each other on two cores, real-time processes of one test starved another's: a fresh clone of
+#: 5d4005e failed ``test_armed_esc_stays_armed_while_thrust_flows`` (esc/heartbeat gaps up to 0.604 s, 20 of 139
+#: reports disarmed), and the README pool day disarmed on an IMU rate of 19.7 Hz.
+VEHICLE_LAUNCH_GROUP = "vehicle_launch"
+
+
 def pytest_configure(config: pytest.Config) -> None:
     global _domain_ctx
     if hasattr(config, "workerinput") or os.environ.get("PYTEST_XDIST_WORKER") is None:
@@ -169,7 +179,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     which loadgroup keeps on one worker in a row. After them (pytest's own fixture ordering, xdist's group suffix):
     the tests of :data:`LONGEST_FIRST` first, in its order; the rest keep theirs."""
     for item in items:
-        if _uses_a_module_fixture(item):
+        if item.get_closest_marker("vehicle_launch") is not None:
+            item.add_marker(pytest.mark.xdist_group(VEHICLE_LAUNCH_GROUP))
+        elif _uses_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
     result = yield
     if getattr(config.option, "loadgroup", False):  # an xdist worker of a --dist loadgroup run

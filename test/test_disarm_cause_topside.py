@@ -28,7 +28,7 @@ from hindrax_drivers.config import load_config
 from hindrax_drivers.testing import child_process, interrupt, ros_context, wait_until
 from hindrax_ident.tools.benchmarks.safety import running_layout
 
-pytestmark = [pytest.mark.ros, pytest.mark.timeout(600)]
+pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(600)]
 
 WAIT_S = 30.0  # generous: a loaded two-core machine
 

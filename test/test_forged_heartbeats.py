@@ -19,6 +19,8 @@ import pytest
 from hindrax_drivers.testing import ConditionTimeout, wait_until
 from hindrax_ident.tools.benchmarks.safety import running_layout
 
+pytestmark = pytest.mark.vehicle_launch
+
 #: the issue's target is 0.3 s (supervisor killed -> outputs stopped, benchmarks/safety.py measures it); a test on a
 #: loaded 2-core machine only asserts that the outputs stop at all within a wide bound (thrust stayed on for 100 %
 #: of 2 s before)

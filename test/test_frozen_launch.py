@@ -10,8 +10,12 @@ import os
 import signal
 import time
 
+import pytest
+
 from hindrax_drivers.testing import wait_until
 from hindrax_ident.tools.benchmarks.safety import running_layout
+
+pytestmark = pytest.mark.vehicle_launch
 
 #: the circuit's timeout is 0.33 s (make bench measures the stop: launch_frozen_outputs_stopped); on a loaded 2-core
 #: machine the test only bounds it widely

@@ -16,7 +16,7 @@ import pytest
 from hindrax_drivers.testing import ConditionTimeout
 from hindrax_ident.tools.benchmarks.safety import _UnitLayout, partial_freeze_stop_s, running_layout
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros]
 
 #: the bound is WatchdogSec (0.2 s) + systemd's timer accuracy (0.25 s) + the kill (benchmarks/safety.py measures
 #: it); a test on a loaded 2-core machine only asserts that the outputs stop at all within a wide bound (thrust

@@ -41,7 +41,7 @@ from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
 
-pytestmark = [pytest.mark.ros, pytest.mark.timeout(1200)]
+pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(1200)]
 
 TOPICS = {"/dvl/data": Dvl, "/ping/altitude": Range, "/pressure/fluid_pressure": FluidPressure,
           "/imu/data_raw": Imu}

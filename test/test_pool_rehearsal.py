@@ -22,7 +22,7 @@ from domain_coordinator import domain_id
 
 from hindrax_drivers.testing import wait_until
 
-pytestmark = [pytest.mark.ros, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(900)]
 
 WAIT_S = 180.0  # a loaded two-core machine starts ten Python processes
 

@@ -25,7 +25,7 @@ from hindrax_drivers.testing import wait_until
 from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
 from hindrax_ident.tools.benchmarks.safety import running_layout
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros]
 
 #: (tool arguments, the refusal's start after "hindrax <tool>: refused: ROS domain N already has ")
 TOOLS = {

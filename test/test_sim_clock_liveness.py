@@ -16,6 +16,7 @@ import os
 import signal
 import time
 
+import pytest
 from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.liveness import heartbeat_qos
@@ -23,6 +24,8 @@ from hindrax_drivers.testing import wait_until
 from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
 from hindrax_ident.tools.benchmarks.safety import _Layout, running_layout
 from hindrax_msgs.msg import Heartbeat
+
+pytestmark = pytest.mark.vehicle_launch
 
 #: simulated seconds per wall second while the ESC is stopped: 1.5 s stopped (and up to 3.5 s more before its next
 #: beat reaches the guard on a loaded machine) stay below the 0.2 s timeout on the graph's clock

@@ -142,6 +142,7 @@ def _maps_shared_memory(pid: int) -> bool:
 
 
 @pytest.mark.ros
+@pytest.mark.vehicle_launch
 @pytest.mark.timeout(600)
 def test_every_vehicle_udp_socket_binds_loopback_and_no_process_uses_shared_memory(tmp_path):
     cfg = load_config(default_config_path())

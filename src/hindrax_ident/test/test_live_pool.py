@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import time
 
+import pytest
 import serial
 
 from hindrax_drivers.config import default_config_path, load_config
@@ -16,6 +17,7 @@ from hindrax_drivers.testing import child_env, may_set_fifo
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV, SocketI2CBus
 from hindrax_ident.sim.live_pool import LivePool
 
+pytestmark = pytest.mark.vehicle_launch
 
 # PCA9685 registers (NXP PCA9685 datasheet rev. 4, §7.3): MODE1, LED0_ON_L, PRE_SCALE
 MODE1, LED0_ON_L, PRE_SCALE = 0x00, 0x06, 0xFE
