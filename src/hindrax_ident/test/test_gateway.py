@@ -441,3 +441,30 @@ def test_a_second_gateway_with_the_same_name_is_reported_and_arming_refused(pool
             assert ("set_armed", True) not in alpha.calls[before:]
         finally:
             runner.stop()
+
+
+def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(pool, topside):
+    """Issue 71 findings 1 and 3 through the real gateway: the copy an eavesdropper keeps is worth nothing, with
+    its timestamp raised by 2^48 or replayed unchanged after the gateway restarted; the replay cache is a 0600 file
+    next to the key."""
+    import stat
+
+    from hindrax_msgs.srv import SignedTrigger
+
+    alpha = pool["vehicles"]["alpha"]
+    before = len(alpha.calls)
+    signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
+    assert topside.call(SignedTrigger, "/alpha/arm", signed).success
+    lifted = SignedTrigger.Request()
+    lifted.signature.link_id, lifted.signature.mac = signed.signature.link_id, signed.signature.mac
+    lifted.signature.timestamp = signed.signature.timestamp + (1 << 48)
+    answer = topside.call(SignedTrigger, "/alpha/arm", lifted)
+    assert not answer.success and "out of range" in answer.message, answer.message
+    assert stat.S_IMODE((pool["keys"] / "alpha.replay").stat().st_mode) == 0o600
+    runner = pool["runners"][0]
+    runner.stop()
+    runner.start()
+    wait_until(lambda: runner.log("gateway").count("internal domain") >= 2, 60, message="the gateway restarted")
+    answer = topside.call(SignedTrigger, "/alpha/arm", signed)
+    assert not answer.success and answer.message.startswith("arm: refused: replayed"), answer.message
+    assert alpha.calls[before:] == [("set_armed", True)]  # the first, once

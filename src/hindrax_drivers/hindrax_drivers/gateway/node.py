@@ -56,7 +56,7 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
 
 from ..dds_transport import PROFILE_ENV, RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path
-from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key
+from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key, replay_path
 from ..ros_process import RosProcess
 from ..sros2_policy import topside_enclaves
 from .bounds import RequestBounds
@@ -128,7 +128,7 @@ class Gateway:
         if count:
             self.relayed[count] += 1
         self.last_refusal = why
-        self.front.get_logger().warn(why)
+        self.front.get_logger().warn(why + (f" ({self.verifier.problem})" if self.verifier.problem else ""))
         return why
 
     def _operator_check(self, relay: Any, request: Any) -> str:
@@ -373,7 +373,10 @@ def main(args: Sequence[str] | None = None) -> int:
         settings = GatewaySettings(**first[0]["settings"])
         bounds = RequestBounds(**first[0]["bounds"])
         try:
-            verifier = Verifier(load_key(key_path(settings.vehicle_name)), settings.vehicle_name)
+            verifier = Verifier(load_key(key_path(settings.vehicle_name)), settings.vehicle_name,
+                                state=replay_path(settings.vehicle_name))
+            if verifier.problem:
+                print(f"gateway: {verifier.problem}", file=sys.stderr, flush=True)
         except OperatorKeyError as exc:
             print(f"gateway: {exc}: every operator request will be refused (the e-stop works)", file=sys.stderr,
                   flush=True)
