@@ -201,8 +201,8 @@ class Gateway:
             try:
                 why = self._operator_check(relay, request) if operator else ""
                 if not why and arm and self._last_estop_s >= self._busy_since_s:
-                    why = self._refuse("arm: refused: an e-stop arrived while it waited; send it again after reset",
-                                       "overtaken_by_estop")
+                    why = self._refuse("arm: refused: an e-stop arrived while it waited; hindrax reset, then hindrax "
+                                       "arm again", "overtaken_by_estop")
                 if why:
                     response.success, response.message = False, why
                     return response
