@@ -228,7 +228,7 @@ class Verifier:
         if self.state is None:
             return True
         text = "\n".join([str(self.floor), *(f"{t} {m.hex()}" for m, t in self.seen.items())]) + "\n"
-        tmp = self.state.with_name(self.state.name + ".tmp")
+        tmp = self.state.with_name(f"{self.state.name}.{os.getpid()}.tmp")  # one per writer process
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
             with os.fdopen(fd, "w") as f:

@@ -425,8 +425,15 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
 
     alpha = pool["vehicles"]["alpha"]
     before = len(alpha.calls)
-    signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
-    assert topside.call(SignedTrigger, "/alpha/arm", signed).success
+    signer, answers = Signer(topside.key, "alpha"), []
+
+    def armed() -> bool:  # an e-stop of the test before may still count as overtaking it: sign again, send again
+        answers.append((signer.sign_message("arm", SignedTrigger.Request()), None))
+        answers[-1] = (answers[-1][0], topside.call(SignedTrigger, "/alpha/arm", answers[-1][0]))
+        return answers[-1][1].success or "e-stop arrived" not in answers[-1][1].message
+    wait_until(armed, WAIT_S, None, "an arm accepted")
+    signed, answer = answers[-1]
+    assert answer.success, answer.message
     lifted = SignedTrigger.Request()
     lifted.signature.link_id, lifted.signature.mac = signed.signature.link_id, signed.signature.mac
     lifted.signature.timestamp = signed.signature.timestamp + (1 << 48)
@@ -439,7 +446,7 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
     wait_until(lambda: runner.log("gateway").count("internal domain") >= 2, 60, message="the gateway restarted")
     answer = topside.call(SignedTrigger, "/alpha/arm", signed)
     assert not answer.success and answer.message.startswith("arm: refused: replayed"), answer.message
-    assert alpha.calls[before:] == [("set_armed", True)]  # the first, once
+    assert alpha.calls[before:] == [("set_armed", True)]  # the accepted one, once
 
 def test_another_server_of_an_operator_service_is_reported_and_arming_refused(pool, topside):
     """Issue 71.2: a silent second server of /alpha/arm receives every signed request; the gateway's status (ERROR,
