@@ -1,23 +1,12 @@
 """Signed operator commands: a per-vehicle secret, HMAC-SHA256 signatures, timestamps near the vehicle's clock.
 
 Modelled on MAVLink 2 message signing (mavlink.io, "Message Signing"): a 32-byte secret shared by the vehicle and
-the operator's PC, a *link id* (one byte, one per sender), a 48-bit *timestamp* in 10 us units since
-2015-01-01 00:00 UTC, and a MAC over the message. Where it differs, and why (docs/threat_model.md):
-
-* the MAC is the full HMAC-SHA256 (Python's :mod:`hmac`), not SHA-256 truncated to 48 bits, and covers the
-  vehicle name and the relay's name (``arm`` and ``disarm`` have the same empty request);
-* every field the :class:`Verifier` compares is covered by the MAC: a link id outside 0-255 or a timestamp outside
-  0 - 2^48-1 is refused before the MAC (the ROS fields are wider than MAVLink's bytes: +2^48 kept the MAC);
-* a timestamp more than :data:`AHEAD_LIMIT` ahead of the vehicle's clock is refused (MAVLink has no upper bound: a
-  PC a day ahead, or a request replayed with +k*2^48, raised its per-link state and locked the operator out); one
-  more than :data:`STALE_LIMIT` behind it is refused;
-* replay protection is a cache of the MACs seen (accepted, or refused for being ahead: those must not become
-  acceptable later) rather than a rising timestamp per link: nothing one sender does moves another's floor, so no
-  sequence of requests locks out an operator whose clock is right; a MAC leaves the cache when its timestamp falls
-  out of the window, raising a floor below which everything is refused (the Pi has no real-time clock: after a boot
-  its clock may run behind until chrony corrects it, and the floor keeps old requests dead meanwhile);
-* the cache is written to ``<keys dir>/<vehicle>.replay`` (:func:`replay_path`; tmp file, fsync, rename, mode
-  0600) before a request is accepted, and read at start: a gateway or vehicle restart reopens no replay.
+the operator's PC, a *link id*, a 48-bit *timestamp* in 10 us units since 2015-01-01 00:00 UTC, a MAC. Past it
+(each difference and why: docs/threat_model.md §4): full HMAC-SHA256 over the vehicle and relay names too; a link id
+past 255 or a timestamp past 2^48-1 refused before the MAC; a timestamp more than :data:`AHEAD_LIMIT` ahead of or
+:data:`STALE_LIMIT` behind the vehicle's clock refused; replays caught by a cache of the MACs seen (those refused for
+being ahead included) with a floor for those that left it, written to ``<keys dir>/<vehicle>.replay``
+(:func:`replay_path`) before a request is accepted and read at start.
 
 The gateway (:mod:`hindrax_drivers.gateway.node`) checks every operator request with a :class:`Verifier`; the
 ``hindrax`` command signs with a :class:`Signer` when it has the key (:func:`key_path`). The e-stop is never signed.

@@ -1,19 +1,11 @@
 """``outputs_off``: silence the PCA9685 from outside the stack, after its unit stopped or was killed (issue 71.6).
 
-The systemd units run it as ``ExecStopPost=`` (docker/hindrax-bare-metal.service, docker/hindrax.service): after
-``systemctl stop``, a crash, or the watchdog's SIGKILL of every process of the unit. The PCA9685 keeps generating its
-last pulses on its own, and a Raspberry Pi kernel without ``strict_gpiod`` keeps a freed GPIO output at its last
-level (raspberrypi/linux pull requests 6117 and 6150), so /OE can stay enabled after the guard died. This command:
-
-1. drives the /OE line (``esc.output_enable_gpio``) HIGH (outputs off) and releases it: with ``strict_gpiod`` the
-   line returns to an input and the board's pull-up holds it high; without, it keeps the high it was given;
-2. writes the chip's ALL_LED_OFF_H full-OFF bit, then MODE1 SLEEP (datasheet §7.3.1, §7.3.4): no pulses whatever
-   the channels held, /OE wired or not.
-
-Each step is tried even when the other fails; one line per step on stdout; exit status 0 when both worked (or /OE is
-not wired and the chip was silenced), 1 otherwise. Standard library, the vehicle file and the I2C/GPIO transports
-only: no ROS (it must run when the ROS installation is what broke). The vehicle file: ``HINDRAX_CONFIG``, else the
-installed one (:func:`hindrax_drivers.config.default_config_path`).
+The systemd units run it as ``ExecStopPost=`` (docker/hindrax*.service): the PCA9685 keeps its last pulses on its
+own, and a Raspberry Pi kernel without ``strict_gpiod`` keeps a freed /OE low (docs/threat_model.md §6). It drives
+/OE (``esc.output_enable_gpio``) high and releases it, then writes the chip's ALL_LED_OFF_H full-OFF bit and MODE1
+SLEEP (:func:`silence_chip`), each step tried even when the other fails, one line each on stdout; exit status 0
+when both worked (or /OE is not wired), else 1. No ROS: it must run when the ROS installation is what broke. The
+vehicle file: ``HINDRAX_CONFIG``, else the installed one (:func:`hindrax_drivers.config.default_config_path`).
 """
 from __future__ import annotations
 
