@@ -16,6 +16,8 @@ import contextlib
 import os
 import signal
 import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import rclpy
@@ -25,6 +27,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import load_config
+from hindrax_drivers.operator_signing import create_key
 from hindrax_drivers.testing import child_process, interrupt, ros_context, wait_until
 from hindrax_ident.tools.benchmarks.safety import running_layout
 
@@ -39,6 +42,8 @@ def topside():
     with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, domain_id() as top, \
             ros_context(domain_id=top) as ctx, contextlib.ExitStack() as stack:
         name = load_config(lay.config).get("vehicle.name")
+        create_key(lay.tmp / "keys" / f"{name}.key")  # the operator's key, on "both sides" (one folder here)
+        lay.env = dict(lay.env, HINDRAX_KEYS_DIR=str(lay.tmp / "keys"))
         log = stack.enter_context(open(lay.tmp / "gateway.log", "w"))
         gateway = stack.enter_context(child_process(
             [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config, "-p",
@@ -49,6 +54,7 @@ def topside():
         probe.create_subscription(DiagnosticStatus, f"/{name}/supervisor/status", seen.append, 50)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(probe)
+        lay.topside_domain, lay.vehicle_name = top, name
         try:
             yield lay, seen, executor
         finally:
@@ -89,6 +95,13 @@ def test_a_tripped_limit_is_named_on_the_topside(topside):
     assert cause.endswith("; next: bring the vehicle back inside the envelope (or fix what the cause names), then "
                           "hindrax reset, hindrax arm"), cause
     lay.probe.destroy_publisher(pub)
+    # issue 74.1: the step it names, from the topside through the gateway (signed), printing what it cleared
+    reset = subprocess.run([str(Path(sys.executable).with_name("hindrax")), "reset", "--vehicle", lay.vehicle_name],
+                           capture_output=True, text=True, timeout=120,
+                           env=dict(lay.env, ROS_DOMAIN_ID=str(lay.topside_domain)))
+    assert reset.returncode == 0, reset.stderr
+    assert reset.stdout.strip() == f"{lay.vehicle_name}: cleared: depth 9.00 m beyond supervisor.max_depth_m " \
+        + cause.split("supervisor.max_depth_m ", 1)[1].split("; next:")[0], (reset.stdout, cause)
 
 
 def test_a_guard_silence_is_named_on_the_topside(topside):

@@ -293,3 +293,15 @@ def test_build_finds_this_hosts_group_ids(tmp_path):
     (bin_dir / "getent").write_text("#!/usr/bin/env bash\nexit 2\n")  # a host without the groups: one line, no build
     r = subprocess.run([str(DOCKER / "build.sh")], env=env, capture_output=True, text=True, timeout=30)
     assert r.returncode == 1 and "no group dialout" in r.stderr and "DOCKER" not in r.stdout
+
+
+def test_both_units_silence_the_outputs_after_every_stop_with_the_installed_command():
+    """Issue 71.6: ``ExecStopPost=`` runs ``outputs_off`` (a console script of hindrax_drivers, no ROS) after a stop,
+    a crash or the watchdog's SIGKILL; the command exists where the units look for it."""
+    setup = (DOCKER.parent / "src/hindrax_drivers/setup.py").read_text()
+    assert '"outputs_off": "hindrax_drivers.guard.outputs_off:main"' in setup
+    for unit in ("hindrax.service", "hindrax-bare-metal.service"):
+        text = (DOCKER / unit).read_text()
+        (line,) = re.findall(r"^ExecStopPost=(.*)$", text, re.M)
+        assert "install/lib/hindrax_drivers/outputs_off" in line, (unit, line)
+    assert "rclpy" not in (DOCKER.parent / "src/hindrax_drivers/hindrax_drivers/guard/outputs_off.py").read_text()

@@ -137,7 +137,8 @@ def test_read_only_and_invalid_changes_are_refused_with_a_reason_and_valid_ones_
         baro.armed.take(disarmed)
         r = set_param(call, "ms5837", "environment.surface_pressure_pa",
                       ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=101000.0))
-        assert r.successful and baro.surface_pressure_pa == pytest.approx(101000.0)
+        # and then checked as pressure/zero_depth is (issue 71.7): this sensor has no reading to check it against
+        assert not r.successful and "no pressure reading yet" in r.reason and baro.surface_pressure_pa == 101325.0
         before = alloc.core.allocator
         r = set_param(call, "thrust_allocation", "thrusters.t1.trim_us",
                       ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5.0))
@@ -261,3 +262,35 @@ def test_a_bad_node_parameter_stops_the_node_with_one_line(factory, name, value,
         with pytest.raises(ConfigError) as err:
             make(context=ctx, parameter_overrides=ALL + [Parameter(name, value=value)])
     assert str(err.value) == f"parameters of {factory}: {line}"
+
+
+def test_the_parameters_a_running_vehicle_node_accepts_are_the_documented_ones():
+    """docs/threat_model.md §5: at run time only the allocation's thrusters.* and the MS5837's surface pressure are
+    writable (each behind the arm lock and its checks); every rclpy built-in and every other parameter is read-only."""
+    from hindrax_drivers.guard.node import OutputGuardNode
+    from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+    from hindrax_drivers.pca9685.node import EscNode
+    from hindrax_drivers.supervisor.node import SupervisorNode
+    from hindrax_drivers.transport.gpio import EmulatedGpioLine
+
+    factories = {
+        "thrust_allocation": lambda c: ThrustAllocationNode(context=c, parameter_overrides=ALL),
+        "ms5837": lambda c: Ms5837Node(bus=EmulatedI2CBus({}), context=c, parameter_overrides=ALL),
+        "static_tf": lambda c: StaticTfNode(context=c, parameter_overrides=ALL),
+        "supervisor": lambda c: SupervisorNode(context=c, parameter_overrides=ALL),
+        "output_guard": lambda c: OutputGuardNode(line=EmulatedGpioLine(), context=c, parameter_overrides=ALL),
+        "esc": lambda c: EscNode(bus=EmulatedI2CBus({0x40: Pca9685Emulator()}), context=c, parameter_overrides=ALL),
+    }
+    with ros_context() as ctx:
+        for label, make in factories.items():
+            node = make(ctx)
+            try:
+                writable = sorted(n for n in node._parameters if not node.describe_parameter(n).read_only)
+            finally:
+                node.destroy_node()
+            if label == "thrust_allocation":
+                assert writable and all(n.startswith("thrusters.") for n in writable), writable
+            elif label == "ms5837":
+                assert writable == ["environment.surface_pressure_pa"], writable
+            else:
+                assert writable == [], (label, writable)

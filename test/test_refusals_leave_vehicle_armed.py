@@ -79,3 +79,26 @@ def test_a_refused_tool_does_not_disarm_the_vehicle(layout, tool, tmp_path):
         f"{tool} disarmed the vehicle before refusing: channel 0 {hw.emu.pulse_width_us(0):.1f} us, /OE high "
         f"{hw.line.is_high()}; ESC said {lay._last_log_line('esc', 'disarming')!r}")
     assert hw.thrust() and hw.emu.pulse_width_us(0) > 1690.0
+
+
+def test_use_sim_time_set_while_armed_is_refused_by_every_safety_process(layout):
+    """Issue 71.5: ``ros2 param set /output_guard use_sim_time true`` while armed froze the guard's and the ESC's
+    timers (thrust 100 % for 3-8 s, the guard reporting OK). Every vehicle node's rclpy built-ins are read-only: each
+    of the ESC, supervisor and guard refuses it through its parameter service, and the vehicle stays armed."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    lay, hw = layout, layout.hw
+    lay.armed_at_1700()
+    sim_time = ParameterMsg(name="use_sim_time", value=ParameterValue(type=ParameterType.PARAMETER_BOOL,
+                                                                      bool_value=True))
+    for node in ("esc", "supervisor", "output_guard"):
+        client = lay.probe.create_client(SetParameters, f"/{node}/set_parameters")
+        wait_until(client.service_is_ready, 30, None, f"{node}'s parameter service")
+        future = client.call_async(SetParameters.Request(parameters=[sim_time]))
+        wait_until(future.done, 30, None, f"{node}'s answer")
+        (result,) = future.result().results
+        assert not result.successful and "read-only" in result.reason, (node, result.reason)
+        lay.probe.destroy_client(client)
+    assert not lay.disarmed_after_arm and hw.thrust() and hw.emu.pulse_width_us(0) > 1690.0

@@ -43,6 +43,8 @@ NODES = {name: mod for name, mod in NODES.items()
 GROUPS = {
     "sensors_node": "hindrax_drivers.composition:sensors_main",
     "actuation_node": "hindrax_drivers.composition:actuation_main",
+    # not a node: the systemd units' ExecStopPost= (docker/hindrax*.service), no ROS
+    "outputs_off": "hindrax_drivers.guard.outputs_off:main",
 }
 
 

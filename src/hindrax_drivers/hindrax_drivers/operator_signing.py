@@ -1,13 +1,16 @@
-"""Signed operator commands: a per-vehicle secret, HMAC-SHA256 signatures, a rising timestamp per link.
+"""Signed operator commands: a per-vehicle secret, HMAC-SHA256 signatures, timestamps near the vehicle's clock.
 
 Modelled on MAVLink 2 message signing (mavlink.io, "Message Signing"): a 32-byte secret shared by the vehicle and
-the operator's PC, a *link id* (one byte, one per sender), a 48-bit *timestamp* in 10 us units since
-2015-01-01 00:00 UTC that must rise on each link, and a MAC over the message. Differences: the MAC is the full
-HMAC-SHA256 (Python's :mod:`hmac`) rather than SHA-256 truncated to 48 bits, and it covers the vehicle name and the
-relay's name (``arm`` and ``disarm`` have the same empty request: a signed disarm cannot be replayed as an arm).
+the operator's PC, a *link id*, a 48-bit *timestamp* in 10 us units since 2015-01-01 00:00 UTC, a MAC. Past it
+(each difference and why: docs/threat_model.md §4): full HMAC-SHA256 over the vehicle and relay names too; a link id
+past 255 or a timestamp past 2^48-1 refused before the MAC; a timestamp more than :data:`AHEAD_LIMIT` ahead of or
+:data:`STALE_LIMIT` behind the vehicle's clock refused; replays caught by a cache of the MACs seen (those refused for
+being ahead included) with a floor for those that left it, written to ``<keys dir>/<vehicle>.replay``
+(:func:`replay_path`) before a request is accepted and read at start.
 
 The gateway (:mod:`hindrax_drivers.gateway.node`) checks every operator request with a :class:`Verifier`; the
 ``hindrax`` command signs with a :class:`Signer` when it has the key (:func:`key_path`). The e-stop is never signed.
+A refusal sent to the topside names no file of the vehicle.
 
 Key file: ``<keys dir>/<vehicle>.key`` (:func:`key_path`), 64 hex digits and a newline, mode 0600, on the vehicle and
 on the operator's PC. Made by :func:`create_key` (``hindrax keys``).
@@ -23,13 +26,14 @@ import secrets
 import stat
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from hashlib import sha256
 from pathlib import Path
 from typing import Any, Callable
 
-__all__ = ["KEYS_DIR_ENV", "KEY_BYTES", "NEW_LINK_WINDOW", "OperatorKeyError", "Signature", "Signer", "Verifier",
-           "create_key", "key_path", "keys_dir", "load_key", "mac", "signed_payload", "timestamp_now"]
+__all__ = ["AHEAD_LIMIT", "KEYS_DIR_ENV", "KEY_BYTES", "STALE_LIMIT", "OperatorKeyError", "Signature", "Signer",
+           "Verifier", "create_key", "key_path", "keys_dir", "load_key", "mac", "replay_path", "signed_payload",
+           "timestamp_now"]
 
 #: the secret's length, bytes (MAVLink 2: 32)
 KEY_BYTES = 32
@@ -39,9 +43,15 @@ KEYS_DIR_ENV = "HINDRAX_KEYS_DIR"
 EPOCH_S = 1420070400
 #: the timestamp's largest value (48 bits)
 TIMESTAMP_MAX = (1 << 48) - 1
-#: a link not seen before is accepted when its first timestamp is no older than this below the newest timestamp
-#: accepted on any link and the vehicle's clock (MAVLink: one minute), in timestamp units (10 us)
-NEW_LINK_WINDOW = 60 * 100_000
+#: a timestamp further ahead of the vehicle's clock than this is refused (chrony keeps the PC and the Pi within
+#: milliseconds), timestamp units (10 us): 5 s
+AHEAD_LIMIT = 5 * 100_000
+#: a timestamp further behind the vehicle's clock than this is refused (MAVLink's one minute), timestamp units: 60 s
+STALE_LIMIT = 60 * 100_000
+#: the replay cache's size bound, MACs (at most :data:`AHEAD_MEMORY` of them refused for being ahead)
+CACHE_MAX = 4096
+#: how many MACs refused for being ahead the cache keeps (a PC with a wrong clock streaming setpoints fills it)
+AHEAD_MEMORY = 1024
 #: what is signed starts with this (domain separation from any other use of the key)
 _CONTEXT = b"hindrax-operator-v1\0"
 
@@ -58,6 +68,11 @@ def keys_dir() -> Path:
 def key_path(vehicle: str) -> Path:
     """The key file of vehicle ``vehicle`` (its ``vehicle.name``)."""
     return keys_dir() / f"{vehicle}.key"
+
+
+def replay_path(vehicle: str) -> Path:
+    """The replay cache of vehicle ``vehicle`` (:class:`Verifier`), next to its key file."""
+    return keys_dir() / f"{vehicle}.replay"
 
 
 def create_key(path: Path, force: bool = False) -> Path:
@@ -106,9 +121,10 @@ def timestamp_now() -> int:
 
 def mac(key: bytes, vehicle: str, relay: str, link_id: int, timestamp: int, payload: bytes) -> bytes:
     """HMAC-SHA256 (32 bytes) of one request: vehicle name, relay name (``arm``, ``controller/setpoint``...), link
-    id, 48-bit timestamp and ``payload`` (the request serialized with its signature field empty)."""
-    head = _CONTEXT + vehicle.encode() + b"\0" + relay.encode() + b"\0" + bytes([link_id & 0xFF]) \
-        + (timestamp & TIMESTAMP_MAX).to_bytes(6, "little")
+    id, 48-bit timestamp and ``payload`` (the request serialized with its signature field empty). Raises
+    ValueError/OverflowError for a link id outside 0-255 or a timestamp outside 0 - 2^48-1 (none is masked)."""
+    head = _CONTEXT + vehicle.encode() + b"\0" + relay.encode() + b"\0" + bytes([link_id]) \
+        + timestamp.to_bytes(6, "little")
     return hmac.new(key, head + payload, sha256).digest()
 
 
@@ -165,45 +181,104 @@ class Signer:
         return message
 
 
-@dataclass
 class Verifier:
     """Checks operator requests for one vehicle (the gateway): ``key`` None = no key on the vehicle, every request
     refused. :meth:`check` returns None (accepted) or the one-line reason; ``counts`` has ``accepted``,
-    ``unsigned``, ``bad_signature``, ``replayed`` and ``no_key``. ``now``: the vehicle's clock as a timestamp
-    (chrony keeps the Pi on the topside's clock); safe to call from several threads."""
+    ``unsigned``, ``malformed``, ``bad_signature``, ``ahead``, ``stale``, ``replayed``, ``unrecorded`` (the cache
+    could not be written) and ``no_key``. ``now``: the vehicle's clock as a timestamp. ``state``: the replay cache's
+    file (:func:`replay_path`; None = memory only); a file that cannot be read leaves everything up to
+    now + :data:`AHEAD_LIMIT` refused (``problem`` says why). Safe to call from several threads."""
 
-    key: bytes | None
-    vehicle: str
-    now: Callable[[], int] = timestamp_now
-    last: dict[int, int] = field(default_factory=dict)
-    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
-        ("accepted", "unsigned", "bad_signature", "replayed", "no_key"), 0))
-    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    def __init__(self, key: bytes | None, vehicle: str, now: Callable[[], int] = timestamp_now,
+                 state: Path | None = None) -> None:
+        self.key, self.vehicle, self.now, self.state = key, vehicle, now, state
+        self.counts = dict.fromkeys(("accepted", "unsigned", "malformed", "bad_signature", "ahead", "stale",
+                                     "replayed", "unrecorded", "no_key"), 0)
+        self.seen: dict[bytes, int] = {}
+        """The replay cache: MAC -> timestamp, of requests accepted or refused for being ahead."""
+        self.floor = 0
+        """Every timestamp at or below this is refused: the newest that left :attr:`seen`."""
+        self.problem = ""
+        self._lock = threading.Lock()
+        self._load()
+
+    def _load(self) -> None:
+        if self.state is None or not self.state.exists():
+            return
+        try:
+            floor, *rows = self.state.read_text().split("\n")
+            self.floor = int(floor)
+            self.seen = {bytes.fromhex(m): int(t) for t, m in (row.split() for row in rows if row)}
+        except (OSError, ValueError) as exc:
+            self.floor, self.seen = self.now() + AHEAD_LIMIT, {}
+            self.problem = f"replay cache {self.state} unreadable ({exc}): requests up to now + 5 s refused"
+
+    def _save(self) -> bool:
+        if self.state is None:
+            return True
+        text = "\n".join([str(self.floor), *(f"{t} {m.hex()}" for m, t in self.seen.items())]) + "\n"
+        tmp = self.state.with_name(f"{self.state.name}.{os.getpid()}.tmp")  # one per writer process
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.state)
+        except OSError as exc:
+            self.problem = f"replay cache {self.state}: {exc.strerror or exc}"
+            return False
+        return True
+
+    def _remember(self, code: bytes, timestamp: int) -> bool:
+        """Put ``code`` in the cache (evicting the oldest past :data:`CACHE_MAX`) and write it; False if unwritten."""
+        self.seen[code] = timestamp
+        while len(self.seen) > CACHE_MAX:
+            oldest = min(self.seen, key=self.seen.__getitem__)
+            self.floor = max(self.floor, self.seen.pop(oldest))
+        return self._save()
 
     def check(self, relay: str, signature: Signature, payload: bytes) -> str | None:
-        """None when ``signature`` is a valid signature of ``payload`` for ``relay`` with a timestamp above the
-        last accepted on its link (a new link: within :data:`NEW_LINK_WINDOW` of the newest on any link); else the
-        reason, counted. Only an accepted request moves its link's timestamp."""
+        """None when ``signature`` is a valid signature of ``payload`` for ``relay``, its timestamp within
+        [now - :data:`STALE_LIMIT`, now + :data:`AHEAD_LIMIT`], above the floor, its MAC not seen before, and the
+        cache written; else the reason, counted. A valid request refused for being ahead is remembered too."""
         with self._lock:
             return self._check(relay, signature, payload)
 
     def _check(self, relay: str, signature: Signature, payload: bytes) -> str | None:
         if self.key is None:
-            return self._refuse("no_key", f"{relay}: refused: no operator key on the vehicle ({key_path(self.vehicle)};"
-                                          " create it with `hindrax keys`)")
-        if not any(signature.mac) and signature.timestamp == 0:
-            return self._refuse("unsigned", f"{relay}: refused: unsigned (the operator's key is "
-                                            f"{key_path(self.vehicle)} on the topside PC)")
-        expected = mac(self.key, self.vehicle, relay, signature.link_id, signature.timestamp, payload)
-        if not hmac.compare_digest(expected, bytes(signature.mac)):
+            return self._refuse("no_key", f"{relay}: refused: no operator key on the vehicle (create it there with "
+                                          "`hindrax keys`, then copy it to this PC)")
+        code, ts, link = bytes(signature.mac), signature.timestamp, signature.link_id
+        if not any(code) and ts == 0:
+            return self._refuse("unsigned", f"{relay}: refused: unsigned (this PC has no key for {self.vehicle}: "
+                                            "copy the vehicle's key here, see `hindrax keys --help`)")
+        if not (0 <= link <= 255 and 0 <= ts <= TIMESTAMP_MAX):
+            return self._refuse("malformed", f"{relay}: refused: link id {link} or timestamp {ts} out of range "
+                                             f"(0-255, 0-{TIMESTAMP_MAX})")
+        if not hmac.compare_digest(mac(self.key, self.vehicle, relay, link, ts, payload), code):
             return self._refuse("bad_signature", f"{relay}: refused: bad signature (not this vehicle's key)")
-        last = self.last.get(signature.link_id)
-        floor = last if last is not None else max(max(self.last.values(), default=0), self.now()) - NEW_LINK_WINDOW
-        if signature.timestamp <= floor:
-            return self._refuse("replayed", f"{relay}: refused: replayed or stale (link {signature.link_id} "
-                                            f"timestamp {signature.timestamp} not above {max(floor, 0)}; a new link "
-                                            "must be within 60 s of the vehicle's clock)")
-        self.last[signature.link_id] = signature.timestamp
+        now = self.now()
+        expired = [m for m, t in self.seen.items() if t < now - STALE_LIMIT]
+        for m in expired:
+            self.floor = max(self.floor, self.seen.pop(m))
+        if code in self.seen or ts <= self.floor:
+            return self._refuse("replayed", f"{relay}: refused: replayed (link {link} timestamp {ts} seen before "
+                                            "or older than the vehicle's replay floor)")
+        if ts > now + AHEAD_LIMIT:
+            if sum(t > now + AHEAD_LIMIT for t in self.seen.values()) < AHEAD_MEMORY:
+                self._remember(code, ts)
+            return self._refuse("ahead", f"{relay}: refused: this PC's clock is {(ts - now) / 1e5:.1f} s ahead of "
+                                         f"the vehicle's (at most {AHEAD_LIMIT / 1e5:g} s): fix its time (chrony), "
+                                         "or the vehicle's if it has not synchronised since boot")
+        if ts < now - STALE_LIMIT:
+            return self._refuse("stale", f"{relay}: refused: stale: this PC's clock is {(now - ts) / 1e5:.1f} s "
+                                         f"behind the vehicle's (at most {STALE_LIMIT / 1e5:g} s): fix its time "
+                                         "(chrony), or the request is an old copy")
+        if not self._remember(code, ts):
+            self.seen.pop(code, None)
+            return self._refuse("unrecorded", f"{relay}: refused: the vehicle could not record it against replay "
+                                              "(see its gateway's log)")
         self.counts["accepted"] += 1
         return None
 

@@ -10,9 +10,15 @@ node passes itself (e.g. the heartbeat subscriptions' liveliness and matched eve
 reads and sets the nodes' parameters) unless the node is built with
 ``start_parameter_services=False``, which then also leaves out the type-description service: the
 one-process graph of ``hindrax run`` does so (nothing outside its process talks to it).
+
+rclpy's own parameters (``use_sim_time``; ``start_type_description_service`` is read-only already) are made
+read-only once the node is built: ``use_sim_time`` is set at start only (the simulation's launch and
+``hindrax run``); set at run time on the guard or the ESC it froze their timers while armed (issue 71.5). Every
+parameter a vehicle node can change at run time, and why each is safe: docs/threat_model.md.
 """
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
@@ -29,9 +35,9 @@ _TYPE_SERVICE = "start_type_description_service"
 
 
 class VehicleNode(Node):
-    """``rclpy.node.Node`` (same arguments) without default QoS event handlers; with
-    ``start_parameter_services=False`` without the type-description service either (module
-    docstring)."""
+    """``rclpy.node.Node`` (same arguments) without default QoS event handlers, rclpy's built-in
+    parameters read-only; with ``start_parameter_services=False`` without the type-description
+    service either (module docstring)."""
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:
         overrides = list(kwargs.get("parameter_overrides") or [])
@@ -39,6 +45,13 @@ class VehicleNode(Node):
                 p.name == _TYPE_SERVICE for p in overrides):
             kwargs["parameter_overrides"] = overrides + [Parameter(_TYPE_SERVICE, value=False)]
         super().__init__(node_name, **kwargs)
+        for name in list(self._parameters):  # rclpy's built-ins, the only ones declared so far
+            descriptor = copy.copy(self.describe_parameter(name))  # rclpy hands out its own object
+            if descriptor.read_only:
+                continue
+            descriptor.read_only = True
+            descriptor.description = "rclpy built-in: set at start only (read-only, docs/threat_model.md)"
+            self.set_descriptor(name, descriptor)
 
     def create_publisher(self, *args: Any, event_callbacks: PublisherEventCallbacks | None = None,
                          **kwargs: Any) -> Any:

@@ -1027,3 +1027,22 @@ def test_pulse_width_goes_out_on_every_write_and_repeats_only_after_a_quiet_peri
         tick(rest_ticks)
         assert len(sent) <= 4, f"{len(sent)} messages in {rest_ticks} ticks disarmed at rest after a disarm"
         node.destroy_node()
+
+
+def test_an_oscillator_marked_calibrated_without_a_measurement_of_this_board_warns_on_diagnostics(monkeypatch):
+    """Issue 71.8: `hindrax health` reads the ESC's /diagnostics: WARN with the operator's check (on a real chip;
+    the emulated one here is taken as real)."""
+    import hindrax_drivers.pca9685.node as esc_node
+    from hindrax_drivers.config.sections.esc import board_id
+
+    monkeypatch.setattr(esc_node, "real_chip", lambda _bus: True)
+    with ros_context() as ctx:
+        for record, warned in ((None, True), ("0badc0de 2026-01-01 1559 us", True), (f"{board_id()} x", False)):
+            extra = {} if record is None else {"esc.oscillator_measured_on": record}
+            node = EscNode(bus=EmulatedI2CBus({0x40: Pca9685Emulator()}), context=ctx,
+                           parameter_overrides=config_parameters({"esc.oscillator_calibrated": True, **extra}))
+            try:
+                warning = node.diag._warnings.get("oscillator_not_measured_here", "")
+                assert bool(warning) is warned and (not warned or "1500 us" in warning), (record, warning)
+            finally:
+                node.destroy_node()

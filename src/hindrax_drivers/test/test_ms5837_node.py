@@ -384,10 +384,11 @@ def test_zero_depth_is_refused_at_depth_and_while_armed(rig):
 
 
 def test_surface_pressure_parameter_is_read_only_while_armed(rig):
-    """``ros2 param set environment.surface_pressure_pa`` is the zero_depth service without its checks: while armed a
+    """``ros2 param set environment.surface_pressure_pa`` goes through zero_depth's checks: while armed a
     101325 -> 118983 Pa change (1.8 m of water, 17658 Pa = 1.8 * 1000 * 9.81) would publish 3.00 m as 1.20 m and
     blind the depth limit. Refused before the ESC reported, while armed and while unknown after armed, with the reason;
-    applied once the ESC reports disarmed."""
+    disarmed, refused too (issue 71.7: it carried into the next arm) beyond zero_depth_margin_pa (5000 Pa) of the
+    mean reading; a change within it is applied."""
     r = rig(lambda t: (SURFACE_PA, 18.0), "30BA")
     change = [Parameter("environment.surface_pressure_pa", value=118983.0)]
     res = r.node.set_parameters(change)[0]
@@ -399,8 +400,26 @@ def test_surface_pressure_parameter_is_read_only_while_armed(rig):
         assert r.node.surface_pressure_pa == SURFACE_PA
         assert r.node.get_parameter("environment.surface_pressure_pa").value == SURFACE_PA
     r.esc_state(False, 1)
-    assert r.node.set_parameters(change)[0].successful
-    assert r.node.surface_pressure_pa == 118983.0
+    r.wait_messages(int(25 * 1.2))  # a whole zero_depth window of surface readings
+    res = r.node.set_parameters(change)[0]
+    assert not res.successful and "Pa (+1.80 m of water) from the mean reading 1013" in res.reason \
+        and "zero_depth_margin_pa 5000" in res.reason, res.reason
+    assert r.node.surface_pressure_pa == SURFACE_PA
+    assert r.node.get_parameter("environment.surface_pressure_pa").value == SURFACE_PA
+    assert r.node.set_parameters([Parameter("environment.surface_pressure_pa", value=101725.0)])[0].successful
+    assert r.node.surface_pressure_pa == 101725.0
+
+
+def test_a_surface_pressure_set_at_depth_is_refused(rig):
+    """Issue 71.7: disarmed at a true 3.00 m (29430 Pa = 3 * 1000 * 9.81 above 101325), a surface pressure of
+    116040 Pa (1.50 m of water above it) would publish 1.50 m and carry into the next arm: refused as zero_depth is."""
+    r = rig(lambda t: (SURFACE_PA + 29430.0, 18.0), "30BA")
+    r.esc_state(False, 1)
+    r.wait_messages(int(25 * 1.2))
+    res = r.node.set_parameters([Parameter("environment.surface_pressure_pa", value=116040.0)])[0]
+    assert not res.successful and "not at the surface" in res.reason, res.reason
+    _, _, depths = r.wait_messages(3)
+    assert -depths[-1].pose.pose.position.z == pytest.approx(3.0, abs=0.01)
 
 
 def test_zero_depth_before_any_reading_is_refused(rig):

@@ -42,3 +42,20 @@ def test_without_parameter_services_a_vehicle_node_serves_nothing():
             assert node.get_parameter("start_type_description_service").value is False
         finally:
             node.destroy_node()
+
+
+def test_rclpy_built_in_parameters_are_set_at_start_only():
+    """Issue 71.5: ``use_sim_time`` set at run time froze the guard's and the ESC's timers while armed."""
+    from rclpy.parameter import Parameter
+
+    with ros_context() as ctx:
+        for start in (False, True):
+            node = VehicleNode("plain", context=ctx, parameter_overrides=[Parameter("use_sim_time", value=start)])
+            try:
+                assert node.get_parameter("use_sim_time").value is start  # the launch's value holds
+                (result,) = node.set_parameters([Parameter("use_sim_time", value=not start)])
+                assert not result.successful and "read-only" in result.reason, result.reason
+                assert node.get_parameter("use_sim_time").value is start
+                assert all(node.describe_parameter(n).read_only for n in node._parameters)
+            finally:
+                node.destroy_node()

@@ -222,3 +222,32 @@ def test_44_9_a_starved_guard_ages_a_dead_peer_at_wall_speed():
     age.heard()
     clock.t += 5.0  # the guard itself was frozen for 5 s: the peer's beats are queued, not missing
     assert age.tick() == pytest.approx(0.2) and age.fresh(0.2)
+
+
+@pytest.mark.parametrize("module,files,expected", [
+    ("pinctrl-bcm2711", {"pinctrl_bcm2835/parameters/persist_gpio_outputs": "N\n"}, ""),
+    ("pinctrl-rp1", {"pinctrl_rp1/parameters/persist_gpio_outputs": "N\n"}, ""),
+    ("pinctrl-bcm2711", {"pinctrl_bcm2835/parameters/strict_gpiod": "Y\n"}, ""),
+    ("pinctrl-bcm2711", {"pinctrl_bcm2835/parameters/persist_gpio_outputs": "Y\n"},
+     "keeps its level on this kernel (pinctrl_bcm2835.persist_gpio_outputs=Y)"),
+    ("pinctrl-rp1", {"pinctrl_bcm2835/parameters/persist_gpio_outputs": "N\n"}, "cannot tell"),
+    ("pinctrl-bcm2711", {}, "cannot tell"),
+])
+def test_how_a_freed_gpio_behaves_is_read_from_the_pinctrl_parameters(tmp_path, module, files, expected):
+    """Issue 71.6: raspberrypi/linux PRs 6117/6150: a Raspberry Pi kernel keeps a freed output's level unless
+    strict_gpiod; the guard reads which (and refuses when it cannot tell)."""
+    from hindrax_drivers.transport.gpio import release_problem_of
+
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    problem = release_problem_of(module, str(tmp_path))
+    assert (problem == "") if not expected else (expected in problem and "strict_gpiod" in problem), problem
+
+
+def test_a_persisting_emulated_line_keeps_its_level_when_released():
+    line = EmulatedGpioLine(pull_high=True, persist=True)
+    line.set_high(False)
+    line.release()
+    assert not line.is_high() and "keeps its level" in line.release_problem()
+    assert EmulatedGpioLine(pull_high=True).release_problem() == ""

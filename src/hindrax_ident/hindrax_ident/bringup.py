@@ -27,6 +27,7 @@ from hindrax_drivers import devices as device_table
 from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.conditions import wait_until
 from hindrax_drivers.config import ConfigError, VehicleConfig, load_config
+from hindrax_drivers.config.sections.esc import board_id
 from hindrax_drivers.gateway.interface import GATEWAY_NODE
 from hindrax_drivers.guard.node import OutputGuardNode
 from hindrax_drivers.recording.recorder_node import RecorderNode
@@ -249,7 +250,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         # `hindrax esc calibrate` measures a real part, when it is the configured one (then the ESC puts pulses out)
         measured = hardware.emulators["pca9685"].oscillator_hz == cfg.esc.oscillator_hz
         ports = {f"{d.section}.port": hardware.ports[d.name] for d in device_table.DEVICES if d.name in hardware.ports}
-        cfg = cfg.with_overrides({**ports, "esc.oscillator_calibrated": measured})
+        cfg = cfg.with_overrides({**ports, "esc.oscillator_calibrated": measured,
+                                  "esc.oscillator_measured_on": f"{board_id()} emulated"})
         bus = hardware.i2c_bus
     else:
         bus = i2c_bus  # None: each I2C node opens smbus2.SMBus(<its configured bus>)

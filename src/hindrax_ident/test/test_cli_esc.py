@@ -57,3 +57,30 @@ def test_calibrate_refuses_a_reading_outside_the_parts_range_and_keeps_the_flag_
     assert r.returncode == 1 and "esc.oscillator_hz = 28853846.2: allowed 23-27 MHz" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert cfg.read_text() == before and load_config(cfg).esc.oscillator_calibrated is False
+
+
+def test_config_check_warns_when_the_oscillator_was_not_measured_on_this_board(tmp_path):
+    """Issue 71.8: a vehicle file marked calibrated without a measurement of this board (copied from another vehicle,
+    or the flag set by hand) put 1559-1631 us on the wire as neutral and passed `config check`. The calibration
+    records the board; the check warns when the record is absent or another board's."""
+    import yaml
+
+    from hindrax_drivers.config.sections.esc import board_id
+
+    doc = yaml.safe_load(default_config_path().read_text())
+    esc = doc["/**"]["ros__parameters"]["esc"]
+    esc["oscillator_calibrated"] = True
+    cfg = tmp_path / "vehicle.yaml"
+    cfg.write_text(yaml.safe_dump(doc))
+    out = run("config", "check", str(cfg)).stdout
+    assert "warning: esc.oscillator_calibrated is true but no measurement is recorded" in out, out
+    assert "1500 us" in out and "hindrax esc calibrate" in out
+    esc["oscillator_measured_on"] = "10000000deadbeef 2026-01-01 1559 us"
+    cfg.write_text(yaml.safe_dump(doc))
+    out = run("config", "check", str(cfg)).stdout
+    assert "measured on board 10000000deadbeef, not this one" in out, out
+    shutil.copy(default_config_path(), cfg)
+    assert run("esc", "calibrate", "--measured-us", "1500", "--config", str(cfg), "--write").returncode == 0
+    assert load_config(cfg).esc.oscillator_measured_on.startswith(board_id() + " ")
+    out = run("config", "check", str(cfg)).stdout
+    assert "measurement is recorded" not in out and "measured on board" not in out, out

@@ -415,6 +415,68 @@ def test_an_arm_an_estop_overtook_is_refused_and_the_vehicle_disarmed(pool, tops
     assert alpha.calls[before:] == ["supervisor/estop", ("set_armed", True), ("set_armed", False)], alpha.calls[before:]
 
 
+def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(pool, topside):
+    """Issue 71 findings 1 and 3 through the real gateway: the copy an eavesdropper keeps is worth nothing, with
+    its timestamp raised by 2^48 or replayed unchanged after the gateway restarted; the replay cache is a 0600 file
+    next to the key."""
+    import stat
+
+    from hindrax_msgs.srv import SignedTrigger
+
+    alpha = pool["vehicles"]["alpha"]
+    before = len(alpha.calls)
+    signer, answers = Signer(topside.key, "alpha"), []
+
+    def armed() -> bool:  # an e-stop of the test before may still count as overtaking it: sign again, send again
+        answers.append((signer.sign_message("arm", SignedTrigger.Request()), None))
+        answers[-1] = (answers[-1][0], topside.call(SignedTrigger, "/alpha/arm", answers[-1][0]))
+        return answers[-1][1].success or "e-stop arrived" not in answers[-1][1].message
+    wait_until(armed, WAIT_S, None, "an arm accepted")
+    signed, answer = answers[-1]
+    assert answer.success, answer.message
+    lifted = SignedTrigger.Request()
+    lifted.signature.link_id, lifted.signature.mac = signed.signature.link_id, signed.signature.mac
+    lifted.signature.timestamp = signed.signature.timestamp + (1 << 48)
+    answer = topside.call(SignedTrigger, "/alpha/arm", lifted)
+    assert not answer.success and "out of range" in answer.message, answer.message
+    assert stat.S_IMODE((pool["keys"] / "alpha.replay").stat().st_mode) == 0o600
+    runner = pool["runners"][0]
+    runner.stop()
+    runner.start()
+    wait_until(lambda: runner.log("gateway").count("internal domain") >= 2, 60, message="the gateway restarted")
+    answer = topside.call(SignedTrigger, "/alpha/arm", signed)
+    assert not answer.success and answer.message.startswith("arm: refused: replayed"), answer.message
+    assert alpha.calls[before:] == [("set_armed", True)]  # the accepted one, once
+
+def test_another_server_of_an_operator_service_is_reported_and_arming_refused(pool, topside):
+    """Issue 71.2: a silent second server of /alpha/arm receives every signed request; the gateway's status (ERROR,
+    also inside on /diagnostics for hindrax health) and the CLI name it, and the gateway refuses to arm meanwhile."""
+    from hindrax_msgs.srv import SignedTrigger
+
+    alpha = pool["vehicles"]["alpha"]
+    before = len(alpha.calls)
+    heard: list = []
+    spy = topside.node.create_service(SignedTrigger, "/alpha/arm", lambda req, resp: heard.append(req) or resp)
+    try:
+        status = topside.status("alpha", lambda s: s.level == b"\x02")
+        assert status.message.startswith("another server answers /alpha/arm (2 servers)"), status.message
+        r = hindrax(pool, "arm", "--vehicle", "alpha")
+        assert "warning: vehicle 'alpha': another server answers /alpha/arm (2 servers)" in r.stderr, r.stderr
+        signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
+        client = topside.node.create_client(SignedTrigger, "/alpha/arm")
+        future = client.call_async(signed)
+        wait_until(lambda: heard and len(alpha.calls) >= before, WAIT_S,
+                   lambda: topside.executor.spin_once(timeout_sec=0.1), "the spy heard the arm")
+        status = topside.status("alpha", lambda s: "another server" in counts(s)["last_refusal"])
+        assert counts(status)["last_refusal"].startswith("arm: refused: another server answers /alpha/arm")
+        assert ("set_armed", True) not in alpha.calls[before:]
+        assert not (future.done() and future.result().success)
+    finally:
+        topside.node.destroy_service(spy)
+    status = topside.status("alpha", lambda s: s.level == b"\x00")
+    assert status.message == "ok", status.message
+
+
 def test_a_second_gateway_with_the_same_name_is_reported_and_arming_refused(pool, topside):
     """Runs last: the impostor stays on the topside graph's caches for a while after it stops."""
     from hindrax_msgs.srv import SignedTrigger
@@ -441,3 +503,4 @@ def test_a_second_gateway_with_the_same_name_is_reported_and_arming_refused(pool
             assert ("set_armed", True) not in alpha.calls[before:]
         finally:
             runner.stop()
+

@@ -305,11 +305,12 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     if fix:
         node.set_parameters(fix)
     for key in declared:
-        if key not in valid:
-            continue  # optional key with no value: stays declared without one
         writable = _matches(_generic(key), dynamic) or _matches(key, dynamic)
         d = _descriptor(key, SCHEMA[_generic(key)], read_only=not writable)
-        d.type = Parameter(key, value=valid[key]).type_.value
+        if key in valid:
+            d.type = Parameter(key, value=valid[key]).type_.value
+        else:  # an optional key with no value: declared without one, and as read-only as the others (issue 71.5)
+            d.dynamic_typing = True
         node.set_descriptor(key, d)
 
     digest = (file_cfg.sha256 if (file_cfg is not None and not overridden)

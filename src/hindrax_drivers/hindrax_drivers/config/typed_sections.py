@@ -128,6 +128,7 @@ class EscSection(Section, prefix="esc"):
     slew_rate_us_per_s: float
     output_latency_s: float
     oscillator_calibrated: bool
+    oscillator_measured_on: str | None
     readback_interval_s: float
     bus_call_timeout_s: float
     heartbeat_timeout_s: float

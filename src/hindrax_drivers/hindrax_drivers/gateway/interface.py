@@ -12,10 +12,10 @@ Pure: no rclpy import (the CLI, the policy generator and the tests read it).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Callable, Iterable
 
 __all__ = ["GATEWAY_NODE", "INTERFACE", "STATUS_TOPIC", "Relay", "VehicleChoiceError", "choose_vehicle",
-           "duplicate_problem", "participants", "relays", "vehicles_seen"]
+           "duplicate_problem", "extra_servers_problem", "participants", "relays", "vehicles_seen"]
 
 #: the node name the gateway has on both graphs, in the namespace ``/<vehicle.name>``; tools find vehicles by it
 GATEWAY_NODE = "gateway"
@@ -127,3 +127,17 @@ def duplicate_problem(vehicle: str, gateways: Iterable[str]) -> str:
         return ""
     return (f"vehicle {vehicle!r} is answered by {len(found)} gateways (participants {', '.join(found)}): two vehicles "
             "share the name; give one another vehicle.name")
+
+
+def extra_servers_problem(vehicle: str, count_services: Callable[[str], int]) -> str:
+    """One line naming the services of ``/<vehicle>/`` (the service relays and the campaign's ``send_goal``) that
+    more than one server answers on the topside, with the count; "" when each has at most one. ``count_services``:
+    rclpy ``Node.count_services``. A DDS request reaches every server of its name: another server reads every request
+    (harmless to a signed one, issue 71) and may answer it before the gateway."""
+    names = [f"/{vehicle}/{r.topside}" for r in relays("service")]
+    names += [f"/{vehicle}/{r.topside}/_action/send_goal" for r in relays("action")]
+    extra = [f"{n} ({k} servers)" for n in names if (k := count_services(n)) > 1]
+    if not extra:
+        return ""
+    return (f"another server answers {', '.join(extra)} on the topside: someone reads the operator's requests and may "
+            "answer them; arming refused until it is gone")

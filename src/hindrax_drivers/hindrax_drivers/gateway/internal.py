@@ -191,7 +191,8 @@ def main(args: Sequence[str] | None = None) -> int:
             settings, cfg = read_settings(boot)
         finally:
             boot.destroy_node()
-        node = proc.own(Node(GATEWAY_NODE, namespace="/" + settings.vehicle_name))
+        # no parameter services: nothing may set its use_sim_time at run time (issue 71.5)
+        node = proc.own(Node(GATEWAY_NODE, namespace="/" + settings.vehicle_name, start_parameter_services=False))
         proc.executor.add_node(node)
         side = InternalSide(node, channel)
         channel.send({"k": "settings", "settings": asdict(settings), "bounds": asdict(RequestBounds.from_config(cfg))})

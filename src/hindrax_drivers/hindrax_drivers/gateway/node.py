@@ -16,10 +16,12 @@ elements (:data:`.interface.INTERFACE`), as serialized messages; each ends when 
 Every request is checked here before it goes inside: an operator element's signature
 (:class:`~hindrax_drivers.operator_signing.Verifier`, the key ``<keys dir>/<vehicle>.key``; none on the vehicle =
 every operator request refused, the e-stop still works), a goal's and a setpoint's bounds
-(:class:`.bounds.RequestBounds`), ``arm`` while another gateway answers to this vehicle's name (refused), and an
+(:class:`.bounds.RequestBounds`), ``arm`` while another gateway answers to this vehicle's name or another server
+answers one of its services (refused: :func:`.interface.extra_servers_problem`), and an
 ``arm`` that an e-stop overtook: one that arrived before an e-stop (while the operator's requests were busy) but is
 answered after it is refused, and the vehicle disarmed again. A refusal is one line, counted in the gateway's status
-(``/<name>/gateway/status`` on the topside, ``/diagnostics`` inside; ERROR while another gateway has this name).
+(``/<name>/gateway/status`` on the topside, ``/diagnostics`` inside; ERROR while another gateway has this name or
+another server answers one of its services).
 
 Threads: three topside nodes, each with its own SingleThreadedExecutor and thread: ``/<name>/gateway`` (``estop``,
 telemetry, setpoints, status), ``/<name>/gateway_operator`` (the operator's services), ``/<name>/gateway_campaign``
@@ -56,11 +58,11 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
 
 from ..dds_transport import PROFILE_ENV, RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path
-from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key
+from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key, replay_path
 from ..ros_process import RosProcess
 from ..sros2_policy import topside_enclaves
 from .bounds import RequestBounds
-from .interface import GATEWAY_NODE, STATUS_TOPIC, duplicate_problem, participants, relays
+from .interface import GATEWAY_NODE, STATUS_TOPIC, duplicate_problem, extra_servers_problem, participants, relays
 from .internal import GatewaySettings, interface_type
 from .link import Channel
 
@@ -96,6 +98,8 @@ class Gateway:
         requests refused for bounds, an e-stop that overtook them, another gateway with this name."""
         self.duplicate = ""
         """One line while another gateway answers to this vehicle's name (:func:`.interface.duplicate_problem`)."""
+        self.extra = ""
+        """One line while another server answers an operator service (:func:`.interface.extra_servers_problem`)."""
         self.last_refusal = ""
         self._ids = itertools.count(1)
         self._pending: dict[int, Future] = {}
@@ -128,7 +132,7 @@ class Gateway:
         if count:
             self.relayed[count] += 1
         self.last_refusal = why
-        self.front.get_logger().warn(why)
+        self.front.get_logger().warn(why + (f" ({self.verifier.problem})" if self.verifier.problem else ""))
         return why
 
     def _operator_check(self, relay: Any, request: Any) -> str:
@@ -136,8 +140,8 @@ class Gateway:
         why = self.verifier.check_message(relay.topside, request)
         if why:
             return self._refuse(why)
-        if relay.topside == "arm" and self.duplicate:
-            return self._refuse(f"arm: refused: {self.duplicate}", "refused_duplicate_name")
+        if relay.topside == "arm" and (self.duplicate or self.extra):
+            return self._refuse(f"arm: refused: {self.duplicate or self.extra}", "refused_duplicate_name")
         return ""
 
     def publish_status(self) -> None:
@@ -145,11 +149,13 @@ class Gateway:
         name = self.settings.vehicle_name
         infos = self.front.get_publishers_info_by_topic(f"/{name}/{STATUS_TOPIC}")
         self.duplicate = duplicate_problem(name, participants(i.endpoint_gid for i in infos))
-        if self.duplicate:
-            self.front.get_logger().error(self.duplicate, throttle_duration_sec=10.0)
+        self.extra = extra_servers_problem(name, self.front.count_services)
+        problem = self.duplicate or self.extra
+        if problem:
+            self.front.get_logger().error(problem, throttle_duration_sec=10.0)
         no_key = self.verifier.key is None
-        level = DiagnosticStatus.ERROR if self.duplicate else DiagnosticStatus.WARN if no_key else DiagnosticStatus.OK
-        message = self.duplicate or ("no operator key on the vehicle: operator requests refused" if no_key else "ok")
+        level = DiagnosticStatus.ERROR if problem else DiagnosticStatus.WARN if no_key else DiagnosticStatus.OK
+        message = problem or ("no operator key on the vehicle: operator requests refused" if no_key else "ok")
         values = {**{f"requests.{k}": v for k, v in self.verifier.counts.items()}, **self.relayed,
                   "last_refusal": self.last_refusal}
         status = DiagnosticStatus(level=level, name=f"{name}/gateway", message=message,
@@ -195,8 +201,8 @@ class Gateway:
             try:
                 why = self._operator_check(relay, request) if operator else ""
                 if not why and arm and self._last_estop_s >= self._busy_since_s:
-                    why = self._refuse("arm: refused: an e-stop arrived while it waited; send it again after reset",
-                                       "overtaken_by_estop")
+                    why = self._refuse("arm: refused: an e-stop arrived while it waited; hindrax reset, then hindrax "
+                                       "arm again", "overtaken_by_estop")
                 if why:
                     response.success, response.message = False, why
                     return response
@@ -373,7 +379,10 @@ def main(args: Sequence[str] | None = None) -> int:
         settings = GatewaySettings(**first[0]["settings"])
         bounds = RequestBounds(**first[0]["bounds"])
         try:
-            verifier = Verifier(load_key(key_path(settings.vehicle_name)), settings.vehicle_name)
+            verifier = Verifier(load_key(key_path(settings.vehicle_name)), settings.vehicle_name,
+                                state=replay_path(settings.vehicle_name))
+            if verifier.problem:
+                print(f"gateway: {verifier.problem}", file=sys.stderr, flush=True)
         except OperatorKeyError as exc:
             print(f"gateway: {exc}: every operator request will be refused (the e-stop works)", file=sys.stderr,
                   flush=True)

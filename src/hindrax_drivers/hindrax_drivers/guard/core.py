@@ -11,6 +11,8 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
 * the guard itself cannot silence the outputs (its /OE line could not be requested or driven, or its last write of
   the chip's sleep registers failed): it must not say OK when it could not act, so the ESC refuses to arm and
   disarms on its ERROR heartbeat; the node retries and clears it on success;
+* its /OE line would keep its level when freed (a Raspberry Pi kernel without ``strict_gpiod``), or the guard cannot
+  tell: a killed guard would leave the outputs enabled, so the outputs are never released (the ESC refuses to arm);
 * the hardware watchdog on /OE ran out while the guard meant to feed it (docs/watchdog.md: the guard was frozen or
   starved): thrust must come back only through a new arm request;
 * either heartbeat cannot be trusted to be its sender's (:class:`~hindrax_drivers.liveness.HeartbeatIdentity`: a
@@ -50,6 +52,7 @@ class GuardCore:
     supervisor_message: str = ""
     identity_fault: str = ""
     drive_fault: str = ""
+    release_fault: str = ""
     stall: str = ""
     #: the guard beat the newest ESC beat acknowledges (its ``guard_seq``; 0: none of this guard's boot)
     esc_ack_seq: int = 0
@@ -75,6 +78,11 @@ class GuardCore:
         """The node's last attempt to drive /OE or write the chip: '' (it worked) or why it failed."""
         self.drive_fault = fault
 
+    def on_release(self, fault: str) -> None:
+        """'' when the /OE line returns to its pull-up once freed, else why not or why that is not known
+        (:meth:`hindrax_drivers.transport.gpio.GpiodLine.release_problem`)."""
+        self.release_fault = fault
+
     def on_stall(self, reason: str) -> None:
         """'' or why the hardware watchdog cut the outputs behind the guard's back (its feed stopped: the guard was
         frozen or starved). A cause at the next :meth:`decide`, latched like any other."""
@@ -87,6 +95,8 @@ class GuardCore:
             out.append(self.stall)
         if self.drive_fault:
             out.append(f"guard cannot act: {self.drive_fault}")
+        if self.release_fault:
+            out.append(f"guard cannot trust its /OE line: {self.release_fault}")
         if self.identity_fault:
             out.append(f"heartbeat not trusted: {self.identity_fault}")
         if esc_age_s > self.timeout_s:

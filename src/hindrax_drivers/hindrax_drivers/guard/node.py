@@ -9,8 +9,11 @@ at every beat its ``boot_id`` and ``seq``; a rejected beat does not count as the
 * ``esc.output_enable_gpio`` set (chip and line): the PCA9685 /OE line through libgpiod
   (:class:`~hindrax_drivers.transport.gpio.GpiodLine`), driven HIGH (outputs off, no pulses: the Basic ESC
   stops) when asserted and LOW when released. The line is requested high at start-up. The wiring has a pull-up on
-  /OE, so when this process dies and the kernel frees the line (the Pi's pinctrl returns it to an input) the
-  outputs go off by themselves.
+  /OE, so when this process dies and the kernel frees the line (the Pi's pinctrl returns it to an input with
+  ``dtparam=strict_gpiod``) the outputs go off by themselves. A kernel that keeps a freed output's level, or one
+  whose behaviour the guard cannot read (:meth:`~hindrax_drivers.transport.gpio.GpiodLine.release_problem`), is a
+  cause that never clears: the outputs stay off and the ESC refuses to arm. After a kill, the unit's
+  ``ExecStopPost=`` (:mod:`.outputs_off`) silences the chip and /OE from outside.
 * not wired: over the shared I2C bus, the chip's ALL_LED_OFF_H full-OFF bit then MODE1 SLEEP (datasheet §7.3.1,
   §7.3.4), once on assertion and again whenever the ESC reports commanding while asserted. Needs a working bus: an
   I2C outage on an unwired vehicle leaves the last widths on the wire (``hindrax config check`` warns).
@@ -62,6 +65,7 @@ from ..sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
 from ..vehicle_node import VehicleNode
 from .core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
+from .outputs_off import open_output_enable, silence_chip
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
 
@@ -75,15 +79,6 @@ GUARD_RATE_HZ = 20.0
 REWRITE_INTERVAL_S = 0.2
 #: after a failure to drive /OE or to reach the chip, the line request or the chip is tried again this often, s
 DRIVE_RETRY_S = 0.5
-
-
-def open_output_enable(chip: str, line: int) -> Any:
-    """The /OE line, requested HIGH (outputs off): the emulation server's line when
-    ``HINDRAX_EMULATION_SOCKET`` is set (tests, benchmarks), else libgpiod. Raises OSError/ImportError."""
-    shared = open_shared_line("oe", True)
-    if shared is not None:
-        return shared
-    return GpiodLine(chip, line, initial_high=True)
 
 
 def open_watchdog_feed(chip: str, line: int) -> Any:
@@ -146,6 +141,8 @@ class OutputGuardNode(VehicleNode):
             self.diag.warn("no_hardware_watchdog", "esc.output_enable_feed_gpio not wired: a frozen launch or Pi "
                                                    "keeps the last widths until systemd restarts the unit")
         self._open_line()
+        if line is not None:
+            self._check_release()
         self.heartbeat = HeartbeatPublisher(self, "guard")
         #: the peers' heartbeats through their identity checks (module docstring)
         #: "armed" for their boot_id rule: the ESC reported armed and the outputs are let through; once /OE is
@@ -247,6 +244,20 @@ class OutputGuardNode(VehicleNode):
             self.line = open_output_enable(*self.gpio)
         except (OSError, ImportError) as exc:
             self._drive_failed(f"cannot request /OE {self.gpio[0]}:{self.gpio[1]}: {exc}")
+            return
+        self._check_release()
+
+    def _check_release(self) -> None:
+        """How the line behaves once freed (module docstring): a cause of its own unless it returns to the pull-up.
+        A line without ``release_problem`` (a test's stand-in) is taken as returning."""
+        try:
+            fault = self.line.release_problem() if hasattr(self.line, "release_problem") else ""
+        except OSError as exc:
+            fault = f"cannot tell how a freed /OE line behaves: {exc}"
+        if fault and fault != self.core.release_fault:
+            self.get_logger().error(f"/OE: {fault}: outputs stay off")
+            self.diag.set_state("cannot trust /OE", DiagnosticStatus.ERROR, fault)
+        self.core.on_release(fault)
 
     def _device(self) -> I2CDevice:
         if self.device is None:
@@ -256,10 +267,8 @@ class OutputGuardNode(VehicleNode):
         return self.device
 
     def _silence_registers(self) -> None:
-        """Every output full OFF, then SLEEP (datasheet §7.3.4, §7.3.1): no pulses whatever the channels held."""
-        dev = self._device()
-        dev.write_byte_data(p.ALL_LED_OFF_H, p.FULL_BIT)
-        dev.write_byte_data(p.MODE1, p.MODE1_SLEEP | p.MODE1_AI | p.MODE1_ALLCALL)
+        """Every output full OFF, then SLEEP (:func:`.outputs_off.silence_chip`)."""
+        silence_chip(self._device())
 
     def _drive_failed(self, reason: str) -> None:
         """The guard could not drive /OE or silence the chip: a cause of its own (ERROR heartbeat: the ESC refuses
@@ -273,7 +282,8 @@ class OutputGuardNode(VehicleNode):
     def _drive_ok(self) -> None:
         if self.core.drive_fault:
             self.get_logger().info("the outputs can be silenced again")
-            self.diag.set_state("ok", DiagnosticStatus.OK)
+            if not self.core.release_fault:
+                self.diag.set_state("ok", DiagnosticStatus.OK)
         self.core.on_drive("")
 
     def _apply(self, asserted: bool, force: bool = False) -> None:

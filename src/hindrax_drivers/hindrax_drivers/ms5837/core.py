@@ -234,3 +234,17 @@ class ZeroDepth:
                           f"sensors.ms5837.zero_depth_margin_pa {self.margin_pa:g}: not at the surface; surface "
                           "pressure unchanged")
         return mean_pa, ""
+
+    def check_value(self, value_pa: float, refusal: str) -> str:
+        """'' when ``environment.surface_pressure_pa`` may be set to ``value_pa`` (Pa) at run time, else the reason:
+        :meth:`decide`'s checks (disarmed, at the surface), and ``value_pa`` within the margin of the mean reading,
+        so the published depth moves by at most the margin (issue 71.7: 3.00 m published as 1.50 m)."""
+        mean_pa, why = self.decide(refusal)
+        if mean_pa is None:
+            return why
+        if abs(value_pa - mean_pa) > self.margin_pa:
+            return (f"environment.surface_pressure_pa = {value_pa:g}: {value_pa - mean_pa:+.1f} Pa "
+                    f"({(value_pa - mean_pa) / self.rho_g:+.2f} m of water) from the mean reading {mean_pa:.1f} Pa, "
+                    f"allowed within sensors.ms5837.zero_depth_margin_pa {self.margin_pa:g}; surface pressure "
+                    "unchanged")
+        return ""

@@ -14,7 +14,9 @@ geometry_msgs/PoseWithCovarianceStamped (frame ``odom``, ``position.z = -depth_m
 §3), ``raw/ms5837`` (a cycle's I2C transactions in one message), ``/diagnostics``. Service ``pressure/zero_depth``
 (std_srvs/Trigger): the surface pressure becomes the mean of the last second, also in the node's
 ``environment.surface_pressure_pa`` parameter; it and a change of that parameter are refused while the ESC reports
-armed or has not reported (:class:`hindrax_drivers.esc_state.ArmedWatch`), with the same reason.
+armed or has not reported (:class:`hindrax_drivers.esc_state.ArmedWatch`), with the same reason; a change of the
+parameter also passes zero_depth's checks: at the surface, and within ``sensors.ms5837.zero_depth_margin_pa`` of
+the mean reading (:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`).
 Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
 from __future__ import annotations
@@ -239,8 +241,14 @@ class Ms5837Node(I2cSensorNode):
         self.diag.published()
 
     def _on_vehicle_parameters(self, cfg) -> None:
-        """Apply a validated change of ``environment.surface_pressure_pa`` (this node's one writable key)."""
-        self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
+        """Apply a validated change of ``environment.surface_pressure_pa`` (this node's one writable key), checked as
+        ``pressure/zero_depth`` is (:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`); raises ValueError
+        with the reason when refused."""
+        value = float(cfg.environment.surface_pressure_pa)
+        why = "" if value == self.surface_pressure_pa else self.zero.check_value(value, self.armed.refusal())
+        if why:
+            raise ValueError(why)
+        self.surface_pressure_pa = value
 
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Set the surface pressure to the mean pressure of the last second, unless

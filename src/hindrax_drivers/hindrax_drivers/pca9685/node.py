@@ -44,6 +44,7 @@ The bus: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, or injected (an
 from __future__ import annotations
 
 import math
+import os
 import time
 from typing import Any
 
@@ -55,13 +56,14 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..config import Spec
+from ..config.sections.esc import board_id, oscillator_problem
 from ..esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
 from ..lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
 from ..liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..transport.i2c import open_smbus
-from ..transport.shared_emulation import open_shared_bus
+from ..transport.shared_emulation import SOCKET_ENV, open_shared_bus
 from . import protocol as p
 from ..vehicle_node import VehicleNode
 from .chip import EscChip
@@ -88,6 +90,11 @@ REPEAT_AFTER_PERIODS = 1.5
 #: disarmed at neutral the repeat is a keep-alive every this many s (ROS time): the state is on ``esc/heartbeat`` at
 #: 25 Hz for the guard and on ``esc/output_state`` for the rest; no reader needs the widths faster at rest
 DISARMED_REPEAT_S = 0.5
+
+
+def real_chip(bus: Any) -> bool:
+    """True when the node drives a real PCA9685: no bus injected and no shared emulation (tests, benchmarks)."""
+    return bus is None and not os.environ.get(SOCKET_ENV)
 
 
 class EscNode(VehicleNode):
@@ -126,6 +133,10 @@ class EscNode(VehicleNode):
             self.chip_io.use_bus(bus)
         now_s = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731
         self.diag = DeviceDiagnostics("hindrax/esc_pca9685", f"i2c-{esc.i2c_bus}@0x{esc.i2c_address:02x}", now_s)
+        # issue 71.8: a real chip marked calibrated without a measurement of this board: WARN on /diagnostics, so
+        # hindrax health shows it (an emulated chip's oscillator is the configured one by construction)
+        if real_chip(bus) and (problem := oscillator_problem(cfg, board_id())):
+            self.diag.warn("oscillator_not_measured_here", problem)
         self.link = ChipLink(self.core, self.chip_io, self.diag, self.get_logger().error, lambda: self.lights_us,
                              esc.readback_interval_s)
         self.clock_monitor = ClockStepMonitor(now_s)

@@ -116,7 +116,7 @@ class EscPeers:
         sup = heartbeat_verdict("supervisor", HEARTBEAT_NAMES["supervisor"], self.supervisor_age.age_s, t,
                                 self.supervisor_ok, self.supervisor_message)
         if sup and self.supervisor_age.fresh(t):
-            sup = f"supervisor tripped: {self.supervisor_message} (clear it with supervisor/reset)"
+            sup = f"supervisor tripped: {self.supervisor_message} (clear it with hindrax reset)"
         guard = heartbeat_verdict("output guard", HEARTBEAT_NAMES["guard"], self.guard_age.age_s, t,
                                   self.guard_ok, self.guard_message)
         if guard and self.guard_age.fresh(t):

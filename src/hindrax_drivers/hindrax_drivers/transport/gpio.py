@@ -4,14 +4,18 @@ Used by the output guard (:mod:`hindrax_drivers.guard`) to drive the PCA9685 /OE
 docs/devices.md §5.1: /OE is active low; high = every output off, i.e. no pulses, which the Basic ESC treats as
 stop).
 
-Two objects with the same three methods, ``set_high(bool)``, ``is_high()`` and ``release()``:
+Two objects with the same four methods, ``set_high(bool)``, ``is_high()``, ``release()`` and
+``release_problem()`` ("" when a released line returns to its pull, else why not or why that is not known):
 
 * :class:`GpiodLine`: one line requested as an output through ``gpiod.request_lines`` (libgpiod v2). On
-  ``release()`` or when the process dies the kernel frees the request; the Raspberry Pi's pinctrl driver then
-  returns the pin to an input (pinctrl-bcm2835 ``gpio_disable_free`` sets the function to GPIO_IN), so the
-  level is whatever the board's pull resistor gives. The vehicle wiring therefore puts a pull-up on /OE
-  (docs/architecture.md §8): a dead guard process leaves the outputs OFF.
-* :class:`EmulatedGpioLine`: the same line in memory, with that pull: ``release()`` returns it to the pull level.
+  ``release()`` or when the process dies the kernel frees the request. Upstream pinctrl then returns the pin to an
+  input, so the level is whatever the board's pull resistor gives: the vehicle wiring puts a pull-up on /OE
+  (docs/architecture.md §8), so a dead guard leaves the outputs OFF. The Raspberry Pi kernel, by default, keeps a
+  freed output at its last level (raspberrypi/linux pull requests 6117 and 6150): ``persist_gpio_outputs`` of
+  ``pinctrl_bcm2835`` / ``pinctrl_rp1`` is Y unless ``dtparam=strict_gpiod`` is in config.txt (the image's
+  docs/deployment.md §11 sets it). :meth:`GpiodLine.release_problem` reads that parameter in ``/sys/module``.
+* :class:`EmulatedGpioLine`: the same line in memory, with that pull: ``release()`` returns it to the pull level,
+  or keeps the driven level with ``persist`` (a Raspberry Pi kernel without ``strict_gpiod``).
   The emulated PCA9685 (:class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator`) reads it to decide whether
   its outputs carry pulses. :mod:`hindrax_drivers.transport.shared_emulation` serves it to other processes (a
   dropped connection releases it, as the kernel does for a dead process).
@@ -31,7 +35,33 @@ import threading
 import time
 from typing import Callable
 
-__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable"]
+__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable", "release_problem_of"]
+
+
+#: /sys/module parameters that say whether a freed output keeps its level: (module, parameter, value when it does not)
+_RELEASE_PARAMETERS = (("persist_gpio_outputs", "N"), ("strict_gpiod", "Y"))
+
+
+def release_problem_of(label: str, sys_module: str = "/sys/module") -> str:
+    """"" when the kernel returns a freed line of the gpiochip labelled ``label`` (``pinctrl-bcm2711``,
+    ``pinctrl-rp1``...) to an input, else one line saying it keeps its level or that this cannot be told (no
+    parameter found). Reads ``<sys_module>/pinctrl_{bcm2835,rp1}/parameters/{persist_gpio_outputs,strict_gpiod}``."""
+    from pathlib import Path
+
+    module = "pinctrl_rp1" if "rp1" in label else "pinctrl_bcm2835"
+    for name, safe in _RELEASE_PARAMETERS:
+        path = Path(sys_module) / module / "parameters" / name
+        try:
+            value = path.read_text().strip()[:1].upper()
+        except OSError:
+            continue
+        if value == safe:
+            return ""
+        return (f"a freed GPIO keeps its level on this kernel ({module}.{name}={value}): a killed guard would leave "
+                "/OE enabled; put dtparam=strict_gpiod in config.txt and reboot (docs/deployment.md §11)")
+    return (f"cannot tell whether a freed GPIO of {label or 'this chip'} returns to an input (no {module} "
+            "persist_gpio_outputs or strict_gpiod parameter): put dtparam=strict_gpiod in config.txt "
+            "(docs/deployment.md §11)")
 
 
 class GpiodLine:
@@ -58,6 +88,15 @@ class GpiodLine:
                                       output_value=Value.ACTIVE if initial_high else Value.INACTIVE)
         self._request = gpiod.request_lines(self.chip, consumer=consumer, config={self.line: settings})
         self._high = bool(initial_high)
+        try:
+            with gpiod.Chip(self.chip) as handle:
+                self._label = str(handle.get_info().label)
+        except OSError:
+            self._label = ""
+
+    def release_problem(self) -> str:
+        """"" when the kernel returns this line to an input once freed, else why not (:func:`release_problem_of`)."""
+        return release_problem_of(self._label)
 
     def set_high(self, high: bool) -> None:
         """Drive the line high (True) or low (False). Raises OSError when the request is gone."""
@@ -77,13 +116,14 @@ class GpiodLine:
 class EmulatedGpioLine:
     """An emulated output line with a pull resistor (for tests and simulation).
 
-    ``pull_high``: the level of the released line (the vehicle's /OE pull-up: True). Starts released. Thread-safe.
-    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release`).
+    ``pull_high``: the level of the released line (the vehicle's /OE pull-up: True). ``persist``: a released line
+    keeps driving its last level (a Raspberry Pi kernel without ``strict_gpiod``). Starts released. Thread-safe.
+    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release` without ``persist``).
     """
 
-    def __init__(self, pull_high: bool = True) -> None:
+    def __init__(self, pull_high: bool = True, persist: bool = False) -> None:
         self._lock = threading.Lock()
-        self.pull_high = bool(pull_high)
+        self.pull_high, self.persist = bool(pull_high), bool(persist)
         self._driven: bool | None = None  # None: released
         self.changes = 0
 
@@ -105,10 +145,17 @@ class EmulatedGpioLine:
             return self._driven is not None
 
     def release(self) -> None:
-        """Stop driving: the pull decides the level (what the kernel does when the requesting process dies)."""
+        """Stop driving: the pull decides the level (what the kernel does when the requesting process dies); with
+        ``persist`` the line keeps its driven level."""
         with self._lock:
-            self._driven = None
+            if not self.persist:
+                self._driven = None
             self.changes += 1
+
+    def release_problem(self) -> str:
+        """"" when a released line returns to its pull; else why not."""
+        return ("a freed GPIO keeps its level (emulated kernel without strict_gpiod): a killed guard would leave /OE "
+                "enabled" if self.persist else "")
 
 
 class WatchdogFeedLine(EmulatedGpioLine):

@@ -6,7 +6,7 @@ layout with emulated devices, one process holds the emulators (:class:`Emulation
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` and named
 :class:`~hindrax_drivers.transport.gpio.EmulatedGpioLine` objects) and the node processes reach them through
 :class:`SharedI2CBus` (the ``smbus2.SMBus`` methods the drivers use) and :class:`SharedGpioLine` (the guard's
-``set_high``/``is_high``/``release``).
+``set_high``/``is_high``/``release``/``release_problem``).
 
 Kernel semantics kept: a process that dies loses its line requests: when a client connection closes (the process
 exited, was killed, or released the line), every line it drove is released and returns to its pull level (the
@@ -16,7 +16,7 @@ kernel keeps the requests of a stopped process.
 Processes pick the server up through the environment: :data:`SOCKET_ENV` names the socket; with it set,
 :func:`open_shared_bus` and :func:`open_shared_line` are what the ESC node and the guard use instead of
 ``smbus2.SMBus(n)`` and ``gpiod`` (see :func:`hindrax_drivers.transport.i2c.open_smbus` and
-:func:`hindrax_drivers.guard.node.open_output_enable`).
+:func:`hindrax_drivers.guard.outputs_off.open_output_enable`).
 
 Why our own code: ``multiprocessing.connection`` (standard library) carries the calls; nothing on PyPI emulates an
 I2C adapter and a GPIO chip shared across processes.
@@ -36,7 +36,7 @@ __all__ = ["SOCKET_ENV", "EmulationServer", "SharedI2CBus", "SharedGpioLine", "o
 #: environment variable naming the server's Unix socket
 SOCKET_ENV = "HINDRAX_EMULATION_SOCKET"
 
-_LINE_METHODS = ("set_high", "is_high", "release")
+_LINE_METHODS = ("set_high", "is_high", "release", "release_problem")
 
 
 class EmulationServer:
@@ -160,6 +160,9 @@ class SharedGpioLine(_Client):
         with contextlib.suppress(OSError):
             self._call(self.name, "release")
         self.close()
+
+    def release_problem(self) -> str:
+        return str(self._call(self.name, "release_problem"))
 
 
 def open_shared_bus() -> SharedI2CBus | None:

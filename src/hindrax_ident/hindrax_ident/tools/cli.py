@@ -33,6 +33,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "allocate a base_link wrench X Y Z K M N (N, N m) to thruster forces and pulse widths (JSON)"),
     (("arm",), "arm", "arm a vehicle's thruster outputs (through its gateway from the topside)"),
     (("disarm",), "arm", "disarm a vehicle's thruster outputs"),
+    (("reset",), "arm", "clear the supervisor's latched trip or e-stop (signed, like arm), printing what it cleared"),
     (("thruster-test",), "thruster_test",
      "step each thruster alone and print the wrench the model expects (reversed, swapped)"),
     (("bringup",), "bringup",

@@ -3,6 +3,7 @@
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any, Mapping
 
 from ...hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error, esc_prescale
@@ -24,6 +25,10 @@ SCHEMA, OPTIONAL = section("esc", {
                              "thrust starting to change, s: the identification's force timing", 0.0, 0.5),
     "oscillator_calibrated": flag("esc.oscillator_hz was measured on this board (`hindrax esc calibrate`); "
                                   "arming is refused while false"),
+    "oscillator_measured_on": text("the record `hindrax esc calibrate --write` leaves: '<board id> <UTC date> "
+                                   "<measured width> us' (board id: the Pi's serial number, or its machine id); "
+                                   "absent, or another board's: `hindrax config check` and `hindrax health` warn "
+                                   "(docs/devices.md §5.1)"),
     "readback_interval_s": real("MODE1, PRE_SCALE and the channel registers are read back this often; a "
                                 "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
     "bus_call_timeout_s": real("a PCA9685 bus call (write or read-back) not returned after this long makes the "
@@ -49,7 +54,7 @@ SCHEMA, OPTIONAL = section("esc", {
     "output_enable_feed_timeout_s": real("the hardware watchdog's timeout: its monostable's pulse width "
                                          "t_W = R_EXT * C_EXT (docs/watchdog.md); the outputs stop this long after "
                                          "the last rising edge, s", 0.05, 2.0),
-}, optional=("output_enable_gpio.", "output_enable_feed"))
+}, optional=("output_enable_gpio.", "output_enable_feed", "oscillator_measured_on"))
 
 
 #: keys whose YAML value may be null, meaning "absent" (their sub-keys are optional)
@@ -64,6 +69,37 @@ def output_enable_gpio(cfg: Any, key: str = "esc.output_enable_gpio") -> tuple[s
     if not chip:
         return None
     return str(chip), int(flat[f"{key}.line"])
+
+
+def board_id() -> str:
+    """This machine's board: the Raspberry Pi's serial number (device tree), else ``/etc/machine-id``, else
+    ``unknown``."""
+    for path in ("/sys/firmware/devicetree/base/serial-number", "/etc/machine-id"):
+        try:
+            text = Path(path).read_text().strip("\x00\n ")
+        except OSError:
+            continue
+        if text:
+            return text
+    return "unknown"
+
+
+def oscillator_problem(cfg: Any, board: str) -> str:
+    """One line when ``esc.oscillator_calibrated`` is true but no measurement on ``board`` is recorded
+    (``esc.oscillator_measured_on`` absent, or naming another board: a vehicle file copied from another vehicle, or
+    the flag set by hand); "" otherwise (false is refused by the ESC itself). Issue 71.8: a mis-set oscillator
+    marked calibrated put 1559-1631 us on the wire as "neutral"."""
+    flat = cfg.flat if hasattr(cfg, "flat") else cfg
+    if not flat.get("esc.oscillator_calibrated"):
+        return ""
+    record = str(flat.get("esc.oscillator_measured_on") or "")
+    check = ("check with a scope that a disarmed thruster channel carries 1500 us (or run `hindrax esc calibrate "
+             "--measured-us X --write` on this vehicle)")
+    if not record:
+        return f"esc.oscillator_calibrated is true but no measurement is recorded (esc.oscillator_measured_on): {check}"
+    if record.split()[0] != board:
+        return f"esc.oscillator_hz was measured on board {record.split()[0]}, not this one ({board}): {check}"
+    return ""
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:

@@ -19,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import ConfigError, default_config_path, load_config, output_enable_gpio
+    from hindrax_drivers.config.sections.esc import board_id, oscillator_problem
     from hindrax_drivers.pca9685.protocol import REFERENCE_CHANNEL
 
     if args.file is None:
@@ -41,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
               f"thruster outputs off (no pulses) and refuses to arm. Start the stack (hindrax bringup), measure the "
               f"reference pulse on PCA9685 channel {REFERENCE_CHANNEL} with a scope, then run `hindrax esc calibrate "
               f"--measured-us X --config {args.file} --write` (sets esc.oscillator_hz and the flag).")
+    if problem := oscillator_problem(cfg, board_id()):
+        print(f"warning: {problem}")
     if output_enable_gpio(cfg) is None:
         print("warning: esc.output_enable_gpio is not wired: the vehicle has no hardware cut-off. The output guard "
               "silences the PCA9685 over the I2C bus (all-off + sleep), which an I2C outage defeats "

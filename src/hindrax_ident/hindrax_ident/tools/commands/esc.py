@@ -9,7 +9,8 @@ Procedure: start the stack (``hindrax bringup``; while not calibrated the ESC no
 ``thrusters.pulse_width_neutral_us``, on PCA9685 channel 15, which no ESC is on), measure its high time with a
 scope, and run this command with the reading. It prints one JSON
 object (assumed and calibrated oscillator, prescale, counts, the pulse width the calibrated value gives);
-``--write`` sets ``esc.oscillator_hz`` and ``esc.oscillator_calibrated: true`` in the configuration file (comments
+``--write`` sets ``esc.oscillator_hz``, ``esc.oscillator_calibrated: true`` and ``esc.oscillator_measured_on`` (this
+board's id, the date, the reading) in the configuration file (comments
 kept, validated, the original restored if the result is invalid). A reading that gives an oscillator outside the
 part's 23-27 MHz (``esc.oscillator_hz``'s range) is refused, written or not: it is a wrong reading. Arithmetic:
 :func:`hindrax_drivers.pca9685.protocol.oscillator_from_measurement`.
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 
 from .common import CommandError, add_config_argument, load_vehicle, update_vehicle_file
 
@@ -72,9 +74,14 @@ def run(args: argparse.Namespace) -> int:
         "written": False,
     }
     if args.write:
+        from hindrax_drivers.config.sections.esc import board_id
+
         try:
-            update_vehicle_file(path, {"esc.oscillator_hz": round(f_true, 1),
-                                       "esc.oscillator_calibrated": True})
+            record = f"{board_id()} {time.strftime('%Y-%m-%d', time.gmtime())} {float(args.measured_us):g} us"
+            update_vehicle_file(path, {"esc.oscillator_hz": round(f_true, 1), "esc.oscillator_calibrated": True,
+                                       "esc.oscillator_measured_on": record},
+                                new_keys={"esc.oscillator_measured_on": (
+                                    "oscillator_calibrated", "board, date, scope reading (hindrax esc calibrate)")})
         except (ValueError, ConfigError) as exc:
             raise CommandError(f"esc calibrate: {path} left unchanged: {exc}") from None
         result["written"] = True

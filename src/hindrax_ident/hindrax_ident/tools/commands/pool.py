@@ -84,8 +84,11 @@ def run(args: argparse.Namespace) -> int:
             from None
     folder = Path(args.dir or tempfile.mkdtemp(prefix="hindrax-rehearsal-")).resolve()
     folder.mkdir(parents=True, exist_ok=True)
+    from hindrax_drivers.config.sections.esc import board_id
+
     doc = yaml.safe_load(installed.read_text())
-    doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True
+    doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True  # the emulated part's, measured here
+    doc["/**"]["ros__parameters"]["esc"]["oscillator_measured_on"] = f"{board_id()} emulated"
     vehicle_file = folder / "hindrax.yaml"
     vehicle_file.write_text(yaml.safe_dump(doc))
     try:

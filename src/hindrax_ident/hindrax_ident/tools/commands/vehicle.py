@@ -4,7 +4,8 @@ A vehicle shows itself by its gateway's node, ``/<vehicle.name>/gateway`` (docs/
 topside domain and on the vehicle's internal graph alike. On the topside the vehicle's interface is the gateway's
 relays under ``/<name>/`` (:data:`hindrax_drivers.gateway.interface.INTERFACE`); on the internal graph (a command
 run on the vehicle itself) the nodes' own names, without a namespace. :func:`find_vehicle` tells the two apart by
-the gateway's topside-only node ``/<name>/gateway_operator``, and refuses a name two gateways answer to.
+the gateway's topside-only node ``/<name>/gateway_operator``, refuses a name two gateways answer to, and warns (stderr)
+when another server answers one of the vehicle's services (an eavesdropper, issue 71).
 
 On the topside an operator's request is signed (:mod:`hindrax_drivers.operator_signing`) with the vehicle's key,
 ``<keys dir>/<name>.key`` (``hindrax keys``), when this PC has it; without it the gateway refuses the request and
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -80,7 +82,8 @@ def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float)
     :class:`CommandError` (one line) for no vehicle, several, not the one named, or a name two gateways answer to."""
     from hindrax_drivers.dds_transport import wait_discovered
     from hindrax_drivers.gateway.interface import (GATEWAY_NODE, STATUS_TOPIC, VehicleChoiceError, choose_vehicle,
-                                                   duplicate_problem, participants, vehicles_seen)
+                                                   duplicate_problem, extra_servers_problem, participants,
+                                                   vehicles_seen)
     from hindrax_drivers.operator_signing import OperatorKeyError, Signer, key_path, load_key
 
     nodes = node.get_node_names_and_namespaces()
@@ -108,6 +111,9 @@ def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float)
     duplicate = duplicate_problem(name, participants(gids))
     if duplicate:
         raise CommandError(f"refusing to command it: {duplicate}")
+    extra = extra_servers_problem(name, node.count_services)
+    if extra:
+        print(f"warning: vehicle {name!r}: {extra}", file=sys.stderr, flush=True)
     path = key_path(name)
     if not path.exists():
         return Target(name, True)
