@@ -231,3 +231,13 @@ def test_run_refuses_an_output_directory_that_holds_a_run(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "not empty" in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # nothing started, nothing written
+
+
+def test_an_online_estimate_prints_names_units_and_95_percent_intervals():
+    from hindrax_ident.tools.commands.ident_live import format_estimate
+    from hindrax_msgs.msg import HydroEstimate
+
+    e = HydroEstimate(dof="heave", parameter_names=["inertia", "bias"], parameter_units=["kg", "N"],
+                      values=[56.6, 1.0], std=[1.0, -1.0])
+    # 56.6 -+ 1.96 * 1.0 = [54.64, 58.56]; std -1 (not converged): no interval
+    assert format_estimate(e) == "heave: inertia 56.6 kg [54.64, 58.56], bias 1 N (no interval)"
