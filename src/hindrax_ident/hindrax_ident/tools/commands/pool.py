@@ -63,9 +63,30 @@ def _domains(args: argparse.Namespace) -> tuple[int, int]:
     return internal, topside
 
 
+def _refuse_a_domain_in_use(domain: int) -> None:
+    """Raise :class:`CommandError` ``"hindrax pool rehearse: refused: ROS domain N already has ESC /esc; ..."`` when
+    an ESC or supervisor is on ``domain`` (:func:`hindrax_drivers.vehicle_graph.refuse_before_start`, as
+    ``hindrax bringup`` and ``hindrax run``): a second vehicle there would cut the first one's thrusters and mix
+    into its bags."""
+    import rclpy
+
+    from hindrax_drivers.vehicle_graph import ForeignVehicleError, refuse_before_start
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    try:
+        refuse_before_start(context, "refusing to start a second vehicle on it (set ROS_DOMAIN_ID to a free "
+                                     "domain)", "hindrax pool rehearse: refused")
+    except ForeignVehicleError as exc:
+        raise CommandError(str(exc)) from None
+    finally:
+        context.try_shutdown()
+
+
 def run(args: argparse.Namespace) -> int:
     """Start the pool and the launch, print the shells' environments, act as the pool's operator (module
-    docstring). Raises :class:`CommandError` without an installed workspace or with bad domains."""
+    docstring). Raises :class:`CommandError` without an installed workspace, with bad domains, or when the internal
+    domain already has a vehicle (:func:`_refuse_a_domain_in_use`)."""
     import yaml
 
     from hindrax_drivers.config import ConfigError, load_config
@@ -76,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
     from ...sim.live_pool import LivePool
 
     internal, topside = _domains(args)
+    _refuse_a_domain_in_use(internal)
     try:
         launch_file = ament_share(LAUNCH[0]) / "launch" / LAUNCH[1]
         installed = ament_share("hindrax_drivers") / "config" / "hindrax.yaml"
