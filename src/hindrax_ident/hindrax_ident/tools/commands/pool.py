@@ -1,11 +1,13 @@
-"""``hindrax pool rehearse [--topside-domain N] [--dir DIR] [--truth FILE]``: the README's pool day on a laptop.
+"""``hindrax pool rehearse [--topside-domain N] [--dir DIR] [--truth FILE] [NAME:=VALUE ...]``: the README's pool
+day on a laptop.
 
 One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_ident.sim.live_pool`: the simulator
 behind the five emulated devices, in a process of its own, on the wall clock) and the *installed*
 ``hindrax_ident/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
 process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.process_runner.ProcessRunner`), the drivers pointed at
-the pool's serial ports and I2C socket. The vehicle file is the installed one with its oscillator marked measured
-(``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
+the pool's serial ports and I2C socket; ``NAME:=VALUE`` are more launch arguments (``model_file:=`` of the block's
+second launch; an undeclared one is refused in one line). The vehicle file is the installed one with its oscillator
+marked measured (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
 
 Domains, as the README names them: the **internal domain** is this shell's ``ROS_DOMAIN_ID`` (the vehicle's
 processes; default 0), the **topside domain** is ``--topside-domain`` (default: the internal one + 1), where the
@@ -40,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dir", default=None, help="folder for the vehicle file, env files, logs and bags "
                                                     "(default: a new temporary one)")
     parser.add_argument("--truth", default=None, help="the pool's truth file (default: the shipped one)")
+    parser.add_argument("launch_arguments", nargs="*", metavar="NAME:=VALUE",
+                        help="more arguments of the launch, as ros2 launch takes them (e.g. model_file:=FILE for "
+                             "the block's second launch, the identified model)")
 
 
 def rehearsal_env(domain: int, **extra: str) -> str:
@@ -97,6 +102,12 @@ def run(args: argparse.Namespace) -> int:
     from ...sim.live_pool import LivePool
 
     internal, topside = _domains(args)
+    given = dict(item.partition(":=")[::2] for item in args.launch_arguments)
+    for item in args.launch_arguments:
+        name, sep, _value = item.partition(":=")
+        if not sep or not name or name in ("config", "output_dir", "topside_domain_id", "topside_discovery_range"):
+            raise CommandError(f"pool rehearse: launch argument {item!r}: expected NAME:=VALUE, NAME not one the "
+                               "rehearsal sets (config, output_dir, topside_domain_id, topside_discovery_range)")
     _refuse_a_domain_in_use(internal)
     try:
         launch_file = ament_share(LAUNCH[0]) / "launch" / LAUNCH[1]
@@ -119,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     create_key(folder / "keys" / f"{name}.key", force=True)
     env = {**os.environ, "ROS_DOMAIN_ID": str(internal), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", **keys}
     arguments = {"config": str(vehicle_file), "output_dir": str(folder / "runs"), "topside_domain_id": str(topside),
-                 "topside_discovery_range": "LOCALHOST"}
+                 "topside_discovery_range": "LOCALHOST", **given}
     try:
         processes = read_launch(launch_file, arguments)
     except LaunchFileError as exc:
