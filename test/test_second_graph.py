@@ -71,7 +71,7 @@ def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
     assert status == 1, err
     assert any(err[-1].startswith(f"hindrax run: refused: ROS domain {domain} already has {other}; refusing to run a "
                                   "campaign beside another vehicle graph") for other in named("ESC", "esc")), err
-    assert not (tmp_path / "run" / "identification.yaml").exists()
+    assert not (tmp_path / "run").exists()  # issue 74.8: a refused run leaves no empty folder
 
 
 @pytest.mark.parametrize("args, started, role, role_name", [

@@ -133,7 +133,10 @@ def test_run_writes_identification_report_and_summary(tmp_path, capsys):
     doc = read_identification(out / "identification.yaml")
     assert set(doc["dofs"]) == {"surge"}
     assert doc["provenance"]["source"] == "simulation" and doc["provenance"]["seed"] == 3
-    assert (out / "report" / "index.html").exists()
+    page = (out / "report" / "index.html").read_text()
+    # issue 74.8: the page opened with the vehicle parameters as a raw Python dict; now folded YAML
+    assert "{&#x27;" not in page and "<b>vehicle_parameters</b>: <details>" in page
+    assert "vehicle.mass_kg: 15.22" in page
     assert (out / "report" / "surge_force_velocity.png").exists()
     # summary table: DOF, parameter, value, std, configured value, relative error
     line = next(x for x in text.splitlines() if x.startswith("surge") and " inertia " in x)

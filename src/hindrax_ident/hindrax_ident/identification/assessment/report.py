@@ -271,8 +271,12 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
     out.mkdir(parents=True, exist_ok=True)
     parts = [_head("Hindrax identification"), "<h1>Hindrax hydrodynamic identification</h1>"]
     prov = document.get("provenance", {})
-    parts.append("<p>" + "<br>".join(f"<b>{html.escape(str(k))}</b>: {html.escape(str(v))}" for k, v in prov.items())
-                 + "</p>")
+    # a nested value (the vehicle_parameters the fit used: 60-odd keys) folded as YAML, not a Python dict
+    parts.append("<p>" + "<br>".join(
+        f"<b>{html.escape(str(k))}</b>: " + (
+            f"<details><summary>{len(v)} values</summary><pre>"
+            f"{html.escape(yaml.safe_dump(v, sort_keys=False, default_flow_style=None))}</pre></details>"
+            if isinstance(v, (dict, list)) else html.escape(str(v))) for k, v in prov.items()) + "</p>")
     if campaign_note:
         parts.append(f"<p>{html.escape(campaign_note)}</p>")
     dofs = document["dofs"]
