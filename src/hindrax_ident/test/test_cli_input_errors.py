@@ -47,3 +47,10 @@ def test_pool_rehearse_refuses_a_malformed_or_reserved_launch_argument_in_one_li
     err = capsys.readouterr().err
     assert err == (f"pool rehearse: launch argument {given!r}: expected NAME:=VALUE, NAME not one the rehearsal sets "
                    "(config, output_dir, topside_domain_id, topside_discovery_range)\n")
+
+
+def test_pool_rehearse_says_why_a_domain_is_0_to_101(capsys):
+    """Issue 74.8: the range error said 0-101 without why."""
+    assert cli.main(["pool", "rehearse", "--topside-domain", "150"]) == 1
+    assert capsys.readouterr().err == ("--topside-domain 150: allowed 0-101 (ROS 2 maps a domain id to UDP ports "
+                                       "7400 + 250 x id; above 101 they meet Linux's ephemeral ports)\n")

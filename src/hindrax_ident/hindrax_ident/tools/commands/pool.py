@@ -53,16 +53,22 @@ def rehearsal_env(domain: int, **extra: str) -> str:
     return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in values.items())
 
 
+#: why a domain id is 0-101 (ROS 2 docs, "The ROS_DOMAIN_ID"): DDS maps it to UDP ports 7400 + 250 x id and up; above
+#: 101 they run into Linux's ephemeral ports (32768-60999)
+_WHY_0_101 = "ROS 2 maps a domain id to UDP ports 7400 + 250 x id; above 101 they meet Linux's ephemeral ports"
+
+
 def _domains(args: argparse.Namespace) -> tuple[int, int]:
     raw = os.environ.get("ROS_DOMAIN_ID", "0") or "0"
     try:
         internal = int(raw)
     except ValueError:
-        raise CommandError(f"ROS_DOMAIN_ID={raw!r}: allowed an integer 0-101 (the internal domain)") from None
+        raise CommandError(f"ROS_DOMAIN_ID={raw!r}: allowed an integer 0-101 (the internal domain; {_WHY_0_101})") \
+            from None
     topside = internal + 1 if args.topside_domain is None else int(args.topside_domain)
     for name, value in (("ROS_DOMAIN_ID (internal domain)", internal), ("--topside-domain", topside)):
         if not 0 <= value <= 101:
-            raise CommandError(f"{name} {value}: allowed 0-101")
+            raise CommandError(f"{name} {value}: allowed 0-101 ({_WHY_0_101})")
     if topside == internal:
         raise CommandError(f"--topside-domain {topside}: must differ from the internal domain (ROS_DOMAIN_ID)")
     return internal, topside
