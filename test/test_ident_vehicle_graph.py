@@ -115,6 +115,12 @@ def test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral(
             text = st.stdout.read()
             assert st.returncode == 0, text
             assert any(f"phase {p}" in text for p in ("positioning", "running", "returning")), text
+            # a second hindrax ident start: refused at once with the reason, the running campaign goes on (below)
+            second = subprocess.Popen([hindrax, "ident", "start", "--dofs", "heave"], env=child_env(),
+                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            wait_until(lambda: second.poll() is not None, 60, read, "the second hindrax ident start")
+            text = second.stdout.read()
+            assert second.returncode == 1 and "a campaign is already running (phase " in text, text
             # feedback of a surge level while it runs
             running = lambda line: line.startswith("surge level 1/1 ") and " +0.00 N" not in line  # noqa: E731
             wait_until(lambda: (read() or any(running(s) for s in seen)), 180, read,

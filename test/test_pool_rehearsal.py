@@ -18,6 +18,7 @@ import threading
 import time
 
 import pytest
+import yaml
 from domain_coordinator import domain_id
 
 from hindrax_drivers.testing import wait_until
@@ -89,6 +90,26 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
                                                                capture_output=True, text=True, timeout=120))
                            or tries[-1].returncode == 0, WAIT_S, None, f"hindrax {command} on the topside")
                 assert tries[-1].stdout.strip() == f"{shells['topside']['HINDRAX_VEHICLE']}: {command}ed", tries[-1]
+            # issue 74.4: ident continue with nothing awaited (the ESC disarmed) answers with the reason
+            t0 = time.monotonic()
+            cont = subprocess.run(["hindrax", "ident", "continue"], env=topside_env, capture_output=True, text=True,
+                                  timeout=120)
+            print(f"ident continue while disarmed answered in {time.monotonic() - t0:.1f} s")
+            assert cont.returncode == 1 and cont.stdout.strip() == "not continued: no identification goal is running", \
+                cont
+            # issue 74.5: the README's read-out of the supervisor's status, without the ros2 CLI
+            status_topic = f"/{shells['topside']['HINDRAX_VEHICLE']}/supervisor/status"
+            echo = subprocess.run(["hindrax", "topic", "echo", status_topic, "--count", "1", "--timeout", str(WAIT_S)],
+                                  env=topside_env, capture_output=True, text=True, timeout=WAIT_S + 60)
+            assert echo.returncode == 0 and echo.stdout.endswith("---\n"), echo
+            status = yaml.safe_load(echo.stdout.rsplit("---", 1)[0])  # disarm_cause among its values after a stop
+            assert list(status) == ["level", "name", "message", "hardware_id", "values"], status
+            # issue 74.2: a second rehearsal on the vehicle's domain is refused, naming what it found
+            second = subprocess.run(["hindrax", "pool", "rehearse", "--topside-domain", str(topside), "--dir",
+                                     str(tmp_path / "second")], env=install.env, stdin=subprocess.DEVNULL,
+                                    capture_output=True, text=True, timeout=120)
+            assert second.returncode == 1 and "hindrax pool rehearse: refused: ROS domain " in second.stderr and \
+                "refusing to start a second vehicle on it" in second.stderr, second
             for code in ("attach_ballast", "remove_ballast"):
                 proc.stdin.write(code + "\n")
                 proc.stdin.flush()

@@ -71,7 +71,7 @@ def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
     assert status == 1, err
     assert any(err[-1].startswith(f"hindrax run: refused: ROS domain {domain} already has {other}; refusing to run a "
                                   "campaign beside another vehicle graph") for other in named("ESC", "esc")), err
-    assert not (tmp_path / "run" / "identification.yaml").exists()
+    assert not (tmp_path / "run").exists()  # issue 74.8: a refused run leaves no empty folder
 
 
 @pytest.mark.parametrize("args, started, role, role_name", [
@@ -115,3 +115,39 @@ def test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start(tmp_p
     assert any(err[-1].startswith(f"hindrax {args[0]}: refused: ROS domain {domain} already has {other};")
                for other in named(role_name, role)), err
     assert not (tmp_path / "run" / "identification.yaml").exists()
+
+
+def test_pool_rehearse_refuses_a_domain_with_another_esc_before_starting_anything(tmp_path):
+    """Issue 74.2: a second rehearsal on a domain in use cut the first vehicle's thrusters and filled its bags."""
+    status, err, domain = _refusal(["pool", "rehearse", "--dir", str(tmp_path / "day")], "esc", tmp_path)
+    assert status == 1, err
+    assert err[-1] in [f"hindrax pool rehearse: refused: ROS domain {domain} already has {other}; refusing to start "
+                       "a second vehicle on it (set ROS_DOMAIN_ID to a free domain)" for other in named("ESC", "esc")]
+    assert not (tmp_path / "day").exists()  # no pool, no vehicle file, no launch
+
+
+def test_health_names_a_second_vehicle_on_its_domain(tmp_path):
+    """Issue 74.2: the first vehicle's health said READY beside a second one; two ESCs on the domain are named."""
+    from domain_coordinator import domain_id
+
+    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
+        escs = [rclpy.create_node("esc", context=ctx) for _ in range(2)]
+        ex = SingleThreadedExecutor(context=ctx)
+        for esc in escs:
+            beat = esc.create_publisher(Heartbeat, "esc/heartbeat", 10)
+            esc.create_timer(0.05, lambda b=beat: b.publish(Heartbeat(level=Heartbeat.OK, boot_id=1, seq=1)))
+            ex.add_node(esc)
+        hindrax = str(Path(sys.executable).with_name("hindrax"))
+        proc = subprocess.Popen([hindrax, "health", "--timeout", "8"], env=child_env(ROS_DOMAIN_ID=str(fresh)),
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            wait_until(lambda: proc.poll() is not None, 120, lambda: ex.spin_once(timeout_sec=0.05), "health")
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+            ex.shutdown()
+            for esc in escs:
+                esc.destroy_node()
+    out = proc.stdout.read()
+    assert proc.returncode == 1, out
+    assert "  FAIL  a second vehicle on this domain: ESC /esc: " in out, out

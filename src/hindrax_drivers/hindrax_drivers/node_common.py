@@ -429,14 +429,10 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
     (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason;
     locked() gives the reason a change is refused now ('' = allowed: the ESC disarmed, ``ArmedWatch.refusal``).
     See :func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters` (the node must be created without
-    ``automatically_declare_parameters_from_overrides``). Logs the one-line reason and re-raises
-    :class:`ConfigError` so :func:`run_node` exits with status 1.
+    ``automatically_declare_parameters_from_overrides``). Raises :class:`ConfigError`: :func:`run_node` prints its
+    one line once and exits with status 1.
     """
-    try:
-        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change, locked=locked)
-    except ConfigError as exc:
-        node.get_logger().fatal(f"invalid configuration: {exc}")
-        raise
+    return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change, locked=locked)
 
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,

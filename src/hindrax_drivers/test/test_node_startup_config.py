@@ -53,10 +53,11 @@ def test_config_check_refuses_each_file_with_the_line(tmp_path):
 
 def test_a_node_started_with_a_refused_file_exits_non_zero_with_the_line(tmp_path):
     procs = []
+    path_of = {}
     for module, case, edit, line in mistakes():
         doc = vehicle_doc()
         edit(doc["/**"]["ros__parameters"])
-        path = tmp_path / f"{case}.yaml"
+        path = path_of[line] = tmp_path / f"{case}.yaml"
         path.write_text(yaml.safe_dump(doc))
         procs.append((line, subprocess.Popen(
             [sys.executable, "-m", module, "--ros-args", "--params-file", str(path)], env=child_env(),
@@ -69,6 +70,8 @@ def test_a_node_started_with_a_refused_file_exits_non_zero_with_the_line(tmp_pat
         assert proc.returncode == 1, err
         stderr_lines = [x for x in err.splitlines() if x.startswith("invalid configuration: ")]
         assert len(stderr_lines) == 1 and line in stderr_lines[0], err
+        # issue 74.8: the file passed is named (not the default file), and the line is said once (no log copy)
+        assert f"(from {path_of[line]})" in stderr_lines[0] and err.count("invalid configuration") == 1, err
 
 
 def test_overrides_equal_to_the_file_or_absent_are_not_checked_again():

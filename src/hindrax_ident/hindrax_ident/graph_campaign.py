@@ -54,6 +54,7 @@ from .identification.online.executive import calibration_forces, float_buoyancy,
 from .identification.bag_input.reader import BagContentError
 from .identification.assessment.pipeline import OverlappedFits, identify_bag
 from .identification.assessment.report import write_outputs
+from .progress_line import ProgressLine, Ticker
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
 
@@ -330,25 +331,27 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     if not dofs:
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
-    say("offline identification from the bag")
-    fitted = overlap.result() if overlap is not None else None
-    if overlap is not None:
-        say(f"fitted while the campaign ran: {', '.join(fitted) or 'none'}" if fitted is not None
-            else f"overlapped fits lost ({overlap.error}): identifying serially")
-    try:  # with the identification node's calibration results
-        _record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration,
-                                              fitted=None if calibration else fitted)
-    except BagContentError as exc:
-        idents, errors = {}, {"bag": str(exc)}
-    outcome.identifications, outcome.errors = idents, errors
-    outcome.wall_time_s = time.monotonic() - wall0
-    if idents:
-        note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), "
-                f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
-                f"action result: {outcome.message}")
-        # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
-        add = sections if sections is not None and node_record is not None else None
-        write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),
-                      calibration=calibration,
-                      sections=add and (lambda doc: add(doc, node_record, idents)))
+    # a line at least every QUIET_S (progress_line) while the fits and the report run: minutes on a busy machine
+    with Ticker(ProgressLine(say, tty=False), "offline identification from the bag") as ticker:
+        fitted = overlap.result() if overlap is not None else None
+        if overlap is not None:
+            ticker.line(f"fitted while the campaign ran: {', '.join(fitted) or 'none'}" if fitted is not None
+                        else f"overlapped fits lost ({overlap.error}): identifying serially")
+        try:  # with the identification node's calibration results
+            _record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration,
+                                                  fitted=None if calibration else fitted)
+        except BagContentError as exc:
+            idents, errors = {}, {"bag": str(exc)}
+        outcome.identifications, outcome.errors = idents, errors
+        outcome.wall_time_s = time.monotonic() - wall0
+        if idents:
+            ticker.set("offline identification: writing identification.yaml and the report")
+            note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), "
+                    f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
+                    f"action result: {outcome.message}")
+            # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
+            add = sections if sections is not None and node_record is not None else None
+            write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),
+                          calibration=calibration,
+                          sections=add and (lambda doc: add(doc, node_record, idents)))
     return outcome

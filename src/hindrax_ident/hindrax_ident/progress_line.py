@@ -4,8 +4,9 @@ A long command (a campaign's feedback at several hertz) must not scroll the same
 :meth:`ProgressLine.update` rewrites the current line (carriage return, erase to the end of the line); in a log or
 a pipe, where a carriage return would pile up, it writes a line only when the text changed. :meth:`ProgressLine.line`
 prints a line that stays (a prompt, a result), ending the updating line first. :class:`Ticker` keeps a long step
-alive on a terminal (its text and the seconds elapsed, rewritten every second) and names each new step once
-elsewhere: ``hindrax ident bag``'s fit, ``make ros-install``'s colcon build (:mod:`hindrax_ident.progress_run`).
+alive on a terminal (its text and the seconds elapsed, rewritten every second) and elsewhere names each new step,
+and again every :data:`QUIET_S` while it lasts: ``hindrax ident bag``'s fit, ``make ros-install``'s colcon build
+(:mod:`hindrax_ident.progress_run`).
 """
 from __future__ import annotations
 
@@ -14,7 +15,11 @@ import threading
 import time
 from typing import Callable, TextIO
 
-__all__ = ["ProgressLine", "Ticker"]
+__all__ = ["QUIET_S", "ProgressLine", "Ticker"]
+
+#: off a terminal, the longest a :class:`Ticker` stays silent: it repeats its step with the seconds elapsed, s (issue
+#: 74.6: a log showed 142 s without a line during a fit and was taken for a hang; no step silent over 10 s)
+QUIET_S = 9.0
 
 
 class ProgressLine:
@@ -59,15 +64,16 @@ class ProgressLine:
 
 class Ticker:
     """A step's text with the seconds elapsed since the ticker started, on a :class:`ProgressLine`: rewritten every
-    ``period_s`` (s) on a terminal by a thread of its own; elsewhere the text alone, once per change (no ticks in a
-    log). A context manager: the thread stops and the line ends on the way out. ``clock``: seconds (monotonic).
+    ``period_s`` (s) on a terminal by a thread of its own; elsewhere the text alone at each change, and again with
+    the seconds every ``quiet_s`` (s, :data:`QUIET_S`) while the step lasts. A context manager: the thread stops and
+    the line ends on the way out. ``clock``: seconds (monotonic).
 
     ``with Ticker(ProgressLine(), "ident bag: fitting") as t: ...; t.set("ident bag: writing the report")``
     """
 
     def __init__(self, progress: ProgressLine, text: str, period_s: float = 1.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.progress, self.period_s, self.clock = progress, float(period_s), clock
+                 clock: Callable[[], float] = time.monotonic, quiet_s: float = QUIET_S) -> None:
+        self.progress, self.period_s, self.clock, self.quiet_s = progress, float(period_s), clock, float(quiet_s)
         self.t0 = clock()
         self._text = text
         self._lock = threading.Lock()
@@ -95,14 +101,18 @@ class Ticker:
             self.progress.line(text)
 
     def _run(self) -> None:
-        while not self._stop.wait(self.period_s):
-            self.show()
+        tty = self.progress._tty
+        while not self._stop.wait(self.period_s if tty else self.quiet_s):
+            if tty:
+                self.show()
+            else:  # a log: the step again with its seconds, so that no line is more than quiet_s apart
+                with self._lock:
+                    self.progress.update(f"{self._text} ({self.elapsed_s():.0f} s)")
 
     def __enter__(self) -> "Ticker":
         self.show()
-        if self.progress._tty:
-            self._thread = threading.Thread(target=self._run, daemon=True, name="progress-ticker")
-            self._thread.start()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="progress-ticker")
+        self._thread.start()
         return self
 
     def __exit__(self, *exc) -> None:

@@ -184,6 +184,10 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
         assert doc.get("joint", {}).get("scales", {}) == {}
         return
     assert "calibration from the bag" in out
+    # issue 74.8: the joint scale (what control model divides by) printed beside the step's, each named
+    joint_line = next(x for x in out.splitlines() if x.startswith("thrust scales estimated jointly"))
+    vf = doc["joint"]["scales"]["vertical_forward"]
+    assert f"vertical_forward {vf['value']:.4f} +- {vf['std']:.4f} (heave)" in joint_line, joint_line
     # the heave run pushes down with every vertical thruster (1600 us): forward thrust, the vertical forward scale
     # of the bag's calibration (the sinker's and the hovers' holds, thrust_scales: test_thrust_calibration.py)
     sc = thrust_scales(CAL, cfg)

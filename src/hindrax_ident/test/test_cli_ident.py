@@ -133,7 +133,10 @@ def test_run_writes_identification_report_and_summary(tmp_path, capsys):
     doc = read_identification(out / "identification.yaml")
     assert set(doc["dofs"]) == {"surge"}
     assert doc["provenance"]["source"] == "simulation" and doc["provenance"]["seed"] == 3
-    assert (out / "report" / "index.html").exists()
+    page = (out / "report" / "index.html").read_text()
+    # issue 74.8: the page opened with the vehicle parameters as a raw Python dict; now folded YAML
+    assert "{&#x27;" not in page and "<b>vehicle_parameters</b>: <details>" in page
+    assert "vehicle.mass_kg: 15.22" in page
     assert (out / "report" / "surge_force_velocity.png").exists()
     # summary table: DOF, parameter, value, std, configured value, relative error
     line = next(x for x in text.splitlines() if x.startswith("surge") and " inertia " in x)
@@ -231,3 +234,36 @@ def test_run_refuses_an_output_directory_that_holds_a_run(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "not empty" in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # nothing started, nothing written
+
+
+def test_an_online_estimate_prints_names_units_and_95_percent_intervals():
+    from hindrax_ident.tools.commands.ident_live import format_estimate
+    from hindrax_msgs.msg import HydroEstimate
+
+    e = HydroEstimate(dof="heave", parameter_names=["inertia", "bias"], parameter_units=["kg", "N"],
+                      values=[56.6, 1.0], std=[1.0, -1.0])
+    # 56.6 -+ 1.96 * 1.0 = [54.64, 58.56]; std -1 (not converged): no interval
+    assert format_estimate(e) == "heave: inertia 56.6 kg [54.64, 58.56], bias 1 N (no interval)"
+
+
+def test_the_convergence_plot_draws_the_band_its_title_promises(tmp_path, monkeypatch):
+    """Issue 74.8: the RLS plot promised a +-1.96 std band that was not seen; the band is drawn where the std is
+    known and the title says for how many parameters (none: it says so)."""
+    from types import SimpleNamespace
+
+    from hindrax_ident.identification.assessment import report
+
+    figures: list = []
+    monkeypatch.setattr(report, "_save", lambda fig, path, dpi=None: figures.append(fig))
+    nan = float("nan")
+    for std, title in (([[nan, nan], [0.1, nan], [0.1, nan]], "heave: RLS convergence (shaded: +-1.96 std, 1 of 2 "
+                                                                "parameters)"),
+                       ([[nan, nan]] * 3, "heave: RLS convergence (no std yet: no band)")):
+        r = SimpleNamespace(dof="heave", names=["inertia", "bias"], values={"inertia": 1.0, "bias": 0.0}, truth={},
+                            signals={"online_history": {"t": [0.0, 1.0, 2.0], "std": std,
+                                                        "theta": [[1.0, 0.0], [1.1, 0.1], [1.0, 0.0]]}})
+        assert report._rls_plot(r, tmp_path / "p.png")
+        axes = figures[-1].axes
+        assert axes[0].get_title() == title
+        assert len(axes[0].collections) == (1 if "shaded" in title else 0)  # the fill_between band
+        assert not axes[1].collections

@@ -38,3 +38,19 @@ def test_a_closed_output_pipe_ends_quietly():
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
+
+
+@pytest.mark.parametrize("given", ["model_file", "config:=other.yaml"])
+def test_pool_rehearse_refuses_a_malformed_or_reserved_launch_argument_in_one_line(given, capsys):
+    """Issue 74.5: the rehearsal takes the block's launch arguments (model_file:=); the ones it sets are refused."""
+    assert cli.main(["pool", "rehearse", given]) == 1
+    err = capsys.readouterr().err
+    assert err == (f"pool rehearse: launch argument {given!r}: expected NAME:=VALUE, NAME not one the rehearsal sets "
+                   "(config, output_dir, topside_domain_id, topside_discovery_range)\n")
+
+
+def test_pool_rehearse_says_why_a_domain_is_0_to_101(capsys):
+    """Issue 74.8: the range error said 0-101 without why."""
+    assert cli.main(["pool", "rehearse", "--topside-domain", "150"]) == 1
+    assert capsys.readouterr().err == ("--topside-domain 150: allowed 0-101 (ROS 2 maps a domain id to UDP ports "
+                                       "7400 + 250 x id; above 101 they meet Linux's ephemeral ports)\n")

@@ -169,7 +169,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     bad = subprocess.run(cmd + ["-p", "control.hold_fraction:=1.5"], env=child_env(), capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 1, bad.stderr
-    assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of controller (defaults from "
+    assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of controller (from "
                                            f"{default_config_path()}): control.hold_fraction = 1.5: allowed number in "
                                            "[0.05, 1]")
     refused = subprocess.run(cmd + ["-p", f"model_file:={other}"], env=child_env(), capture_output=True, text=True,

@@ -77,3 +77,20 @@ def test_a_bias_near_zero_is_judged_against_the_damping_force_not_its_value():
     adv = data_advice("surge", "bias", 0.001, 0.5, v, a, f, 0.05, scale=2.0)
     assert adv["feasible"] is True and adv["run_kind"] == "holds and slow runs both ways"
     assert adv["seconds_more"] < POOL_DAY_S / 4
+
+
+def test_parameters_suspect_for_a_dof_wide_reason_alone_are_told_which_runs_fix_them():
+    """Issue 74.3: a pool day ended with seven heave parameters suspect for DOF-wide reasons (narrow intervals)
+    and no advice; each now names runs of a kind and the pool time."""
+    v, a, f = _signals()
+    names = ["inertia", "linear_damping", "bias"]
+    ev = FitEvidence(dof="surge", names=names, theta=np.array([20.0, 30.0, 0.0]),
+                     cov=np.diag([0.04, 0.09, 0.0001]), t_dof=10, units={"inertia": "kg", "linear_damping": "kg/s",
+                                                                          "bias": "N"},
+                     velocity=v, acceleration=a, force=f, h=0.05, residual_rho=0.9)
+    out = assess(ev, (0.05, 0.10))
+    assert out["verdict"] == "suspect" and any("residuals not white" in r for r in out["reasons"])
+    for name in names:
+        p = out["parameters"][name]
+        assert p["verdict"] == "suspect" and p["advice"]["runs"] >= 1, p
+        assert "min of pool time" in format_advice(name, p["advice"])

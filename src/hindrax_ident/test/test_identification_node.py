@@ -131,6 +131,9 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             assert handle.accepted
             running = lambda: any(s.phase == ManeuverStatus.PHASE_RUNNING for s in got["status"])  # noqa: E731
             wait_until(running, 300, spin, "surge run under way")  # wall time: slow under load
+            second = action.send_goal_async(RunIdentification.Goal(dofs=["heave"]))
+            wait_until(second.done, 10, spin, "second goal answer")
+            assert not second.result().accepted  # a campaign runs: refused, and the first goes on (below)
             t_run = sim.t_s
             wait_until(lambda: sim.t_s > t_run + 2.0, 30, spin, "two seconds of the run")
             # a publisher on another clock (a second graph on the system clock in this domain): its samples are

@@ -4,6 +4,7 @@ import io
 import sys
 import threading
 
+from hindrax_drivers.testing import wait_until
 from hindrax_ident import progress_run
 from hindrax_ident.progress_line import ProgressLine, Ticker
 from hindrax_ident.results_doc import duration_rows, record_duration
@@ -98,3 +99,12 @@ def test_progress_run_records_a_successful_build_in_the_durations_section(tmp_pa
     assert progress_run.main(["ros-install", "--results-doc", str(doc), "--record", "make failed", "--",
                               sys.executable, "-c", "raise SystemExit(1)"]) == 1
     assert "make failed" not in duration_rows(doc.read_text())
+
+
+def test_a_ticker_in_a_log_repeats_its_step_with_the_seconds_so_no_silence_is_long():
+    """Issue 74.6: a fit's log stayed silent 142 s; off a terminal the step now comes again every quiet_s."""
+    lines: list[str] = []
+    with Ticker(ProgressLine(lines.append, tty=False), "run: fitting", quiet_s=0.01):
+        wait_until(lambda: len(lines) >= 3, 30.0, message="the ticker's repeated lines")
+    assert lines[0] == "run: fitting"
+    assert all(line.startswith("run: fitting (") and line.endswith(" s)") for line in lines[1:3]), lines

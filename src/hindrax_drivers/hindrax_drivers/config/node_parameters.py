@@ -37,6 +37,7 @@ from __future__ import annotations
 import array
 import functools
 import hashlib
+import sys
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
@@ -50,7 +51,7 @@ from .sections import cross_checks
 
 __all__ = ["select_schema_keys", "concrete_keys", "validate_selection",
            "declare_vehicle_parameters", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
-           "check_whole_vehicle", "declare_node_parameter"]
+           "check_whole_vehicle", "declare_node_parameter", "params_files"]
 
 #: Name of the parameter naming a vehicle file to take defaults from ("" = the shipped file).
 CONFIG_FILE_PARAMETER = "config_file"
@@ -229,6 +230,12 @@ def declare_node_parameter(node: Any, name: str, spec: Spec, default: Any) -> An
     return coerced
 
 
+def params_files(argv: Sequence[str]) -> list[str]:
+    """The ``--params-file FILE`` paths of the ROS arguments in ``argv`` (after a ``--ros-args``), in order."""
+    ros = list(argv)[list(argv).index("--ros-args") + 1:] if "--ros-args" in argv else []
+    return [ros[i + 1] for i, word in enumerate(ros[:-1]) if word == "--params-file"]
+
+
 def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
                                on_change: Callable[[VehicleConfig], None] | None = None,
                                locked: Callable[[], str] | None = None) -> VehicleConfig:
@@ -271,7 +278,10 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         defaults = file_cfg.to_ros_parameters()
 
     source = config_file or (file_cfg.source if file_cfg else "")
-    src = f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else "")
+    # the file the values came from: the process's --params-file (a launch's or the command line's) over the defaults
+    given = ", ".join(params_files(sys.argv)) if not config_file else ""
+    src = f"parameters of {node.get_name()}" + (f" (from {given})" if given else
+                                                 f" (defaults from {source})" if source else "")
     check_whole_vehicle(vehicle_overrides(node), defaults, src)
     values: dict[str, Any] = {}
 

@@ -474,7 +474,9 @@ class GyroBias:
             message = (f"vehicle not still during the gyro-bias estimate (gyro std max "
                        f"{g_std.max():.2e} rad/s, limit {self.gyro_threshold:.2e}; accel std max "
                        f"{a_std.max():.2e} m/s^2, limit {self.accel_threshold:.2e}): "
-                       "no bias applied")
+                       "no bias applied; the rates keep the gyro's own offset (the identification's fit removes "
+                       "what is left against the attitude and heading); start the vehicle resting to measure it "
+                       "(on the virtual pool it drifts at start: expected)")
         self.estimating = False
         self.result = GyroBiasResult(bias, g_std, a_std, len(g), still, message)
         return self.result

@@ -96,13 +96,11 @@ class ControllerNode(VehicleNode):
         path = self.get_parameter("model_file").value if model_file is None else model_file
         if not isinstance(path, str):
             issue = ConfigIssue("model_file", path, "a path string or ''")
-            log.fatal(f"invalid configuration: {issue.line()}")
             raise ConfigError([issue], f"parameters of {self.get_name()}")
         try:
             self.model = load_model(path, self.config) if path else model_from_config(self.config)
         except ModelFileError as exc:  # never a silent fallback to the vehicle file
             issue = ConfigIssue("model_file", path, f"a readable identification.yaml of this vehicle ({exc})")
-            log.fatal(f"invalid configuration: {issue.line()}")
             raise ConfigError([issue], f"parameters of {self.get_name()}") from exc
         for note in self.model.notes:
             log.warn(note)

@@ -86,6 +86,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("pool", "rehearse"), "pool",
      "the README's pool day on a laptop: the live pool, the installed launch, the shells' env"),
     (("esc", "calibrate"), "esc", "PCA9685 oscillator (esc.oscillator_hz) from a scope reading"),
+    (("topic", "echo"), "topic", "print a topic's messages as YAML (ros2 topic echo, without the ros2 CLI)"),
 ]
 
 

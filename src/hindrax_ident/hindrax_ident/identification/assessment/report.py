@@ -6,7 +6,8 @@ Plots per DOF:
   tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
   smoothed velocity, the steady-window means of [Hindrax-Drag]'s method, and the fitted curve
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
-* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band and the
+* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band (where the RLS has
+  a noise estimate; the title says how many parameters have one) and the
   reported (offline) value.
 
 For a fit of bags of any topics (``hindrax ident fit``, :func:`write_fit_outputs`): per fitted DOF, the validation
@@ -120,11 +121,16 @@ def _rls_plot(r, path: Path) -> bool:
     sd = np.asarray(h["std"])
     n = th.shape[1]
     fig, axes = plt.subplots(n, 1, figsize=(6, 1.6 * n), sharex=True)
+    banded = 0  # parameters with a band drawn: the title says whether the promised band is there
     for i, name in enumerate(r.names):
         ax = axes[i]
         ax.plot(t, th[:, i], "C0", lw=1)
-        band = np.nan_to_num(1.96 * sd[:, i], nan=0.0)
-        ax.fill_between(t, th[:, i] - band, th[:, i] + band, color="C0", alpha=0.25)
+        band, known = 1.96 * sd[:, i], np.isfinite(sd[:, i])  # NaN before the RLS has a noise estimate
+        if known.any():
+            banded += 1
+            ax.fill_between(t, th[:, i] - band, th[:, i] + band, where=known, color="C0", alpha=0.3)
+            for edge in (th[:, i] - band, th[:, i] + band):  # a band narrower than the line stays visible
+                ax.plot(t, np.where(known, edge, np.nan), "C0", lw=0.5, ls=":")
         ax.axhline(r.values[name], color="C2", ls="--", lw=1, label="offline")
         tr = r.truth.get(name)
         if tr is not None:
@@ -135,7 +141,8 @@ def _rls_plot(r, path: Path) -> bool:
             span = max(hi - lo, 0.2 * abs(r.values[name]) + 1e-3)
             ax.set_ylim(min(lo, r.values[name]) - 0.5 * span, max(hi, r.values[name]) + 0.5 * span)
     axes[0].legend(fontsize=6)
-    axes[0].set_title(f"{r.dof}: RLS convergence (+-1.96 std)")
+    axes[0].set_title(f"{r.dof}: RLS convergence " + (f"(shaded: +-1.96 std, {banded} of {n} parameters)" if banded
+                                                      else "(no std yet: no band)"))
     axes[-1].set_xlabel("time in the DOF's manoeuvres (s)")
     _save(fig, path, dpi=80)
     return True
@@ -271,8 +278,12 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
     out.mkdir(parents=True, exist_ok=True)
     parts = [_head("Hindrax identification"), "<h1>Hindrax hydrodynamic identification</h1>"]
     prov = document.get("provenance", {})
-    parts.append("<p>" + "<br>".join(f"<b>{html.escape(str(k))}</b>: {html.escape(str(v))}" for k, v in prov.items())
-                 + "</p>")
+    # a nested value (the vehicle_parameters the fit used: 60-odd keys) folded as YAML, not a Python dict
+    parts.append("<p>" + "<br>".join(
+        f"<b>{html.escape(str(k))}</b>: " + (
+            f"<details><summary>{len(v)} values</summary><pre>"
+            f"{html.escape(yaml.safe_dump(v, sort_keys=False, default_flow_style=None))}</pre></details>"
+            if isinstance(v, (dict, list)) else html.escape(str(v))) for k, v in prov.items()) + "</p>")
     if campaign_note:
         parts.append(f"<p>{html.escape(campaign_note)}</p>")
     dofs = document["dofs"]

@@ -174,7 +174,7 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     with ``cv_nrmse_hold`` the model must beat holding the velocity
     (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
     :data:`~..fit.fit_core.NO_MODEL_VERDICT`; per parameter, on a bound or fold estimates spread by
-    more than 3 fit std. A parameter with a reason of its own gets ``advice`` (:func:`data_advice`).
+    more than 3 fit std. A suspect parameter (a reason of its own or of the DOF) gets ``advice`` (:func:`data_advice`).
 
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
     (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
@@ -315,7 +315,9 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
                 if std_fit[i] > 0 and spread > 3 * std_fit[i]:
                     e["reasons"].append(f"fold estimates spread {spread:.3g} > 3 x std {std_fit[i]:.3g}")
     for n, e in out.items():
-        if e["reasons"] and ev.h > 0:  # what data would fix it
+        # what data would fix it: a parameter suspect for a DOF-wide reason alone gets it too (issue 74.3: a pool
+        # day's seven suspect heave parameters named no run); its narrow interval gets a repetition (data_advice)
+        if (e["reasons"] or dof_reasons) and ev.h > 0:
             half = 0.5 * (e["ci95"][1] - e["ci95"][0])
             ref = (total / v_typ if n.startswith("linear") and v_typ > 0 else total if n == "bias" else None)
             e["advice"] = data_advice(ev.dof, n, e["value"], half, ev.velocity, ev.acceleration, ev.force, ev.h,

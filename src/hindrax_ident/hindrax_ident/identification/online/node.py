@@ -212,7 +212,6 @@ class IdentificationNode(VehicleNode):
         value = self.get_parameter(name).value
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
             issue = ConfigIssue(name, value, "a number > 0")
-            self.get_logger().fatal(f"invalid configuration: {issue.line()}")
             raise ConfigError([issue], f"parameters of {self.get_name()}")
         return float(value)
 

@@ -7,7 +7,8 @@ measures now; zero velocity over the bottom), waits until the controller's statu
 controller (``controller/enable``, std_srvs/SetBool). Without a target it calls ``controller/hold`` (hold depth and
 heading where the vehicle is). ``release`` disables the controller (zero wrench). The controller refuses while the
 ESC is not armed or an identification goal owns the wrench (docs/control.md §3); the refusal is printed and the
-exit code is 1.
+exit code is 1. After a hold it watches the controller's status ``--watch-s`` seconds (default 10) and prints what
+was held and its error over them (:func:`hold_result`).
 
 On the topside the names are the gateway's ``/<name>/controller/...`` (docs/architecture.md §8.2); on the vehicle
 they are the controller's own. The vehicle is the one named, or the only one on the domain
@@ -23,7 +24,7 @@ from typing import Any
 from .common import CommandError
 from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, wait_for, with_ros
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "run", "hold_result"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="hold this altitude above the floor (Ping1D range), m")
         parser.add_argument("--heading-deg", type=float, default=None, metavar="H",
                             help="hold this compass heading, deg clockwise from north (default: the heading now)")
+        parser.add_argument("--watch-s", type=float, default=10.0, metavar="S",
+                            help="then watch the hold this long and print what it held and its error, s "
+                                 "(default 10; 0: do not wait)")
 
 
 def _check(args: argparse.Namespace) -> None:
@@ -54,13 +58,11 @@ def _check(args: argparse.Namespace) -> None:
         raise CommandError(f"--altitude-m {args.altitude_m:g}: allowed > 0")
 
 
-def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Namespace) -> None:
-    """Publish the setpoint until the controller's status shows it (a topic: nothing else says it arrived)."""
-    from hindrax_msgs.msg import ControllerStatus, ControlSetpoint
+def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Namespace, statuses: list) -> None:
+    """Publish the setpoint until the controller's status (``statuses``, filled by a subscription) shows it (a
+    topic: nothing else says it arrived)."""
+    from hindrax_msgs.msg import ControlSetpoint
 
-    statuses: list = []
-    node.create_subscription(ControllerStatus, target.resolve("controller/status", "controller/status"),
-                             statuses.append, 10)
     pub = node.create_publisher(ControlSetpoint, target.resolve("controller/setpoint", "controller/setpoint"), 10)
     wait_for(executor, lambda: statuses and pub.get_subscription_count() > 0, args.timeout,
           f"{target.name}: no controller status")
@@ -91,11 +93,16 @@ def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Name
 
 
 def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple[str, bool, str]:
-    """Do ``hold`` or ``release`` on the vehicle found. Returns (vehicle name, success, the controller's message).
+    """Do ``hold`` or ``release`` on the vehicle found; after a hold, watch it ``args.watch_s`` (wall) and add
+    :func:`hold_result`'s line to the message. Returns (vehicle name, success, the controller's message).
     Raises :class:`CommandError` for no vehicle or no answer."""
+    from hindrax_msgs.msg import ControllerStatus
     from std_srvs.srv import SetBool, Trigger
 
     target = find_vehicle(node, executor, args.vehicle, args.discovery_timeout)
+    statuses: list = []
+    node.create_subscription(ControllerStatus, target.resolve("controller/status", "controller/status"),
+                             statuses.append, 10)
     enable = lambda on: target.service("controller/enable", "controller/enable", SetBool, data=on)  # noqa: E731
     if not args._hold:
         answer = call_service(node, executor, enable(False), args.timeout)
@@ -103,9 +110,51 @@ def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple
         hold = target.service("controller/hold", "controller/hold", Trigger)
         answer = call_service(node, executor, hold, args.timeout)
     else:
-        _send_setpoint(node, executor, target, args)
+        _send_setpoint(node, executor, target, args, statuses)
         answer = call_service(node, executor, enable(True), args.timeout)
-    return target.name, bool(answer.success), str(answer.message)
+    message = str(answer.message)
+    if args._hold and answer.success and args.watch_s > 0:
+        print(f"{target.name}: {message}; watching the hold for {args.watch_s:g} s ...", flush=True)
+        n = len(statuses)
+        deadline = time.monotonic() + args.watch_s
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        message = hold_result(statuses[n:], args.watch_s)
+    return target.name, bool(answer.success), message
+
+
+def hold_result(statuses: list, watch_s: float) -> str:
+    """One line of what the controller held over the statuses (hindrax_msgs/ControllerStatus) received while
+    watching for ``watch_s`` s: the depth or altitude setpoint (m), the mean measured value and the error (measured
+    - setpoint: mean, RMS, largest magnitude, m), and the heading's RMS error (deg); or why there is none (the
+    controller let go, no status arrived)."""
+    from hindrax_msgs.msg import ControlSetpoint
+
+    held = [s for s in statuses if s.enabled]
+    if not held:
+        last = statuses[-1].message if statuses else "no controller status arrived"
+        return f"not holding after {watch_s:g} s: {last}"
+    mode = held[-1].vertical_mode
+    what, get, want = {ControlSetpoint.VERTICAL_DEPTH: ("depth", "depth_m", "depth_setpoint_m"),
+                       ControlSetpoint.VERTICAL_ALTITUDE: ("altitude", "altitude_m", "altitude_setpoint_m")}.get(
+        mode, ("", "", ""))
+    parts = []
+    if what:
+        setpoint = getattr(held[-1], want)
+        err = [getattr(s, get) - getattr(s, want) for s in held if s.vertical_mode == mode]
+        err = [e for e in err if math.isfinite(e)]
+        if err:
+            mean, rms = sum(err) / len(err), math.sqrt(sum(e * e for e in err) / len(err))
+            parts.append(f"{what} {setpoint:.3f} m held: measured {setpoint + mean:.3f} m mean, error {mean:+.3f} m "
+                         f"mean, {rms:.3f} m RMS, {max(abs(e) for e in err):.3f} m largest")
+        else:
+            parts.append(f"{what} {setpoint:.3f} m: no measurement")
+    heading = [math.remainder(s.heading_rad - s.heading_setpoint_rad, math.tau) for s in held]
+    heading = [h for h in heading if math.isfinite(h)]
+    if heading:
+        parts.append(f"heading error {math.degrees(math.sqrt(sum(h * h for h in heading) / len(heading))):.1f} deg "
+                     "RMS")
+    return f"over the last {watch_s:g} s ({len(held)} statuses): " + "; ".join(parts or ["nothing held"])
 
 
 def run(args: argparse.Namespace) -> int:

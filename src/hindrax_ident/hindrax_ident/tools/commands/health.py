@@ -5,7 +5,8 @@ discovery) and exits 0 when it is ready, 1 with what is missing or failing other
 :mod:`hindrax_drivers.health`). What must be there comes from the launch file the vehicle runs, read as ``ros2
 launch`` reads it (:mod:`hindrax_drivers.launch_xml`; default ``hindrax_drivers/vehicle.launch.xml``, with the
 launch arguments given as ``NAME:=VALUE``, e.g. ``record:=true`` to require the recorder): every node in the graph,
-each node's ``/diagnostics`` status OK, and ``supervisor/status`` OK. It returns as soon as everything is seen OK.
+each node's ``/diagnostics`` status OK, ``supervisor/status`` OK, and no second ESC or supervisor on the domain
+(a second vehicle). It returns as soon as everything is seen OK.
 When no node of the vehicle is seen at all, one line says so and names the ROS domain and discovery it looked on.
 
 The operator's check before a dive, and the Docker image's HEALTHCHECK (``--quiet``: the verdict line only).
@@ -49,13 +50,15 @@ def _launch_path(spec: str):
 
 def collect(timeout_s: float, done=None):
     """Listen to the graph for up to ``timeout_s`` s (returning early once ``done(nodes, statuses, supervisor)``):
-    returns (node names, {status name: Seen}, Seen of supervisor/status or None)."""
+    returns (node names, {status name: Seen}, Seen of supervisor/status or None, the graph's
+    :class:`~hindrax_drivers.vehicle_graph.GraphView` at the end: node names with duplicates, heartbeat publishers)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from rclpy.executors import SingleThreadedExecutor
 
     from hindrax_drivers.conditions import ros_context
     from hindrax_drivers.health import SUPERVISOR_STATUS_TOPIC, Seen
+    from hindrax_drivers.vehicle_graph import graph_view
 
     def seen(st: DiagnosticStatus) -> Seen:
         level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
@@ -79,10 +82,25 @@ def collect(timeout_s: float, done=None):
                 names = {n for n, _ns in node.get_node_names_and_namespaces()} - {node.get_name()}
                 if done is not None and done(names, statuses, supervisor[-1] if supervisor else None):
                     break
+            view = graph_view(node)
         finally:
             ex.shutdown()
             node.destroy_node()
-    return names, statuses, (supervisor[-1] if supervisor else None)
+    return names, statuses, (supervisor[-1] if supervisor else None), view
+
+
+def second_vehicle(expected_nodes, view) -> str:
+    """The problem line when ``view`` (:func:`collect`) shows an ESC or supervisor beyond the one each of the
+    launch's ``expected_nodes`` (node names, no namespace) accounts for, e.g. ``"a second vehicle on this domain:
+    ESC /esc, supervisor /supervisor: ..."`` (:func:`hindrax_drivers.vehicle_graph.foreign_vehicle_processes`);
+    "" when there is none."""
+    from hindrax_drivers.vehicle_graph import HEARTBEAT_TOPICS, ROLE_NODES, GraphView, foreign_vehicle_processes
+
+    own = GraphView(tuple("/" + n for n in expected_nodes if n in ROLE_NODES),
+                    {"/" + t: ("/" + t.split("/")[0],) for t in HEARTBEAT_TOPICS if t.split("/")[0] in expected_nodes})
+    found = foreign_vehicle_processes(view, own)
+    return (f"a second vehicle on this domain: {', '.join(found)}: it commands the same thrusters and fills the "
+            "same bags; stop it (one vehicle per domain)") if found else ""
 
 
 def _where() -> str:
@@ -117,12 +135,16 @@ def run(args: argparse.Namespace) -> int:
     def ready(nodes, statuses, supervisor) -> bool:
         return assess(expect, nodes, statuses, supervisor, args.strict).ready
 
-    nodes, statuses, supervisor = collect(args.timeout, ready)
+    nodes, statuses, supervisor, view = collect(args.timeout, ready)
     if not ({n.rsplit("/", 1)[-1] for n in nodes} & set(expect.nodes)) and not statuses and supervisor is None:
         print(f"NOT READY: no node of {args.launch} seen on {_where()} within {args.timeout:g} s: is the vehicle "
               "running, on this domain? (from the topside: docs/deployment.md §6)")
         return 1
     report = assess(expect, nodes, statuses, supervisor, args.strict)
+    second = second_vehicle(expect.nodes, view)
+    if second:
+        report.problems.append(second)
+        report.ready = False
     for line in ([report.summary()] if args.quiet else report.lines()):
         print(line)
     return 0 if report.ready else 1

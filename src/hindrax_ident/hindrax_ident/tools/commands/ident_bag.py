@@ -45,11 +45,14 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
     """Identify a campaign bag (:func:`~..identification.assessment.pipeline.identify_bag`, the fit core's ``opts``:
     default its defaults) and write identification.yaml and the report in ``out``
     (:func:`~..identification.assessment.pipeline.write_campaign_outputs`); prints the DOFs without an estimate and
-    the bag's calibration, and the fit's progress while it runs (a minute or two for a whole campaign:
+    the bag's calibration (the steps' scales, then the joint ones control model uses), and the fit's progress while
+    it runs (a minute or two for a whole campaign:
     :class:`~..progress_line.Ticker`, the seconds on a terminal). ``args`` gives ``restoring_n_m_per_rad`` and
     ``restoring_std`` (the free decay's stiffness when the bag has no inclining step; absent: the vehicle file's).
     Returns (record, {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed ``command``)
     for an unusable bag or when no DOF is identified."""
+    import yaml
+
     from hindrax_drivers.recording.reader import BagError
 
     from ...identification.assessment import pipeline
@@ -70,11 +73,16 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
         raise CommandError(f"{command}: no DOF could be identified")
     out.mkdir(parents=True, exist_ok=True)
     if record.calibration:
-        print("calibration from the bag (identification/calibration): " + ", ".join(
+        print("calibration from the bag (identification/calibration), the steps' measured thrust scales: " + ", ".join(
             f"{k} {v['value']:.4f} +- {v['std']:.4f}" for k, v in record.calibration.items()))
     path = pipeline.write_campaign_outputs(out, record, idents, cfg, bag, lacking,
                                            getattr(args, "restoring_n_m_per_rad", None),
                                            getattr(args, "restoring_std", 0.0))
+    scales = (yaml.safe_load(Path(path).read_text()).get("joint") or {}).get("scales") or {}
+    if scales:  # issue 74.8: the scale control model uses differs from the step's; both are named
+        print("thrust scales estimated jointly with the fits (identification.yaml joint.scales, what control model "
+              "divides by): " + ", ".join(f"{g} {e['value']:.4f} +- {e['std']:.4f} ({', '.join(e.get('dofs', []))})"
+                                          for g, e in scales.items()))
     return record, idents, path
 
 

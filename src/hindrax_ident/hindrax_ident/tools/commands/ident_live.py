@@ -29,7 +29,8 @@ from typing import Any, Callable
 from .common import CommandError, choices
 from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, wait_for, with_ros
 
-__all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign", "call_continue"]
+__all__ = ["add_arguments", "run", "format_estimate", "format_feedback", "format_status", "start_campaign",
+           "call_continue"]
 
 _PHASE_NAMES = {0: "idle", 1: "positioning", 2: "running", 3: "returning", 4: "done", 5: "aborted"}
 _ROTATIONS = ("roll", "pitch", "yaw")
@@ -115,13 +116,16 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
                    cancel_requested: Callable[[], bool] = lambda: False,
                    give_up: Callable[[], bool] = lambda: False, calibrate: list[str] | None = None,
                    calibration_only: bool = False, action_name: str = "run_identification",
-                   sign: Callable[[Any], Any] = lambda goal: goal) -> tuple[bool, str]:
+                   sign: Callable[[Any], Any] = lambda goal: goal,
+                   status_topic: str = "identification/status") -> tuple[bool, str]:
     """Send one goal from ``node`` (spun by ``executor``), print its feedback (an operator prompt once, when it
     appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
     (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
     ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside); ``sign``:
-    signs the goal for the gateway (:meth:`~hindrax_ident.tools.commands.vehicle.Target.sign`).
-    Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
+    signs the goal for the gateway (:meth:`~hindrax_ident.tools.commands.vehicle.Target.sign`); ``status_topic``:
+    the node's ManeuverStatus (``/<vehicle>/identification/status`` on the topside). Returns (success, message).
+    Raises :class:`CommandError` when no server answers, the goal is rejected, or a campaign is already running
+    (read on ``status_topic`` before the goal is sent: the goal is then not sent)."""
     from rclpy.action import ActionClient
 
     from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
@@ -132,8 +136,10 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     client = ActionClient(node, RunIdentification, action_name)
     goals = GoalSender(node, client, action_name)
     spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
+    running = _running_campaign(node, executor, status_topic)
     wait_for(executor, client.server_is_ready, server_timeout_s, "no run_identification server",
              _NO_STACK)
+    running()  # a campaign under way: its line, and no goal sent (it would wait behind the running one)
     goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
                                   calibrate=list(calibrate or []), calibration_only=bool(calibration_only))
     goal = sign(goal)
@@ -154,10 +160,12 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     try:
         handle = goals.send(goal, spin, max(server_timeout_s, 5.0), feedback_callback=on_feedback)
     except GoalNotAnswered as exc:
+        running()
         raise CommandError(f"run_identification: {exc}; the node's status: hindrax ident status") from None
     if not handle.accepted:
-        raise CommandError("goal rejected: a campaign is already running or the goal is invalid "
-                           "(see the identification node's log)")
+        running()
+        raise CommandError("goal rejected: invalid, or the last campaign is still ending (see the identification "
+                           "node's log)")
     what = "calibration only" if calibration_only else (', '.join(dofs) or 'all DOFs')
     cal = f" after calibration {', '.join(calibrate)}" if (calibrate and not calibration_only) else ""
     print_line(f"campaign started: {what}{cal}; Ctrl-C cancels")
@@ -172,10 +180,46 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
             return False, "stopped waiting for the end of the cancelled goal"
         spin()
     res = result.result
+    if res.estimates:
+        print_line("online estimates (RLS), not the verdict (hindrax ident fit on the bag gives it):")
     for e in res.estimates:
-        values = ", ".join(f"{n} {v:.4g}" for n, v in zip(e.parameter_names, e.values))
-        print_line(f"  {e.dof}: {values}")
+        print_line(f"  {format_estimate(e)}")
     return bool(res.success), str(res.message)
+
+
+def format_estimate(e: Any) -> str:
+    """One line of a HydroEstimate: the DOF, then each parameter's name, value and unit with its 95 % interval
+    (value +- 1.96 std; "no interval" where the node publishes std -1: not converged or not trusted), e.g.
+    ``heave: inertia 56.6 kg [55.1, 58.1], ...``."""
+    def one(name: str, value: float, unit: str, std: float | None) -> str:
+        band = (f"[{value - 1.96 * std:.4g}, {value + 1.96 * std:.4g}]" if std is not None and std >= 0.0
+                else "(no interval)")
+        return f"{name} {value:.4g} {unit} {band}"
+    units, stds = list(e.parameter_units), list(e.std)
+    return f"{e.dof}: " + ", ".join(
+        one(n, v, units[i] if i < len(units) else "", stds[i] if i < len(stds) else None)
+        for i, (n, v) in enumerate(zip(e.parameter_names, e.values)))
+
+
+def _running_campaign(node: Any, executor: Any, topic: str, wait_s: float = 3.0) -> Callable[[], None]:
+    """Listen to ``topic`` (identification/status, ManeuverStatus); the returned check spins up to ``wait_s`` (wall)
+    for a message and raises :class:`CommandError` ``"a campaign is already running (<status>) ..."`` when the last
+    one shows a goal under way (positioning, running, returning). No message: no objection (the goal's own answer
+    says more)."""
+    from hindrax_msgs.msg import ManeuverStatus
+
+    got: list = []
+    node.create_subscription(ManeuverStatus, topic, got.append, 10)
+    under_way = (ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHASE_RUNNING, ManeuverStatus.PHASE_RETURNING)
+
+    def check() -> None:
+        deadline = time.monotonic() + wait_s
+        while not got and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        if got and int(got[-1].phase) in under_way:
+            raise CommandError(f"a campaign is already running ({format_status(got[-1])}); not started: it goes "
+                               "on undisturbed (hindrax ident status; Ctrl-C in its own terminal cancels it)")
+    return check
 
 
 def _on_vehicle(args: argparse.Namespace, body: Callable[[Any, Any, Target], Any]) -> Any:
@@ -195,7 +239,8 @@ def _start(args: argparse.Namespace) -> int:
             cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2,
             calibrate=calibrate, calibration_only=bool(args.calibration_only),
             action_name=target.resolve("run_identification", "run_identification"),
-            sign=lambda goal: target.sign("run_identification", goal)))
+            sign=lambda goal: target.sign("run_identification", goal),
+            status_topic=target.resolve("identification/status", "identification/status")))
     finally:
         signal.signal(signal.SIGINT, previous)
     print(f"result: {'complete' if ok else 'not complete'}: {message}", flush=True)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ... import results_doc
 from .common import (CommandError, WallProgress, add_config_argument, choices, load_vehicle,
-                     result_dir)
+                     remove_if_empty, result_dir)
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
 
@@ -245,6 +245,7 @@ def run_graph(args: argparse.Namespace) -> int:
                                          doc, rec, cfg, args.restoring_n_m_per_rad, args.restoring_std,
                                          progress))
     except ForeignVehicleError as exc:
+        remove_if_empty(out)  # refused before the graph started: no empty run folder left behind
         raise CommandError(f"hindrax run: {exc}") from exc
     return _finish(args, progress, out, outcome.identifications, outcome.errors, outcome.success,
                    "through the node graph", f"bag {outcome.bag_dir}; ")

@@ -1,0 +1,51 @@
+"""``hindrax topic echo``: the README's read-out of the supervisor's status where the ros2 CLI is absent (issue
+74.5): the topic's type found on the graph, the message printed as YAML with its fields."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.testing import child_env, ros_context, wait_until
+
+pytestmark = pytest.mark.ros
+
+
+def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
+    import yaml
+    from domain_coordinator import domain_id
+
+    hindrax = str(Path(sys.executable).with_name("hindrax"))
+    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
+        node = rclpy.create_node("supervisor_stand_in", context=ctx)
+        pub = node.create_publisher(DiagnosticStatus, "/rov/supervisor/status", 10)
+        node.create_timer(0.1, lambda: pub.publish(DiagnosticStatus(level=b"\x02", name="supervisor", values=[
+            KeyValue(key="disarm_cause", value="no valid DVL velocity")])))
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        env = child_env(ROS_DOMAIN_ID=str(fresh))
+        runs = [subprocess.Popen([hindrax, "topic", "echo", topic, "--count", "1", "--timeout", "30"], env=env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                for topic in ("/rov/supervisor/status", "/rov/no_such_topic")]
+        try:
+            wait_until(lambda: all(p.poll() is not None for p in runs), 120, lambda: ex.spin_once(timeout_sec=0.05),
+                       "hindrax topic echo")
+        finally:
+            for p in runs:
+                if p.poll() is None:
+                    p.kill()
+            ex.shutdown()
+            node.destroy_node()
+    (ok, missing) = [(p.returncode, p.stdout.read(), p.stderr.read()) for p in runs]
+    assert ok[0] == 0, ok
+    text, end = ok[1].rsplit("---", 1)
+    assert end.strip() == ""
+    assert yaml.safe_load(text) == {"level": 2, "name": "supervisor", "message": "", "hardware_id": "",
+                                    "values": [{"key": "disarm_cause", "value": "no valid DVL velocity"}]}
+    assert missing[0] == 1 and missing[2] == ("no topic /rov/no_such_topic within 30 s (is it spelled as the graph "
+                                              "has it?)\n"), missing
