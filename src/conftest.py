@@ -2,7 +2,7 @@
 
 ``synthetic_runs``: the pieces the identification tests build their data from, each from its definition and none
 from the code under test: a pilot's held force steps, the exact response of a first-order model to a force held
-over each tick, and a record chunk (:class:`~hindrax_ident.identification.fit.fit_core.Chunk`) of that velocity measured
+over each tick, and a record chunk (:class:`~hindrax_fit.fit.fit_core.Chunk`) of that velocity measured
 at half the tick rate with white noise and smoothed (Savitzky-Golay) as the readers smooth it.
 """
 from __future__ import annotations
@@ -41,7 +41,7 @@ def _measured_chunk(rng: np.random.Generator, v: np.ndarray, force: np.ndarray, 
     measurements interpolated onto the ticks. ``chunk``: further :class:`~.fit_core.Chunk` fields (group, t0, ...)."""
     from scipy import signal
 
-    from hindrax_ident.identification.fit import fit_core
+    from hindrax_fit.fit import fit_core
 
     n = v.size
     meas = np.arange(0, n, 2)
@@ -102,9 +102,9 @@ def ballast_goal_on_the_graph(tmp_path_factory) -> SimpleNamespace:
 
     from hindrax_drivers.config import default_config_path
     from hindrax_drivers.testing import ros_context, wait_until
-    from hindrax_ident.bringup import build_graph
-    from hindrax_ident.graph_campaign import VirtualOperator
-    from hindrax_ident.identification.online import executive
+    from hindrax_sim.graph.bringup import build_graph
+    from hindrax_sim.graph.graph_campaign import VirtualOperator
+    from hindrax_onboard.identification.online import executive
     from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.msg import ManeuverStatus
     from hindrax_msgs.srv import SetArmed

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from hindrax_drivers.pca9685 import protocol as pca9685
 from hindrax_drivers.transport.i2c import I2CDevice
-from hindrax_ident.tools.benchmarks import safety
+from hindrax_tools.benchmarks import safety
 
 ROOT = Path(__file__).resolve().parents[1]
 ARCH = (ROOT / "docs" / "architecture.md").read_text()

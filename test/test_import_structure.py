@@ -45,13 +45,13 @@ PACKAGES = {"hindrax_drivers": ROOT / "src" / "hindrax_drivers" / "hindrax_drive
 #: Modules allowed to import node modules: the graph builders (the whole stack in one process; the driver nodes
 #: on replayed device data) and the entry points that start nodes (``hindrax bag play|record``).
 ENTRY_POINTS = frozenset({
-    "hindrax_ident.bringup",
+    "hindrax_sim.graph.bringup",
     "hindrax_drivers.recording.replay_devices",
-    "hindrax_ident.tools.commands.bag.play",
-    "hindrax_ident.tools.commands.bag.record",
+    "hindrax_tools.commands.bag.play",
+    "hindrax_tools.commands.bag.record",
 })
 #: Packages whose every module is an entry point: the ``make bench`` benchmarks start the nodes they measure.
-ENTRY_POINT_PACKAGES = ("hindrax_ident.tools.benchmarks",)
+ENTRY_POINT_PACKAGES = ("hindrax_tools.benchmarks",)
 
 
 def is_entry_point(name: str) -> bool:
@@ -190,10 +190,10 @@ def graph() -> dict[str, set[str]]:
 
 def test_graph_covers_both_packages(graph):
     """Sanity: the graph holds the known modules and edges (a broken parser would pass the rules vacuously)."""
-    assert "hindrax_ident.identification.bag_input.from_bag" in graph
+    assert "hindrax_fit.bag_input.from_bag" in graph
     assert "hindrax_drivers.recording.writer" in graph
     # function-local import
-    assert "hindrax_ident.bringup" in graph["hindrax_ident.tools.commands.bringup"]
+    assert "hindrax_sim.graph.bringup" in graph["hindrax_tools.commands.bringup"]
     assert "hindrax_drivers.recording.recover" in graph["hindrax_drivers.recording.reader"]  # from . import x
     assert len(graph) > 80
 
@@ -235,14 +235,14 @@ def test_entry_points_exist(graph):
 #: closed-loop evaluations); the graph builders above every node they compose.
 LAYERS = (
     ("hindrax_drivers", 0),
-    ("hindrax_ident.estimation", 1),
-    ("hindrax_ident.vehicle", 2),
-    ("hindrax_ident.control", 3),
-    ("hindrax_ident.identification", 4),
-    ("hindrax_ident.sim", 5),
-    ("hindrax_ident.ordered_executor", 6),  # the graph builders' executor
-    ("hindrax_ident.bringup", 6),
-    ("hindrax_ident.composition", 6),
+    ("hindrax_onboard.estimation", 1),
+    ("hindrax_onboard.vehicle", 2),
+    ("hindrax_onboard.control", 3),
+    ("hindrax_onboard.identification", 4),
+    ("hindrax_sim", 5),
+    ("hindrax_sim.graph.ordered_executor", 6),  # the graph builders' executor
+    ("hindrax_sim.graph.bringup", 6),
+    ("hindrax_onboard.composition", 6),
 )
 TOP_LAYER = 7
 
@@ -267,11 +267,11 @@ def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
 
 
 def test_the_layer_checker_sees_an_upward_import():
-    graph = {"hindrax_ident.vehicle.x": {"hindrax_ident.sim", "hindrax_ident.sim.model"},
-             "hindrax_ident.sim.model": {"hindrax_ident.vehicle.x", "hindrax_drivers.frames"},
+    graph = {"hindrax_onboard.vehicle.x": {"hindrax_sim", "hindrax_sim.model"},
+             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.frames"},
              "hindrax_drivers.frames": set()}
-    assert upward_imports(graph) == {("hindrax_ident.vehicle.x", "hindrax_ident.sim.model")}
-    assert layer_of("hindrax_ident.tools.commands.run") == TOP_LAYER
+    assert upward_imports(graph) == {("hindrax_onboard.vehicle.x", "hindrax_sim.model")}
+    assert layer_of("hindrax_tools.commands.run") == TOP_LAYER
     assert layer_of("hindrax_drivers.frames") == 0
     assert [layer_of(f"hindrax_ident.{m}") for m in ("vehicle.state", "control.node", "identification.online.node",
                                                      "sim.campaign", "bringup", "graph_campaign")] == [2, 3, 4, 5, 6, 7]
@@ -279,7 +279,7 @@ def test_the_layer_checker_sees_an_upward_import():
 
 #: The tools room: what engineers run beside the vehicle (``hindrax``, ``make bench``), never what
 #it runs.
-TOOLS = "hindrax_ident.tools"
+TOOLS = "hindrax_tools"
 
 
 def imports_of_tools(graph: dict[str, set[str]]) -> list[str]:
@@ -293,25 +293,25 @@ def imports_of_tools(graph: dict[str, set[str]]) -> list[str]:
 
 def test_nothing_outside_the_tools_room_imports_it(graph):
     assert f"{TOOLS}.commands.run" in graph and f"{TOOLS}.benchmarks.stack" in graph  # not vacuous
-    seen = imports_of_tools({"hindrax_ident.sim.x": {f"{TOOLS}.cli"},
+    seen = imports_of_tools({"hindrax_sim.x": {f"{TOOLS}.cli"},
                              f"{TOOLS}.cli": {f"{TOOLS}.bench"}})
-    assert seen == [f"hindrax_ident.sim.x -> {TOOLS}.cli"]
+    assert seen == [f"hindrax_sim.x -> {TOOLS}.cli"]
     assert imports_of_tools(graph) == []
 
 
 def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
     # the order is not vacuous: identification holds with the controller's law, the simulator runs the campaign
-    assert "hindrax_ident.control.maneuvers" in graph["hindrax_ident.identification.online.steps.context"]
-    assert "hindrax_ident.identification.online.executive" in graph["hindrax_ident.sim.campaign"]
+    assert "hindrax_onboard.control.maneuvers" in graph["hindrax_onboard.identification.online.steps.context"]
+    assert "hindrax_onboard.identification.online.executive" in graph["hindrax_sim.campaign"]
     up = sorted(f"{a} -> {b}" for a, b in upward_imports(graph))
     assert not up, "imports from a lower layer to a higher one (drivers < estimation < vehicle < control < " \
                    "identification < sim < bringup < commands):\n" + "\n".join(up)
-    assert all(layer_of(m) <= layer_of("hindrax_ident.vehicle")
-               for m in graph.get("hindrax_ident.vehicle.rigid_body", set()) if m in graph)
+    assert all(layer_of(m) <= layer_of("hindrax_onboard.vehicle")
+               for m in graph.get("hindrax_onboard.vehicle.rigid_body", set()) if m in graph)
 
 
 # ------------------------------------------------------------------------------------------------ identification rooms
-IDENT = "hindrax_ident.identification"
+IDENT = "hindrax_onboard.identification"
 #: The rooms of the identification package, lowest first: a module imports its own room and the rooms below it. The
 #: fit core defines the per-DOF record (``fit_core.DofRecord``, ``Chunk``) that the bag reader returns; the
 #: assessment (verdicts, identification.yaml, report, the pipeline) reads, fits and writes.
@@ -408,16 +408,16 @@ def pipeline_violations(graph: dict[str, set[str]]) -> list[str]:
 
 def test_the_pipeline_checker_sees_a_reader_or_an_adapter_used_elsewhere():
     graph = {f"{IDENT}.fit.fit_any": {BAG_READER},
-             "hindrax_ident.tools.commands.ident_fit": {
+             "hindrax_tools.commands.ident_fit": {
                  f"{IDENT}.bag_input.any_topics", f"{IDENT}.fit.fit_any",
                  f"{IDENT}.assessment.pipeline", f"{IDENT}.fit.fit_core"},
              f"{IDENT}.bag_input.from_bag": {BAG_READER}}
     assert pipeline_violations(graph) == [
         f"{IDENT}.fit.fit_any -> {BAG_READER} (only the bag input room reads bags)",
-        f"hindrax_ident.tools.commands.ident_fit -> {IDENT}.bag_input.any_topics "
+        f"hindrax_tools.commands.ident_fit -> {IDENT}.bag_input.any_topics "
         "(outside identification: use the "
         f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)",
-        f"hindrax_ident.tools.commands.ident_fit -> {IDENT}.fit.fit_any "
+        f"hindrax_tools.commands.ident_fit -> {IDENT}.fit.fit_any "
         "(outside identification: use the "
         f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)"]
 
@@ -425,7 +425,7 @@ def test_the_pipeline_checker_sees_a_reader_or_an_adapter_used_elsewhere():
 def test_one_pipeline_reads_bags_and_writes_identification(graph):
     """Only the bag input room reads bags; commands, the simulator and the graph runs go through the pipeline."""
     assert BAG_READER in graph[f"{IDENT}.bag_input.any_topics"]  # the rule is not vacuous
-    assert f"{IDENT}.assessment.pipeline" in graph["hindrax_ident.tools.commands.ident_fit"]
+    assert f"{IDENT}.assessment.pipeline" in graph["hindrax_tools.commands.ident_fit"]
     assert all(m in graph for m in PIPELINE_FACES | PIPELINE_ONLY)
     assert pipeline_violations(graph) == []
 
@@ -434,10 +434,10 @@ def test_one_pipeline_reads_bags_and_writes_identification(graph):
 #: name -> the one module (path under src/) that defines it.
 DEFINED_ONCE = {
     "wrap_angle": "hindrax_drivers/hindrax_drivers/frames.py",
-    "ThrustLag": "hindrax_ident/hindrax_ident/vehicle/thrust_lag.py",
+    "ThrustLag": "hindrax_onboard/hindrax_onboard/vehicle/thrust_lag.py",
     "ThrustCurve": "hindrax_drivers/hindrax_drivers/allocation/thrust_curve.py",
-    "rigid_body_mass_matrix": "hindrax_ident/hindrax_ident/vehicle/rigid_body.py",
-    "skew": "hindrax_ident/hindrax_ident/vehicle/rigid_body.py",
+    "rigid_body_mass_matrix": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
+    "skew": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
 }
 #: Other names the same things had; none may be defined anywhere.
 FORMER_NAMES = ("wrap", "_wrap", "_wrap_angle", "angle_wrap", "LaggedThrust", "_lagged", "lag_factor", "_skew")

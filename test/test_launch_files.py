@@ -186,7 +186,7 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
                             {"record": "true", "output_dir": "/ws/runs"})
     assert ("hindrax_drivers", "recorder_node") in recorded
     pool = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages)
-    # the pool test records in the identification's process (hindrax_ident.composition), never twice
+    # the pool test records in the identification's process (hindrax_onboard.composition), never twice
     assert ("hindrax_drivers", "recorder_node") not in pool and ("hindrax_ident", "ident_record_node") in pool
     assert IDENT_GROUPS["ident_record_node"] == ("identification", "controller", "recorder")
     unrecorded = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"record": "false"})
@@ -195,7 +195,7 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
     live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
-    # the pool test runs the identification node and the controller in one process (hindrax_ident.composition);
+    # the pool test runs the identification node and the controller in one process (hindrax_onboard.composition);
     # the controller is optional (off by default) in the vehicle, alone there
     assert IDENT_GROUPS["ident_control_node"] == ("identification", "controller")
     assert ("hindrax_ident", "controller_node") not in vehicle
@@ -325,7 +325,7 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
 def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):
     """docs/deployment.md, the "Running on the Pi" steps: each `ros2 launch PKG FILE [name:=value]` names an installed
     launch file and arguments it declares; each `hindrax <command>` is a registered command."""
-    from hindrax_ident.tools.cli import COMMANDS
+    from hindrax_tools.cli import COMMANDS
 
     text = (REPO / "docs" / "deployment.md").read_text()
     launches = re.findall(r"ros2 launch (\w+) ([\w.]+\.launch\.xml)((?: \w+:=[^\s`]*)*)", text)

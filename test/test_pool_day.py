@@ -38,7 +38,7 @@ from hindrax_drivers.emulated_devices import EmulatedDevices
 from hindrax_drivers.launch_xml import read_launch
 from hindrax_drivers.process_runner import ProcessRunner
 from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
+from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(1200)]
@@ -302,9 +302,9 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
 
     from diagnostic_msgs.msg import DiagnosticStatus
     from hindrax_drivers.testing import child_env
-    from hindrax_ident.graph_campaign import parse_prompt
-    from hindrax_ident.sim.live_pool import LivePool
-    from hindrax_ident.sim.truth import load_truth
+    from hindrax_sim.graph.graph_campaign import parse_prompt
+    from hindrax_sim.live_pool import LivePool
+    from hindrax_sim.truth import load_truth
     from hindrax_msgs.msg import ThrusterPwm
 
     install = colcon_install

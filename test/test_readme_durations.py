@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_ident.results_doc import duration_rows
+from hindrax_tools.results_doc import duration_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 

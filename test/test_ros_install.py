@@ -68,7 +68,7 @@ def test_every_node_and_hindrax_are_installed(install):
     print("installed executables:", " ".join(installed))
     # the installed package is the one imported, not the repository's
     r = subprocess.run(["python3", "-c", "import hindrax_drivers, hindrax_ident; print(hindrax_drivers.__file__); "
-                        "print(hindrax_ident.__file__)"], env=env, capture_output=True, text=True, timeout=60)
+                        "print(hindrax_onboard.__file__)"], env=env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and all(line.startswith(str(inst)) for line in r.stdout.split()), r.stdout + r.stderr
 
 
@@ -196,7 +196,7 @@ def test_truth_files_are_installed_and_the_installed_simulator_runs(install, tmp
     # a vehicle file mounted elsewhere (the image's HINDRAX_CONFIG): the simulator still finds the installed truth
     mounted = tmp_path / "mounted.yaml"
     shutil.copy2(inst / "share" / "hindrax_drivers" / "config" / "hindrax.yaml", mounted)
-    r = subprocess.run(["python3", "-c", "from hindrax_ident.sim.truth import truth_dir, default_truth_path; "
+    r = subprocess.run(["python3", "-c", "from hindrax_sim.truth import truth_dir, default_truth_path; "
                         "print(truth_dir()); print(default_truth_path().is_file())"],
                        env=dict(env, HINDRAX_CONFIG=str(mounted)), cwd=tmp_path, capture_output=True, text=True,
                        timeout=60)

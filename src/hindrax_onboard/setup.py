@@ -43,12 +43,12 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "hindrax = hindrax_ident.tools.cli:main",
-            "identification_node = hindrax_ident.identification.online.node:main",
-            "simulator_node = hindrax_ident.sim.node:main",
-            "controller_node = hindrax_ident.control.node:main",
-            "ident_control_node = hindrax_ident.composition:ident_control_main",
-            "ident_record_node = hindrax_ident.composition:ident_record_main",
+            "hindrax = hindrax_tools.cli:main",
+            "identification_node = hindrax_onboard.identification.online.node:main",
+            "simulator_node = hindrax_sim.node:main",
+            "controller_node = hindrax_onboard.control.node:main",
+            "ident_control_node = hindrax_onboard.composition:ident_control_main",
+            "ident_record_node = hindrax_onboard.composition:ident_record_main",
         ],
     },
 )

@@ -22,7 +22,7 @@ Groups (:data:`GROUPS`):
     callback inside the process, as from any other publisher. The ESC node is built last and so
     closed first on exit: it writes neutral before anything else shuts down.
 ``ident_control_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
-    the identification node and the controller, both non-safety (:mod:`hindrax_ident.composition`
+    the identification node and the controller, both non-safety (:mod:`hindrax_onboard.composition`
     builds them; this package names them only).
 ``ident_record_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
     the same two and the recorder: the pool test's layout with recording on.
@@ -54,7 +54,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "actuation_node": ("thrust_allocation", "esc"),
 }
 
-#: hindrax_ident's composed processes: console script -> its nodes (the classes: hindrax_ident.composition; this
+#: hindrax_ident's composed processes: console script -> its nodes (the classes: hindrax_onboard.composition; this
 #: package imports nothing of hindrax_ident, it only names the nodes for the launch-file readers)
 IDENT_GROUPS: dict[str, tuple[str, ...]] = {
     "ident_control_node": ("identification", "controller"),

@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hindrax_ident.identification.fit import fit_core
+from hindrax_fit.fit import fit_core
 
 H, N, M6, D = 0.05, 1600, 3.0, 2.7
 TRUE = np.array([41.0, 53.0, 38.0, np.nan, np.nan, M6])

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hindrax_ident.identification.fit import fit_core
+from hindrax_fit.fit import fit_core
 
 H = 0.05
 
@@ -45,8 +45,8 @@ def test_predict_and_cross_validation_start_each_segment_from_the_same_smoothed_
 
 
 def test_moving_only_and_all_segment_fits_are_both_reported(synthetic_runs):
-    from hindrax_ident.identification.assessment.results import build_document
-    from hindrax_ident.identification.fit.fit_any import DofFit, FitResult
+    from hindrax_fit.assessment.results import build_document
+    from hindrax_fit.fit.fit_any import DofFit, FitResult
 
     rec = _velocity_record(synthetic_runs)
     res = fit_core.identify_dof(rec, fit_core.CoreOptions(select=False, terms=fit_core.Terms("linear")))

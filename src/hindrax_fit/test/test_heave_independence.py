@@ -4,7 +4,7 @@ A measured position's output-error residual is the double integral of every forc
 synthetic heave record whose vehicle also feels an unrecorded force of 1 N (Ornstein-Uhlenbeck, 1 s correlation
 time; the README's pool day on the wall clock leaves such a misfit, lag-1 autocorrelation 0.86) the right model's
 consecutive depth residuals are correlated far above the whiteness threshold, yet their cross-correlation with the
-input stays inside its 99 % bound (:func:`~hindrax_ident.identification.fit.fit_core.input_correlation`,
+input stays inside its 99 % bound (:func:`~hindrax_fit.fit.fit_core.input_correlation`,
 [Ljung1999] §16.6) and the verdict trusts it.
 On the same data a model without quadratic damping, and the right model with a 30 % wrong inertia, leave residuals
 that follow the force: the verdict flags them.
@@ -16,8 +16,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hindrax_ident.identification.assessment import verdicts
-from hindrax_ident.identification.fit import fit_core
+from hindrax_fit.assessment import verdicts
+from hindrax_fit.fit import fit_core
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from hindrax_ident.identification.assessment.verdicts import FitEvidence, assess, data_advice, format_advice
+from hindrax_fit.assessment.verdicts import FitEvidence, assess, data_advice, format_advice
 
 POOL_DAY_S = 8 * 3600.0
 

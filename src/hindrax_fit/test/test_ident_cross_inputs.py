@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hindrax_ident.identification.fit import fit_core
+from hindrax_fit.fit import fit_core
 
 
 def test_another_dofs_force_is_chosen_when_the_allocation_couples_it(synthetic_runs):

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.assessment.results import build_document
-from hindrax_ident.identification.fit.fit_any import DofFit, FitResult
+from hindrax_fit.fit import fit_core
+from hindrax_fit.assessment.results import build_document
+from hindrax_fit.fit.fit_any import DofFit, FitResult
 
 BIASES = (2.0, -1.5, 0.5)
 

@@ -20,9 +20,9 @@ import pytest
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.assessment import pipeline, results
-from hindrax_ident.identification.bag_input import any_topics
-from hindrax_ident.identification.fit.dof_model import truth_parameters
+from hindrax_fit.assessment import pipeline, results
+from hindrax_fit.bag_input import any_topics
+from hindrax_onboard.identification.model.dof_model import truth_parameters
 
 T0_NS = 1_000_000_000_000
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from hindrax_ident.identification.fit import fit_core
+from hindrax_fit.fit import fit_core
 
 H = 0.05
 DELAY_S, LAG1_S, LAG2_S = 0.25, 0.04, 0.012

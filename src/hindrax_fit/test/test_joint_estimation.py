@@ -1,5 +1,5 @@
 """The thrust scales per thruster group and rotation direction
-and the empirical priors estimated jointly with the fits (:func:`hindrax_ident.identification.fit.calibration.
+and the empirical priors estimated jointly with the fits (:func:`hindrax_fit.fit.calibration.
 joint_estimate`), checked against closed forms.
 
 With the fit of phi = theta / sigma(s) (sigma the shares-weighted scale of a parameter) and Gaussian priors, the
@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.fit.calibration import joint_estimate, scale_prior_stds
-from hindrax_ident.identification.fit.dof_model import parameter_names, rigid_inertia
-from hindrax_ident.identification.assessment.results import build_results
-from hindrax_ident.identification.fit.posterior import prior_entries
-from hindrax_ident.identification.assessment.verdicts import apply_verdicts
+from hindrax_fit.fit.calibration import joint_estimate, scale_prior_stds
+from hindrax_onboard.identification.model.dof_model import parameter_names, rigid_inertia
+from hindrax_fit.assessment.results import build_results
+from hindrax_onboard.identification.model.posterior import prior_entries
+from hindrax_fit.assessment.verdicts import apply_verdicts
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -149,8 +149,8 @@ def test_sensitivities_are_measured_by_refits_and_carried_into_the_intervals(cfg
     from scipy import signal
 
     from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
-    from hindrax_ident.identification.fit.calibration import attach_thrust_sensitivities
-    from hindrax_ident.identification.bag_input.campaign_record import CampaignRecord
+    from hindrax_fit.fit.calibration import attach_thrust_sensitivities
+    from hindrax_onboard.identification.model.campaign_record import CampaignRecord
 
     rng = np.random.default_rng(3)
     n, dt, tau = 600, 0.02, float(cfg.thrusters.time_constant_s)
@@ -177,7 +177,7 @@ def test_sensitivities_are_measured_by_refits_and_carried_into_the_intervals(cfg
                 out[d] = _ident(d, theta, np.full(theta.size, 0.01))
         return out, {}
 
-    from hindrax_ident.identification.fit.calibration import apply_thrust_calibration
+    from hindrax_fit.fit.calibration import apply_thrust_calibration
     ids, _ = linear_fit(apply_thrust_calibration(rec, cfg=cfg), cfg)
     attach_thrust_sensitivities(rec, ids, cfg, linear_fit)
     tc = cfg.thrusters
@@ -245,7 +245,7 @@ def test_identification_yaml_shows_the_prior_beside_the_value_and_the_joint_sect
 
 
 def test_free_decay_disagreement_makes_the_inertia_suspect():
-    from hindrax_ident.identification.assessment.verdicts import apply_reference_verdicts, free_decay_reason
+    from hindrax_fit.assessment.verdicts import apply_reference_verdicts, free_decay_reason
 
     # 1.07 +- 0.02 against 0.97 +- 0.03: |0.10| / 0.0361 = 2.77 > 1.96 -> suspect
     assert "z = +2.8" in free_decay_reason("roll", (1.07, 0.02), (0.97, 0.03))
@@ -273,8 +273,8 @@ def test_free_decay_disagreement_makes_the_inertia_suspect():
 
 
 def test_report_references_section_shows_scales_free_decay_priors_and_disagreements(cfg):
-    from hindrax_ident.identification.assessment.report import references_html
-    from hindrax_ident.identification.assessment.verdicts import apply_reference_verdicts
+    from hindrax_fit.assessment.report import references_html
+    from hindrax_fit.assessment.verdicts import apply_reference_verdicts
 
     rs = {"surge": _ident("surge", [27.3, 66.5, 1.25, 0.02], [0.3, 2.0, 3.0, 0.05])}
     rs["surge"].signals.update(velocity=np.linspace(-0.5, 0.5, 50))

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hindrax_ident.estimation.least_squares import EstimationError
-from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.fit.dof_model import model_terms
-from hindrax_ident.vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.estimation.least_squares import EstimationError
+from hindrax_fit.fit import fit_core
+from hindrax_onboard.identification.model.dof_model import model_terms
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

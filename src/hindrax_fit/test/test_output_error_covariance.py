@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hindrax_ident.identification.fit import fit_core
+from hindrax_fit.fit import fit_core
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

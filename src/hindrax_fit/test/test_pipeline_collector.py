@@ -8,8 +8,8 @@ import gc
 
 import pytest
 
-from hindrax_ident.identification.assessment import pipeline
-from hindrax_ident.identification.bag_input.from_bag import BagContentError
+from hindrax_fit.assessment import pipeline
+from hindrax_fit.bag_input.from_bag import BagContentError
 
 
 @dataclasses.dataclass

@@ -24,8 +24,8 @@ __all__ = ["GROUPS", "NODE_CLASSES", "ident_control_main", "ident_record_main"]
 
 #: node -> "module:class" of the nodes this package composes
 NODE_CLASSES: dict[str, str] = {
-    "identification": "hindrax_ident.identification.online.node:IdentificationNode",
-    "controller": "hindrax_ident.control.node:ControllerNode",
+    "identification": "hindrax_onboard.identification.online.node:IdentificationNode",
+    "controller": "hindrax_onboard.control.node:ControllerNode",
     "recorder": DRIVER_CLASSES["recorder"],
 }
 #: console script -> its nodes, in construction order

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.control.law import (MIN_BANDWIDTH_FACTOR, UNCERTAINTY_Z, ControlInput, ControlSettings, Controller,
+from hindrax_onboard.control.law import (MIN_BANDWIDTH_FACTOR, UNCERTAINTY_Z, ControlInput, ControlSettings, Controller,
                                        FloorEstimator, ReferenceModel, design_gains)
-from hindrax_ident.control.model import AxisModel, ControlModel, model_from_config
+from hindrax_onboard.control.model import AxisModel, ControlModel, model_from_config
 
 TICK = 0.02
 
@@ -283,7 +283,7 @@ def test_beams_far_from_the_altimeters_footprint_count_less_where_the_slope_chan
     through them is wrong by the slope change times that distance (law.FLOOR_SLOPE_CHANGE_STD): with that error in
     each beam's variance the stern beam, still on the flat, holds the new slope back less, and the altitude error over
     flat - 1:3 - flat is at most 0.9 of the error without it. Ideal plant and ranges: no noise, no lag."""
-    from hindrax_ident.control import law
+    from hindrax_onboard.control import law
 
     with_term = _altitude_over_the_ramp(True, monkeypatch, ping_x_m=0.10)
     monkeypatch.setattr(law, "FLOOR_SLOPE_CHANGE_STD", 0.0)

@@ -1,16 +1,16 @@
-"""Tests of hindrax_ident.estimation.drag_coefficient ([Hindrax-Drag] Table 4, docs/identification.md)."""
+"""Tests of hindrax_onboard.estimation.drag_coefficient ([Hindrax-Drag] Table 4, docs/identification.md)."""
 
 import numpy as np
 import pytest
 
-from hindrax_ident.estimation.drag_coefficient import (
+from hindrax_onboard.estimation.drag_coefficient import (
     KINEMATIC_VISCOSITY_WATER_M2_S,
     characteristic_length_from_volume,
     drag_coefficient,
     reynolds_number,
     reynolds_range,
 )
-from hindrax_ident.estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.least_squares import EstimationError
 
 
 def test_characteristic_lengths_of_hindrax_am():

@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.filters (constant-acceleration Kalman filter, RTS smoother).
+"""Tests of hindrax_onboard.estimation.filters (constant-acceleration Kalman filter, RTS smoother).
 
 Error bounds are set against the naive alternative the design forbids (finite differences):
 with position noise sigma = 0.01 m at ~20 Hz, a first difference has velocity noise
@@ -9,13 +9,13 @@ sigma sqrt(6) / dt^2 ~ 10 m/s^2, on a trajectory of velocity and acceleration am
 import numpy as np
 import pytest
 
-from hindrax_ident.estimation.filters import (
+from hindrax_onboard.estimation.filters import (
     KinematicKalmanFilter,
     process_noise,
     smooth_kinematics,
     transition_matrix,
 )
-from hindrax_ident.estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.least_squares import EstimationError
 
 A_M, W_RAD_S = 0.5, 1.0     # x = A sin(w t): v amplitude 0.5 m/s, a amplitude 0.5 m/s^2
 
@@ -152,7 +152,7 @@ def test_linear_kalman_steps_as_filterpy_does():
     row (a missing measurement, as AccelAidedFilter fuses), and R given per update."""
     from filterpy.kalman import KalmanFilter
 
-    from hindrax_ident.estimation.kalman import LinearKalman
+    from hindrax_onboard.estimation.kalman import LinearKalman
 
     rng = np.random.default_rng(7)
     ref, own = KalmanFilter(dim_x=3, dim_z=2), LinearKalman(3)

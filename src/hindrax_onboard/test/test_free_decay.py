@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.free_decay against [Hindrax-AM] (Tables 3-6) and physics.
+"""Tests of hindrax_onboard.estimation.free_decay against [Hindrax-AM] (Tables 3-6) and physics.
 
 Table checks: every printed number is compared with the value computed from the printed
 inputs of its own equation: m_ad eq. 7 and eq. 5 from (omega_d, zeta, k_eq, m_b = 0.39 kg);
@@ -18,7 +18,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_ident.estimation.free_decay import (
+from hindrax_onboard.estimation.free_decay import (
     FreeDecayResult,
     added_mass_error_percent,
     added_mass_exact,
@@ -33,7 +33,7 @@ from hindrax_ident.estimation.free_decay import (
     log_decrement,
     natural_frequency,
 )
-from hindrax_ident.estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.least_squares import EstimationError
 
 MODEL_MASS_KG = 0.39          # [Hindrax-AM] section 2
 MODEL_VOLUME_M3 = 0.00056     # [Hindrax-AM] section 2
@@ -190,7 +190,7 @@ def test_hindrax_am_reynolds_range_of_heave_rows():
     0.136e5 (6 mm) to 0.65e5 (45 mm). (The surge and sway rows would give about 0.11e5, below
     the printed lower bound.)
     """
-    from hindrax_ident.estimation.drag_coefficient import reynolds_number
+    from hindrax_onboard.estimation.drag_coefficient import reynolds_number
 
     res = []
     for row in HINDRAX_AM_ROWS:

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 from builtin_interfaces.msg import Time
 
-from hindrax_ident.identification.online.node import hydro_estimate
+from hindrax_onboard.identification.online.node import hydro_estimate
 
 
 def _estimator(raw_std, published):

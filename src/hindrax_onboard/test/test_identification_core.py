@@ -9,9 +9,9 @@ import pytest
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.online.core import (ARMED_GRACE_S, DISARMED, NEEDED_SENSORS, NOT_ARMED,
+from hindrax_onboard.identification.online.core import (ARMED_GRACE_S, DISARMED, NEEDED_SENSORS, NOT_ARMED,
                                                       STATUS_PERIOD_S, IdentificationCore, goal_problem)
-from hindrax_ident.identification.online.executive import ExecutiveStatus
+from hindrax_onboard.identification.online.executive import ExecutiveStatus
 
 CFG = load_config(default_config_path())
 CURVE = AllocationCore(CFG).allocator.curves[0]
@@ -21,7 +21,7 @@ TICK = 0.02
 
 
 class StandInExecutive:
-    """What the core uses of :class:`~hindrax_ident.identification.online.executive.Executive`: ``wrenches`` are
+    """What the core uses of :class:`~hindrax_onboard.identification.online.executive.Executive`: ``wrenches`` are
     returned by start/step in turn (None = the campaign is over), ``phase`` and ``message`` make the status."""
 
     def __init__(self, cfg, dofs, levels, **kwargs):

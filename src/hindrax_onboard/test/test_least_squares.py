@@ -1,10 +1,10 @@
-"""Tests of hindrax_ident.estimation.least_squares ([Hindrax-Drag] eqs. 2-8)."""
+"""Tests of hindrax_onboard.estimation.least_squares ([Hindrax-Drag] eqs. 2-8)."""
 
 import numpy as np
 import pytest
 from scipy import stats
 
-from hindrax_ident.estimation.least_squares import (
+from hindrax_onboard.estimation.least_squares import (
     DragFit,
     EstimationError,
     fit_drag,

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_ident.control.odometry import odometry_estimate
+from hindrax_onboard.control.odometry import odometry_estimate
 
 
 def test_a_vehicle_heading_east_is_base_link_along_odom_x():

@@ -1,10 +1,10 @@
-"""Tests of hindrax_ident.estimation.rls (recursive LS with forgetting, docs/identification.md §1.D)."""
+"""Tests of hindrax_onboard.estimation.rls (recursive LS with forgetting, docs/identification.md §1.D)."""
 
 import numpy as np
 import pytest
 
-from hindrax_ident.estimation.least_squares import EstimationError, fit_linear_model
-from hindrax_ident.estimation.rls import RecursiveLeastSquares
+from hindrax_onboard.estimation.least_squares import EstimationError, fit_linear_model
+from hindrax_onboard.estimation.rls import RecursiveLeastSquares
 
 THETA = np.array([35.0, 70.0, 6.0, 0.78])   # inertia, k_q, k_l, bias (docs/architecture.md §5)
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from hindrax_ident.estimation.rls import RecursiveLeastSquares
+from hindrax_onboard.estimation.rls import RecursiveLeastSquares
 
 
 def _feed(rls, rng, theta, n, cols=(0, 1), noise=0.05):

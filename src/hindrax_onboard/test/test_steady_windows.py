@@ -1,11 +1,11 @@
-"""Tests of hindrax_ident.estimation.steady_windows on a simulated thrust ladder ([Hindrax-Drag] §4)."""
+"""Tests of hindrax_onboard.estimation.steady_windows on a simulated thrust ladder ([Hindrax-Drag] §4)."""
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hindrax_ident.estimation.least_squares import EstimationError, fit_drag
-from hindrax_ident.estimation.steady_windows import (
+from hindrax_onboard.estimation.least_squares import EstimationError, fit_drag
+from hindrax_onboard.estimation.steady_windows import (
     SteadyWindow,
     constant_force_segments,
     detect_steady_windows,

@@ -2,7 +2,7 @@
 
 The campaign logic is the :class:`~..identification.online.executive.Executive` (the same object the identification node
 drives on the ROS graph, :mod:`..identification.online.node`); here its plant is a
-:class:`~hindrax_ident.sim.simulator.Simulator` stepped in this process: each control tick
+:class:`~hindrax_sim.simulator.Simulator` stepped in this process: each control tick
 (``identification.estimate_rate_hz``; the simulator steps in between) the wrench is allocated
 (:class:`~hindrax_drivers.allocation.core.AllocationCore`), its pulse widths drive the simulator's thrusters, the thrust
 curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and the sensor samples the simulator
@@ -25,9 +25,9 @@ import numpy as np
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from ..identification.bag_input.campaign_record import CampaignRecord
-from ..identification.online.executive import CampaignAbort, Executive, TickInput
-from ..identification.online.steps import Ballast, Float, Inclining, LinePull
+from hindrax_onboard.identification.model.campaign_record import CampaignRecord
+from hindrax_onboard.identification.online.executive import CampaignAbort, Executive, TickInput
+from hindrax_onboard.identification.online.steps import Ballast, Float, Inclining, LinePull
 from .simulator import Simulator
 
 __all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "PoolOperator"]
@@ -119,7 +119,7 @@ class PoolOperator:
 
 class Campaign:
     """Runs the identification campaign (:class:`~..identification.online.executive.Executive`) on a
-    :class:`~hindrax_ident.sim.simulator.Simulator` (module docstring).
+    :class:`~hindrax_sim.simulator.Simulator` (module docstring).
 
     cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF
     (default ``identification.levels_per_dof``). seed: simulator seed (default ``simulation.seed``).

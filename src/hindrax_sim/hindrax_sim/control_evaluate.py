@@ -2,12 +2,12 @@
 
 ``hindrax control evaluate --truth FILE --model YAML``; the manoeuvres, why they were chosen, the
 fairness rules and the metrics are those of docs/control.md §6. The simulator runs in-process on a
-truth that differs from the vehicle file (:mod:`hindrax_ident.sim.truth`); the loop is the
+truth that differs from the vehicle file (:mod:`hindrax_sim.truth`); the loop is the
 campaign's (:class:`~..control.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench ->
 thrust allocation -> pulse widths -> thrusters) at the controller node's rate (``control.rate_hz``).
 The manoeuvres (:data:`MANEUVERS`, their numbers in :class:`EvaluationSetup`): ``depth_step``,
 ``altitude_hold`` (over the floor profile ``floor_profile_m``,
-:meth:`~hindrax_ident.sim.pool.Pool.set_floor_profile`), ``altitude_gentle`` (a plane floor,
+:meth:`~hindrax_sim.pool.Pool.set_floor_profile`), ``altitude_gentle`` (a plane floor,
 ``gentle_floor_gradient``) and ``heading_step``; each with the holds of :data:`MODELS`:
 ``identified`` (the law of :mod:`..control.law` with the model of ``identification.yaml``),
 ``vehicle_file`` (the same law, the vehicle file's model) and ``pd_hold``
@@ -39,13 +39,13 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.frames import wrap_angle
 
-from ..control.maneuvers import HoldController, dof_authority
+from hindrax_onboard.control.maneuvers import HoldController, dof_authority
 from .simulator import Simulator
 from .truth import Truth, with_floor_gradient, without_sensor_noise
-from ..control.law import ControlSettings, ReferenceModel
-from ..control.legacy import LegacyPDHold
-from ..control.loop import HoldLoop
-from ..control.model import ControlModel, model_from_config
+from hindrax_onboard.control.law import ControlSettings, ReferenceModel
+from hindrax_onboard.control.legacy import LegacyPDHold
+from hindrax_onboard.control.loop import HoldLoop
+from hindrax_onboard.control.model import ControlModel, model_from_config
 
 __all__ = ["MANEUVERS", "ALTITUDE_MANEUVERS", "MODELS", "METRICS", "EvaluationSetup", "CaseResult", "run_case",
            "evaluate", "metrics", "summarise", "format_table", "write_outputs", "ratios", "make_hold",

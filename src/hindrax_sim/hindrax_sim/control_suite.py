@@ -2,7 +2,7 @@
 altitude than the vehicle file (``hindrax control scenarios``, docs/control.md §7).
 
 Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification
-(:class:`~hindrax_ident.sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml``
+(:class:`~hindrax_sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml``
 read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then
 :data:`SUITE_MANEUVERS` of :mod:`.control_evaluate` on the same truth. Writes
 ``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the summary
@@ -17,14 +17,14 @@ from typing import Callable, Sequence
 
 from hindrax_drivers.config import VehicleConfig
 
-from ..identification.fit.calibration import apply_thrust_calibration
+from hindrax_fit.fit.calibration import apply_thrust_calibration
 from .campaign import Campaign
-from ..identification.fit.campaign_fit import identify_all_with_errors
-from ..identification.assessment.results import build_results, write_identification
+from hindrax_fit.fit.campaign_fit import identify_all_with_errors
+from hindrax_fit.assessment.results import build_results, write_identification
 from .simulator import Simulator
 from .truth import load_truth, truth_dir as shipped
 from .control_evaluate import EvaluationSetup, evaluate, jsonable, ratios, setup_dict, write_outputs
-from ..control.model import ControlModel, load_model, model_from_config
+from hindrax_onboard.control.model import ControlModel, load_model, model_from_config
 
 __all__ = ["SUITE_DOFS", "SUITE_MANEUVERS", "scenario_names", "run_scenario", "run_suite", "write_suite",
            "format_suite"]

@@ -6,8 +6,8 @@ runs), and the MS5837, ICM-20948 (+ AK09916) and PCA9685 emulators sit on one
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` that the I2C drivers use in place of
 ``smbus2.SMBus``. Each emulator's truth source is a *measured* sensor sample of the vehicle at the moment the
 emulated device samples (an MS5837 conversion start, an ICM-20948 data-rate tick, a DVL ping, through
-:meth:`~hindrax_ident.sim.simulator.Simulator.measure`: noise, bias and the DVL's dropouts from
-:mod:`hindrax_ident.sim.sensors`; the Ping1D uses the newest rate-grid sample); emulator clocks are the
+:meth:`~hindrax_sim.simulator.Simulator.measure`: noise, bias and the DVL's dropouts from
+:mod:`hindrax_sim.sensors`; the Ping1D uses the newest rate-grid sample); emulator clocks are the
 simulated time as published on ``/clock`` (quantised to ``simulation.clock_rate_hz``).
 
 The simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers
@@ -50,7 +50,7 @@ class SerialLockStep:
     """Serve one serial device emulator at the simulator's clock ticks and hold simulated time until its driver has
     handled every byte sent: the serial counterpart of the I2C emulators, which answer inside the driver's call.
 
-    :meth:`tick` is a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode` and
+    :meth:`tick` is a clock listener of the :class:`~hindrax_sim.node.SimulatorNode` and
     :meth:`settled` a step gate: the driver stamps every message at the tick it was sent.
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
@@ -123,7 +123,7 @@ class VirtualHardware:
     configured addresses), ``ports`` (serial device name -> pty path). Call :meth:`close` to stop the pty threads.
     ``serve_serial=False`` skips the ptys (for tests that only need the I2C side). The ptys are served by their own
     threads, or, with ``serial_threads=False``, in lock-step with a simulator node once :meth:`lock_step_serial`
-    is called (what :func:`~hindrax_ident.bringup.build_graph` does).
+    is called (what :func:`~hindrax_sim.graph.bringup.build_graph` does).
     """
 
     def __init__(self, sim: Simulator, config: VehicleConfig, serve_serial: bool = True, seed: int = 0,

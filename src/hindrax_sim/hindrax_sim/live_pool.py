@@ -2,10 +2,10 @@
 in a process of its own, so that the launch layout's driver processes run exactly as on the vehicle.
 
 ``hindrax bringup --sim`` and ``hindrax run`` put the simulator and every node in one process on simulated time
-(:mod:`hindrax_ident.bringup`). Here nothing of the stack changes: the installed launch (``pool_test.launch.xml``,
+(:mod:`hindrax_sim.graph.bringup`). Here nothing of the stack changes: the installed launch (``pool_test.launch.xml``,
 one process per driver, the real clock, the vehicle's transport) opens its serial ports and its I2C bus, and finds
-the emulators of :class:`~hindrax_ident.sim.hardware.VirtualHardware` there, fed by a
-:class:`~hindrax_ident.sim.simulator.Simulator` that this process steps to keep up with the wall clock. The
+the emulators of :class:`~hindrax_sim.hardware.VirtualHardware` there, fed by a
+:class:`~hindrax_sim.simulator.Simulator` that this process steps to keep up with the wall clock. The
 simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers, so wrench -> allocation -> ESC
 process -> I2C -> thrust -> motion -> sensors -> drivers is the vehicle's path, with a simulated vehicle at its end.
 The devices are reached as :class:`~hindrax_drivers.emulated_devices.EmulatedDevices` are
@@ -18,7 +18,7 @@ milliseconds, the ESC's heartbeat follows them, and the output guard stops the t
 spends about 2 % of a core stepping the simulator (0.08 ms per 5 ms step on the development machine).
 
 The operator's hands (the calibration steps' ballast, float, line pulls and inclining mass:
-:class:`~hindrax_ident.sim.campaign.PoolOperator`, the same as the in-process campaign's) are commands
+:class:`~hindrax_sim.campaign.PoolOperator`, the same as the in-process campaign's) are commands
 on the process's standard input; :class:`LivePool` is the client.
 
 Protocol (one line each way, JSON answers): the process prints ``{"ports": {...}, "i2c_socket": path}`` once its
@@ -50,7 +50,7 @@ from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, PRIORITY_ENV,
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 
 from .campaign import PoolOperator
-from ..identification.online.executive import calibration_forces, float_buoyancy, inclining_load
+from hindrax_onboard.identification.online.executive import calibration_forces, float_buoyancy, inclining_load
 from .hardware import VirtualHardware
 from .simulator import Simulator
 
@@ -156,9 +156,9 @@ def take_hardware_priority() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m hindrax_ident.sim.live_pool --config FILE --directory DIR [--truth FILE] [--seed N]``: serve the
+    """``python -m hindrax_sim.live_pool --config FILE --directory DIR [--truth FILE] [--seed N]``: serve the
     live pool until ``quit`` or the end of standard input (module docstring: protocol)."""
-    ap = argparse.ArgumentParser(prog="python -m hindrax_ident.sim.live_pool", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m hindrax_sim.live_pool", description=__doc__.splitlines()[0])
     ap.add_argument("--config", required=True, help="vehicle file")
     ap.add_argument("--directory", required=True, help="folder for the I2C socket")
     ap.add_argument("--truth", default=None, help="the pool's truth file (default: the shipped one)")
@@ -201,7 +201,7 @@ class LivePool(DriverEndpoints):
                  env: Mapping[str, str] | None = None, truth: str | None = None) -> None:
         self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-live-pool-"))
         self.directory.mkdir(parents=True, exist_ok=True)
-        cmd = [sys.executable, "-m", "hindrax_ident.sim.live_pool", "--config", str(config_path),
+        cmd = [sys.executable, "-m", "hindrax_sim.live_pool", "--config", str(config_path),
                "--directory", str(self.directory)]
         cmd += ["--truth", str(truth)] if truth else []
         self._stderr = open(self.directory / "live_pool.log", "w")

@@ -42,7 +42,7 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from ..vehicle.rigid_body import rigid_body_mass_matrix, skew
+from hindrax_onboard.vehicle.rigid_body import rigid_body_mass_matrix, skew
 
 __all__ = ["skew", "rigid_body_mass_matrix", "damping_vector", "restoring_vector",
            "rotation_matrix_from_quaternion", "euler_from_rotation_matrix", "VehicleModel"]

@@ -1,6 +1,6 @@
 """ROS 2 node of the virtual pool: steps :class:`~.simulator.Simulator`, publishes /clock and ground truth.
 
-Run alone: ``python -m hindrax_ident.sim.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+Run alone: ``python -m hindrax_sim.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 
 Interfaces
 ----------
@@ -247,7 +247,7 @@ class SimulatorNode(VehicleNode):
     def advance_clock_period(self) -> bool:
         """Step to the next /clock tick (one whole period), unless a step gate holds the time: returns False then.
         For a caller that drives the simulation itself instead of the timer (the node is then not added to an
-        executor; :meth:`hindrax_ident.bringup.Graph.spin_once`)."""
+        executor; :meth:`hindrax_sim.graph.bringup.Graph.spin_once`)."""
         if self._gates and self._at_clock_boundary() and not self._gates_open():
             if self.real_time_factor > 0.0:  # the wall clock keeps running: do not try to catch up afterwards
                 self._wall_anchor, self._sim_anchor = time.monotonic(), self.simulator.t_s
@@ -337,7 +337,7 @@ class SimulatorNode(VehicleNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Run the simulator node alone (``python -m hindrax_ident.sim.node --ros-args --params-file ...``)."""
+    """Run the simulator node alone (``python -m hindrax_sim.node --ros-args --params-file ...``)."""
     return run_node(SimulatorNode, args)
 
 

@@ -1,5 +1,5 @@
 """A piloted or closed-loop virtual-pool run written as a bag of standard messages only (``hindrax ident fit``,
-its tests and the realistic-data benchmark :mod:`hindrax_ident.tools.benchmarks.ident_fit`).
+its tests and the realistic-data benchmark :mod:`hindrax_tools.benchmarks.ident_fit`).
 
 Who flies (``PilotSettings.pilot``):
 
@@ -221,7 +221,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                       settings: PilotSettings = PilotSettings(), truth=None) -> Path:
     """Fly one run (module docstring) and write it to the bag directory ``bag_dir``; returns the path.
 
-    cfg: the vehicle file; truth: the simulator's truth (path, :class:`~hindrax_ident.sim.truth.Truth` or None for
+    cfg: the vehicle file; truth: the simulator's truth (path, :class:`~hindrax_sim.truth.Truth` or None for
     the shipped default). Raises ``FileExistsError`` when ``bag_dir`` already holds a bag.
     """
     s = settings

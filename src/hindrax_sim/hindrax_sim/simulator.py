@@ -276,7 +276,7 @@ class Simulator:
     def set_external_wrench(self, wrench_frd: Sequence[float]) -> None:
         """Hold ``wrench_frd`` (6,) [X Y Z K M N] about the body origin (FRD, N, N m) from the next step on, as
         :meth:`step`'s ``external_wrench_frd`` does, for a plant stepped by someone else (the simulator node): e.g.
-        the known force of a calibration step (:mod:`hindrax_ident.graph_campaign`). Raises
+        the known force of a calibration step (:mod:`hindrax_sim.graph.graph_campaign`). Raises
         ``ValueError`` unless 6 finite numbers."""
         self._external = _wrench6(wrench_frd)
 

@@ -13,7 +13,7 @@
   propeller, so its physical thrust along ``direction_frd`` is ``curve(2 P_neutral - P)``. The per-thruster
   ``trim_us`` compensates a real ESC's offset; the simulated ESCs have none, so the trim is not undone.
   Battery sag is not modelled (``voltage_scale`` 1).
-* Lag: :class:`hindrax_ident.vehicle.thrust_lag.ThrustLag` of ``thrusters.time_constant_s``, exact for a command
+* Lag: :class:`hindrax_onboard.vehicle.thrust_lag.ThrustLag` of ``thrusters.time_constant_s``, exact for a command
   held over a step, which the integrator evaluates at its stage times.
 * Not modelled: thrust dependence on advance speed and thruster-hull / thruster-thruster interaction
   ([Hindrax-Drag] §6; docs/identification.md §3 C6).
@@ -26,8 +26,8 @@ from hindrax_drivers.allocation.from_config import thrust_curve_from_config
 from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
 from hindrax_drivers.config import VehicleConfig
 
-from ..vehicle.rigid_body import skew
-from ..vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.vehicle.rigid_body import skew
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 
 __all__ = ["PulseWidthError", "Thrusters"]
 

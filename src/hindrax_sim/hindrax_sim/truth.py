@@ -279,7 +279,7 @@ def with_floor_gradient(truth: Truth, gradient_ne) -> Truth:
 def without_sensor_noise(truth: Truth) -> Truth:
     """The same truth with the simulated sensors' white noise, dropouts and DVL scale error set to zero
     (``simulation.sensors.*.noise_std_*``, ``dropout_probability``, ``dvl75.scale_error_fraction``); biases, rates
-    and the truth's disturbances are kept. With :func:`hindrax_ident.sim.control_evaluate.run_case` also turning off
+    and the truth's disturbances are kept. With :func:`hindrax_sim.control_evaluate.run_case` also turning off
     the DVL beam-range noise, this is the diagnostic that separates the model's error from the sensor noise
     (docs/control.md §6; ``hindrax control evaluate --no-sensor-noise``). Raises :class:`TruthError` if the
     configuration does not validate (it always should)."""

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.online.core import IdentificationCore
-from hindrax_ident.identification.online.executive import TickInput
-from hindrax_ident.identification.online.steps import Ballast, Dive, Float, Inclining, LinePull, TiltDecay
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.campaign import Campaign
+from hindrax_onboard.identification.online.core import IdentificationCore
+from hindrax_onboard.identification.online.executive import TickInput
+from hindrax_onboard.identification.online.steps import Ballast, Dive, Float, Inclining, LinePull, TiltDecay
+from hindrax_sim.simulator import Simulator
 
 HOLD = {"settle_s": 2.0, "window_s": 10.0}
 

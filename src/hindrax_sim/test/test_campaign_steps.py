@@ -1,6 +1,6 @@
 """The campaign's steps as objects: each step run on its own on the in-process simulator, after the
 dive that every plan starts with, through the same sequencer as the whole campaign
-(:class:`~hindrax_ident.identification.online.executive.Executive` with an explicit step list); the plan the sequencer
+(:class:`~hindrax_onboard.identification.online.executive.Executive` with an explicit step list); the plan the sequencer
 makes
 from its arguments; the virtual pool's operator.
 
@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import ConfigError, default_config_path, load_config
-from hindrax_ident.identification.fit.calibration import thrust_scales
-from hindrax_ident.sim.campaign import Campaign, PoolOperator
-from hindrax_ident.identification.online.executive import THRUST_STEPS, Executive, TickInput, expand_calibration
-from hindrax_ident.control.maneuvers import PoolBox
-from hindrax_ident.identification.online.steps import (Ballast, BroadbandRun, Dive, Float, Inclining, LinePull,
+from hindrax_fit.fit.calibration import thrust_scales
+from hindrax_sim.campaign import Campaign, PoolOperator
+from hindrax_onboard.identification.online.executive import THRUST_STEPS, Executive, TickInput, expand_calibration
+from hindrax_onboard.control.maneuvers import PoolBox
+from hindrax_onboard.identification.online.steps import (Ballast, BroadbandRun, Dive, Float, Inclining, LinePull,
                                                        RotationLadder, Step, TiltDecay, TranslationLadder)
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import truth_dir
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import truth_dir
 
 ASYMMETRIC = truth_dir() / "scenarios" / "thrust_asymmetric.yaml"
 FWD, REV = 0.95, 0.85                        # the truth file's disturbances.thrust positive / negative

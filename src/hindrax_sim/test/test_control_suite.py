@@ -1,5 +1,5 @@
-"""The scenario suite's table says where the heave model came from (hindrax_ident.sim.control_suite)."""
-from hindrax_ident.sim.control_suite import format_suite
+"""The scenario suite's table says where the heave model came from (hindrax_sim.control_suite)."""
+from hindrax_sim.control_suite import format_suite
 
 
 def _row(name, sources):

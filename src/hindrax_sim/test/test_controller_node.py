@@ -29,7 +29,7 @@ def _call(client, request, spin):
 @pytest.mark.ros
 def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
     with ros_context() as ctx:
-        from hindrax_ident.bringup import build_graph
+        from hindrax_sim.graph.bringup import build_graph
 
         graph = build_graph(default_config_path(), sim=True, context=ctx, seed=5, controller=True, drive_clocks=True,
                             overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
@@ -152,7 +152,7 @@ def _tick_period_s(node) -> float:
 
 
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
-    """``python -m hindrax_ident.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
+    """``python -m hindrax_onboard.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
     the vehicle file's model, SIGINT -> 0; a bad ``control.*`` value, or a model file of another vehicle (never a
     silent fallback, issue 45.4) -> 1 with one line naming key, value and allowed range."""
     import subprocess
@@ -164,7 +164,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     other = tmp_path / "identification.yaml"
     other.write_text(yaml.safe_dump({"schema_version": 1, "provenance": {"configuration_sha256": "0" * 64},
                                      "dofs": {"heave": {"inertia": {"value": 50.0, "std": 1.0, "unit": "kg"}}}}))
-    cmd = [python_executable(), "-m", "hindrax_ident.control.node", "--ros-args", "--params-file",
+    cmd = [python_executable(), "-m", "hindrax_onboard.control.node", "--ros-args", "--params-file",
            str(default_config_path())]
     bad = subprocess.run(cmd + ["-p", "control.hold_fraction:=1.5"], env=child_env(), capture_output=True, text=True,
                          timeout=60)
@@ -199,7 +199,7 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import Imu
 
-    from hindrax_ident.control.node import ControllerNode
+    from hindrax_onboard.control.node import ControllerNode
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
     from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
@@ -254,8 +254,8 @@ def test_disabled_the_controller_conditions_one_imu_message_in_idle_imu_every():
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Imu
 
-    from hindrax_ident.control.node import IDLE_IMU_EVERY, ControllerNode
-    from hindrax_ident.vehicle.signals import samples_from_imu
+    from hindrax_onboard.control.node import IDLE_IMU_EVERY, ControllerNode
+    from hindrax_onboard.vehicle.signals import samples_from_imu
 
     with ros_context() as ctx:
         node = ControllerNode(config=load_config(default_config_path()), context=ctx, model_file="")
@@ -295,7 +295,7 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
 
     from rclpy.experimental.events_executor import EventsExecutor
 
-    from hindrax_ident.control.node import GOAL_TICK_S, ODOM_PERIOD_S, ControllerNode
+    from hindrax_onboard.control.node import GOAL_TICK_S, ODOM_PERIOD_S, ControllerNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:

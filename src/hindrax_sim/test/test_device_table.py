@@ -18,10 +18,10 @@ from hindrax_drivers.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, Emulat
 from hindrax_drivers.health import STATUS_OF_NODE
 from hindrax_drivers.recording import replay_devices
 from hindrax_drivers.testing import ros_context
-from hindrax_ident.bringup import build_graph
-from hindrax_ident.sim.hardware import VirtualHardware
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import truth_from_mapping
+from hindrax_sim.graph.bringup import build_graph
+from hindrax_sim.hardware import VirtualHardware
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import truth_from_mapping
 from hindrax_msgs.msg import RawDeviceData
 
 BAG = Path(__file__).resolve().parents[2] / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"

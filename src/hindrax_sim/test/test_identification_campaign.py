@@ -9,9 +9,9 @@ import pytest
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.fit.campaign_fit import identify_dof
-from hindrax_ident.control.maneuvers import PoolBox, dof_authority, level_ladder
+from hindrax_sim.campaign import Campaign
+from hindrax_fit.fit.campaign_fit import identify_dof
+from hindrax_onboard.control.maneuvers import PoolBox, dof_authority, level_ladder
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

@@ -16,9 +16,9 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.bringup import build_graph
-from hindrax_ident.identification.online.executive import ordered_samples
-from hindrax_ident.vehicle.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
+from hindrax_sim.graph.bringup import build_graph
+from hindrax_onboard.identification.online.executive import ordered_samples
+from hindrax_onboard.vehicle.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
                                                             thrust_of_written_widths)
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
@@ -191,8 +191,8 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
     """An operator who arms and starts at once: the goal is accepted while the ESC's armed flag is on its way and
     goes on once it arrives; without it the goal ends after ARMED_GRACE_S with the "not armed" result, having
     commanded nothing. The node's own callbacks are driven directly (no graph), with a stand-in goal handle."""
-    from hindrax_ident.identification.online.core import ARMED_GRACE_S, NOT_ARMED
-    from hindrax_ident.identification.online.node import IdentificationNode
+    from hindrax_onboard.identification.online.core import ARMED_GRACE_S, NOT_ARMED
+    from hindrax_onboard.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
@@ -230,7 +230,7 @@ def test_node_parameters_are_described_read_only_and_checked():
     from rclpy.parameter import Parameter
 
     from hindrax_drivers.config import ConfigError
-    from hindrax_ident.identification.online.node import IdentificationNode
+    from hindrax_onboard.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
@@ -248,13 +248,13 @@ def test_node_parameters_are_described_read_only_and_checked():
 
 
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
-    """``python -m hindrax_ident.identification.online.node`` (run_node): ready, SIGINT -> status 0; an invalid node
+    """``python -m hindrax_onboard.identification.online.node`` (run_node): ready, SIGINT -> status 0; an invalid node
     parameter -> status 1 with one line naming key, value and allowed range."""
     import subprocess
 
     from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable
 
-    cmd = [python_executable(), "-m", "hindrax_ident.identification.online.node", "--ros-args", "--params-file",
+    cmd = [python_executable(), "-m", "hindrax_onboard.identification.online.node", "--ros-args", "--params-file",
            str(default_config_path())]
     bad = subprocess.run(cmd + ["-p", "sensor_timeout_s:=-1.0"], env=child_env(), capture_output=True, text=True,
                          timeout=60)
@@ -277,7 +277,7 @@ def _node_and_probe(cfg, ctx):
     """An identification node and a bare probe node of ``ctx``, both on one single-threaded executor."""
     from rclpy.executors import SingleThreadedExecutor
 
-    from hindrax_ident.identification.online.node import IdentificationNode
+    from hindrax_onboard.identification.online.node import IdentificationNode
 
     node = IdentificationNode(config=cfg, context=ctx)
     probe = rclpy.create_node("probe", context=ctx)
@@ -328,7 +328,7 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
     from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
-    from hindrax_ident.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
+    from hindrax_onboard.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
 
     cfg = load_config(default_config_path())
     inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude", "/thrusters/pulse_width"}

@@ -8,13 +8,13 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import DOFS, default_config_path, load_config
-from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         regressor_matrix, truth_parameters)
-from hindrax_ident.identification.assessment.report import write_report
-from hindrax_ident.identification.assessment.results import (IdentificationFileError, build_results,
+from hindrax_fit.assessment.report import write_report
+from hindrax_fit.assessment.results import (IdentificationFileError, build_results,
                                                              read_identification, to_config_overrides,
                                                              write_identification)
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.simulator import Simulator
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -166,7 +166,7 @@ def test_a_report_plot_is_laid_out_once_and_drawn_once(tmp_path, monkeypatch):
     import matplotlib.figure
     import matplotlib.pyplot as plt
 
-    from hindrax_ident.identification.assessment import report
+    from hindrax_fit.assessment import report
 
     draws = []
     draw = matplotlib.figure.Figure.draw

@@ -25,7 +25,7 @@ from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_ident.identification.online.node import IdentificationNode
+from hindrax_onboard.identification.online.node import IdentificationNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -108,7 +108,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             c.clock.sec, c.clock.nanosec = divmod(clock["ns"], 1_000_000_000)
             pubs["clock"].publish(c)
             ex.spin_once(timeout_sec=0.01)
-            for _ in range(10_000):  # then every callback that is ready (as hindrax_ident.bringup's spin_until_idle)
+            for _ in range(10_000):  # then every callback that is ready (as hindrax_sim.graph.bringup's spin_until_idle)
                 try:
                     handler, _entity, _node = ex.wait_for_ready_callbacks(0.0)
                 except (TimeoutException, ShutdownException):

@@ -14,7 +14,7 @@ from hindrax_drivers.emulated_devices import I2C_DEVICES, SERIAL_DEVICES
 from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY
 from hindrax_drivers.testing import child_env, may_set_fifo
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV, SocketI2CBus
-from hindrax_ident.sim.live_pool import LivePool
+from hindrax_sim.live_pool import LivePool
 
 
 # PCA9685 registers (NXP PCA9685 datasheet rev. 4, §7.3): MODE1, LED0_ON_L, PRE_SCALE

@@ -1,4 +1,4 @@
-"""The one-process graph's executor (hindrax_ident.ordered_executor): the lean wait yields what
+"""The one-process graph's executor (hindrax_sim.graph.ordered_executor): the lean wait yields what
 rclpy's own wait yields, in the same order, the executor visits its nodes in the order they were
 added, and plain callbacks run through its own handler."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.ordered_executor import LeanWaitExecutor
+from hindrax_sim.graph.ordered_executor import LeanWaitExecutor
 
 
 def _drain(gen) -> list:
@@ -81,7 +81,7 @@ def test_a_handle_no_longer_valid_leaves_none_held():
     entity-by-entity way."""
     from rclpy.exceptions import InvalidHandle
 
-    from hindrax_ident.ordered_executor import _enter_each
+    from hindrax_sim.graph.ordered_executor import _enter_each
 
     log: list = []
 
@@ -112,7 +112,7 @@ def test_plain_callbacks_run_at_once_and_their_errors_reach_the_spinner():
     through rclpy's Task."""
     import pytest
 
-    from hindrax_ident.ordered_executor import _Call
+    from hindrax_sim.graph.ordered_executor import _Call
 
     with ros_context() as ctx:
         ex = LeanWaitExecutor(context=ctx)
@@ -151,7 +151,7 @@ def test_plain_callbacks_run_at_once_and_their_errors_reach_the_spinner():
 def test_snapshot_handles_held_from_one_wait_to_the_next(monkeypatch):
     """The lean wait marks its snapshot's handles in use once, not at every wait; an entity
     destroyed meanwhile is released at the next wait (a new snapshot), every handle at shutdown."""
-    import hindrax_ident.ordered_executor as oe
+    import hindrax_sim.graph.ordered_executor as oe
 
     entered: list = []
     enter = oe._ENTER

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.estimation.priors import priors_from_config
-from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.fit.dof_model import (parameter_names, rigid_inertia,
+from hindrax_onboard.estimation.priors import priors_from_config
+from hindrax_sim.campaign import Campaign
+from hindrax_onboard.identification.model.dof_model import (parameter_names, rigid_inertia,
                                                         truth_parameters)
-from hindrax_ident.identification.online.estimators import online_rls
+from hindrax_onboard.identification.online.estimators import online_rls
 
 
 @pytest.fixture(scope="module")

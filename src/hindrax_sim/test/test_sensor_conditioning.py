@@ -11,10 +11,10 @@ import pytest
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.fit.campaign_fit import rate_bias_against_angle
-from hindrax_ident.vehicle.fusion import smooth_with_rate
-from hindrax_ident.vehicle.state import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
+from hindrax_sim.campaign import Campaign
+from hindrax_fit.fit.campaign_fit import rate_bias_against_angle
+from hindrax_onboard.vehicle.fusion import smooth_with_rate
+from hindrax_onboard.vehicle.state import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +63,7 @@ def test_driver_dvl_velocity_is_already_at_the_body_origin(cfg):
     """dvl/data carries the base_link velocity (the driver removed the lever arm): not corrected twice."""
     from hindrax_msgs.msg import Dvl
 
-    from hindrax_ident.vehicle.signals import samples_from_dvl
+    from hindrax_onboard.vehicle.signals import samples_from_dvl
 
     st = SensorState(cfg)
     _gyro(st, 0.0, [0.0, 1.5, 0.0])

@@ -8,10 +8,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim import sensors as sn
-from hindrax_ident.sim.model import rotation_matrix_from_quaternion
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import truth_from_mapping
+from hindrax_sim import sensors as sn
+from hindrax_sim.model import rotation_matrix_from_quaternion
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import truth_from_mapping
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +138,7 @@ def test_dvl_scale_factor_and_misalignment(quiet):
 
 
 def test_dvl_multipath_dropouts_near_walls(quiet, vehicle):
-    from hindrax_ident.sim.pool import Pool
+    from hindrax_sim.pool import Pool
     suite = sn.SensorSuite(quiet, Pool.from_config(quiet), 1, devices=["dvl75"])
     d = truth_from_mapping(quiet, {"disturbances": {"dvl": {"multipath_distance_m": 1.0,
                                                             "multipath_dropout_probability": 0.6}}}).disturbances

@@ -13,8 +13,8 @@ from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_drivers.transport.i2c import I2CDevice
 from hindrax_drivers.transport.pty_device import PtyDevice
 from hindrax_drivers.transport.serial_transport import SerialTransport
-from hindrax_ident.sim.hardware import HANDOFF_TIMEOUT_S, SerialLockStep, VirtualHardware
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.hardware import HANDOFF_TIMEOUT_S, SerialLockStep, VirtualHardware
+from hindrax_sim.simulator import Simulator
 
 
 @pytest.fixture

@@ -18,9 +18,9 @@ from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, default_config_path, load_config
-from hindrax_ident.sim import model as mdl
-from hindrax_ident.sim.simulator import PulseWidthError, Simulator
-from hindrax_ident.sim.thrusters import Thrusters
+from hindrax_sim import model as mdl
+from hindrax_sim.simulator import PulseWidthError, Simulator
+from hindrax_sim.thrusters import Thrusters
 
 
 @pytest.fixture(scope="module")

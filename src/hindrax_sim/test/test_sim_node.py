@@ -16,7 +16,7 @@ from rosgraph_msgs.msg import Clock
 from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import child_env, child_process, python_executable, ros_context, wait_until
-from hindrax_ident.sim.node import SimulatorNode, time_msg
+from hindrax_sim.node import SimulatorNode, time_msg
 from hindrax_msgs.msg import ThrusterPwm
 
 pytestmark = pytest.mark.ros
@@ -207,10 +207,10 @@ def test_time_msg_rounding():
 
 
 def test_node_runs_alone_from_the_params_file():
-    """``python -m hindrax_ident.sim.node --ros-args --params-file hindrax.yaml``: /clock advances; SIGINT
+    """``python -m hindrax_sim.node --ros-args --params-file hindrax.yaml``: /clock advances; SIGINT
     ends it cleanly; an invalid parameter stops it with one line naming the key."""
     params = str(default_config_path())
-    cmd = [python_executable(), "-m", "hindrax_ident.sim.node", "--ros-args", "--params-file", params,
+    cmd = [python_executable(), "-m", "hindrax_sim.node", "--ros-args", "--params-file", params,
            "-p", "simulation.real_time_factor:=0.0"]
     with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         with ros_context() as ctx:

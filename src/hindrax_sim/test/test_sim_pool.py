@@ -6,8 +6,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim.pool import FACES, FreeSurface, Pool
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.pool import FACES, FreeSurface, Pool
+from hindrax_sim.simulator import Simulator
 
 
 @pytest.fixture(scope="module")

@@ -6,11 +6,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim import sensors as sn
-from hindrax_ident.sim.model import rotation_matrix_from_quaternion
-from hindrax_ident.sim.pool import Pool
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import load_truth
+from hindrax_sim import sensors as sn
+from hindrax_sim.model import rotation_matrix_from_quaternion
+from hindrax_sim.pool import Pool
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import load_truth
 
 G = 9.81
 

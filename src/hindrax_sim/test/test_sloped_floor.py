@@ -11,10 +11,10 @@ import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dvl75.protocol import BEAM_TILT_RAD
-from hindrax_ident.vehicle.state import SensorState
-from hindrax_ident.vehicle.signals import samples_from_dvl
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import TruthError, load_truth, truth_from_mapping, with_floor_gradient
+from hindrax_onboard.vehicle.state import SensorState
+from hindrax_onboard.vehicle.signals import samples_from_dvl
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import TruthError, load_truth, truth_from_mapping, with_floor_gradient
 
 GRAD = (-0.08, 0.03)
 
@@ -94,7 +94,7 @@ def test_dvl_emulator_reports_the_simulated_beam_ranges():
 
     from hindrax_drivers.dvl75 import protocol as dvl
     from hindrax_drivers.testing import wait_until
-    from hindrax_ident.sim.hardware import VirtualHardware
+    from hindrax_sim.hardware import VirtualHardware
 
     vehicle = load_config(default_config_path())
     sim = Simulator(vehicle, seed=3, truth=with_floor_gradient(load_truth(vehicle), (-0.15, 0.0)))

@@ -9,10 +9,10 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.vehicle.uncertainty import measurement_settings
-from hindrax_ident.identification.online.estimators import OnlineDofEstimator
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import (DISTURBANCE_SCHEMA, Disturbances, TruthError,
+from hindrax_onboard.vehicle.uncertainty import measurement_settings
+from hindrax_onboard.identification.online.estimators import OnlineDofEstimator
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import (DISTURBANCE_SCHEMA, Disturbances, TruthError,
                                      default_truth_path, load_truth, truth_dir, truth_from_mapping)
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -132,7 +132,7 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
     """``hindrax run --truth FILE``'s graph: the simulator and the emulators get the truth, every node the vehicle
     file (their parameters hold no truth-only key and the vehicle's thrust lag)."""
     from hindrax_drivers.testing import ros_context
-    from hindrax_ident.bringup import build_graph
+    from hindrax_sim.graph.bringup import build_graph
 
     p = tmp_path / "truth.yaml"
     p.write_text("thrusters: {time_constant_s: 0.25}\ndisturbances: {thrust: {scale: 0.9}}\n")
@@ -158,10 +158,10 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
 def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
     """Issue 16, done when: a truth whose thrust curves are 5 % weaker than the vehicle file's gives surge and heave
     inertia intervals that cover the truth (or a suspect verdict). The truth's hydrodynamics are the vehicle's."""
-    from hindrax_ident.sim.campaign import Campaign
-    from hindrax_ident.identification.fit.campaign_fit import identify_all_with_errors
-    from hindrax_ident.identification.fit.dof_model import truth_parameters
-    from hindrax_ident.identification.assessment.verdicts import apply_verdicts
+    from hindrax_sim.campaign import Campaign
+    from hindrax_fit.fit.campaign_fit import identify_all_with_errors
+    from hindrax_onboard.identification.model.dof_model import truth_parameters
+    from hindrax_fit.assessment.verdicts import apply_verdicts
 
     truth = load_truth(vehicle, truth_dir() / "thrust_0.95.yaml")
     assert truth.disturbances.get("thrust.scale") == 0.95

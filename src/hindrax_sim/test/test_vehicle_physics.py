@@ -1,4 +1,4 @@
-"""The vehicle physics shared below control, identification and the simulator (hindrax_ident.vehicle).
+"""The vehicle physics shared below control, identification and the simulator (hindrax_onboard.vehicle).
 
 Expected values are written out by hand: exp(-0.2) = 0.818730753, exp(-0.1) = 0.904837418; M_RB of a 10 kg body with
 its CG 0.1 m below the origin (r_g = (0, 0, 0.1) m, FRD) and I_cg = diag(1, 2, 3) kg m^2: the off-diagonal block
@@ -12,9 +12,9 @@ import pytest
 from hindrax_drivers.allocation.from_config import thrust_curve_from_config
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.frames import wrap_angle
-from hindrax_ident.sim.thrusters import Thrusters
-from hindrax_ident.vehicle.rigid_body import rigid_body_mass_matrix
-from hindrax_ident.vehicle.thrust_lag import ThrustLag
+from hindrax_sim.thrusters import Thrusters
+from hindrax_onboard.vehicle.rigid_body import rigid_body_mass_matrix
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 
 
 @pytest.mark.parametrize("time_constant_s,dt_s,decay", [(0.1, 0.02, 0.818730753), (0.1, 0.01, 0.904837418),

@@ -1,10 +1,10 @@
 """``make bench``: run the benchmark scripts and print one table, writing JSON beside it.
 
-Each module in :mod:`hindrax_ident.tools.benchmarks` (listed in :data:`BENCHMARKS`) provides
+Each module in :mod:`hindrax_tools.benchmarks` (listed in :data:`BENCHMARKS`) provides
 ``run(quick: bool) -> list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally
 ``target`` and ``note``. Benchmarks measure; tests never time anything (README, "Tests").
 
-Usage: ``python -m hindrax_ident.tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline
+Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline
 GIT_REF]``
 (``--baseline``: the stack section measures that commit's launch layout too, in the same run).
 """
@@ -20,13 +20,13 @@ import sys
 import time
 from pathlib import Path
 
-from hindrax_ident import results_doc
+from hindrax_tools import results_doc
 from hindrax_drivers.dds_transport import loopback_transport
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
-#: benchmark name -> the modules of :mod:`hindrax_ident.tools.benchmarks` whose rows form its
+#: benchmark name -> the modules of :mod:`hindrax_tools.benchmarks` whose rows form its
 #: section, each with ``run(quick)``; a section's first module is named like it
 BENCHMARKS: dict[str, tuple[str, ...]] = {name: (name,) for name in (
     "stack", "actuation", "heartbeats", "safety", "simulator", "i2c_drivers", "i2c_socket",
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline", default=None, metavar="GIT_REF",
                         help="the stack section also measures this commit's launch layout in the same run and "
                              "reports today's CPU over it "
-                             "(hindrax_ident.tools.benchmarks.stack.baseline_launch)")
+                             "(hindrax_tools.benchmarks.stack.baseline_launch)")
     results_doc.add_argument(parser)
     args = parser.parse_args(argv)
     names = [n for n in args.only.split(",") if n] or list(BENCHMARKS)
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"== {name}", flush=True)
         t0 = time.monotonic()
         for module in BENCHMARKS[name]:
-            run = importlib.import_module(f"hindrax_ident.tools.benchmarks.{module}").run
+            run = importlib.import_module(f"hindrax_tools.benchmarks.{module}").run
             extra = {"baseline": args.baseline} if args.baseline and module == "stack" else {}
             for row in run(quick=args.quick, **extra):
                 rows.append({"benchmark": name, **row})

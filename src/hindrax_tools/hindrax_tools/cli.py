@@ -6,7 +6,7 @@ command line is imported, so ``hindrax --help`` imports nothing but argparse and
 check`` does not import ROS (src/hindrax_ident/test/test_cli_help.py; time: ``make bench``).
 
 Exit status: 0 on success, 1 when the command found a problem (it raises
-:class:`~hindrax_ident.tools.commands.common.CommandError`, whose one-line message goes to
+:class:`~hindrax_tools.commands.common.CommandError`, whose one-line message goes to
 stderr), 2 on a usage error (argparse), 130 when interrupted, 141 when the reader of its output
 closed the pipe (``| head``: no traceback).
 """
@@ -24,7 +24,7 @@ from typing import Sequence
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 #: the package of the command modules
-PACKAGE = "hindrax_ident.tools.commands"
+PACKAGE = "hindrax_tools.commands"
 #: (command words, module in PACKAGE implementing add_arguments/run, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("config", "check"), "config_check",

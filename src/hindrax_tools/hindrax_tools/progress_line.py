@@ -5,7 +5,7 @@ A long command (a campaign's feedback at several hertz) must not scroll the same
 a pipe, where a carriage return would pile up, it writes a line only when the text changed. :meth:`ProgressLine.line`
 prints a line that stays (a prompt, a result), ending the updating line first. :class:`Ticker` keeps a long step
 alive on a terminal (its text and the seconds elapsed, rewritten every second) and names each new step once
-elsewhere: ``hindrax ident bag``'s fit, ``make ros-install``'s colcon build (:mod:`hindrax_ident.progress_run`).
+elsewhere: ``hindrax ident bag``'s fit, ``make ros-install``'s colcon build (:mod:`hindrax_tools.progress_run`).
 """
 from __future__ import annotations
 

@@ -1,12 +1,12 @@
-"""Run a long build command with a progress line: ``python -m hindrax_ident.progress_run LABEL [--results-doc PATH
+"""Run a long build command with a progress line: ``python -m hindrax_tools.progress_run LABEL [--results-doc PATH
 --record NAME] -- COMMAND ...`` (``make ros-install`` runs colcon through it: 4 silent minutes before).
 
 The command's output (stdout and stderr together) passes through line by line; colcon's ``Starting >>> <pkg>`` and
-``Finished <<< <pkg>`` lines also set the state shown under them (:class:`~hindrax_ident.progress_line.Ticker`: on a
+``Finished <<< <pkg>`` lines also set the state shown under them (:class:`~hindrax_tools.progress_line.Ticker`: on a
 terminal ``LABEL: building <pkgs> (<n> finished)  <s> s``, rewritten every second; in a log the state once per
 change). At the end one line says how long it took; with ``--results-doc`` and ``--record`` a successful run writes
 that time into the measurements document's ``durations`` section
-(:func:`hindrax_ident.results_doc.record_duration`). The exit status is the command's (127 when it cannot start).
+(:func:`hindrax_tools.results_doc.record_duration`). The exit status is the command's (127 when it cannot start).
 """
 from __future__ import annotations
 
@@ -77,11 +77,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """The command line (module docstring); returns the command's exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if "--" not in argv:
-        print("usage: python -m hindrax_ident.progress_run LABEL [--results-doc PATH --record NAME] -- COMMAND ...",
+        print("usage: python -m hindrax_tools.progress_run LABEL [--results-doc PATH --record NAME] -- COMMAND ...",
               file=sys.stderr)
         return 2
     split = argv.index("--")
-    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.progress_run")
+    parser = argparse.ArgumentParser(prog="python -m hindrax_tools.progress_run")
     parser.add_argument("label")
     parser.add_argument("--results-doc", default="", metavar="PATH")
     parser.add_argument("--record", default="", metavar="NAME", help="the command's row in section durations")

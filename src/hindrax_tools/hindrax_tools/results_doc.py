@@ -17,7 +17,7 @@ temporary file, then ``os.replace``).
 
 Section ``durations`` (:func:`record_duration`): one row per long command (``make setup``, ``make
 ros-install``), written by the command itself with its seconds and the machine's load; the README
-quotes them. From a shell: ``python -m hindrax_ident.results_doc duration --results-doc
+quotes them. From a shell: ``python -m hindrax_tools.results_doc duration --results-doc
 docs/results.md "make setup (new .venv)" 211``.
 """
 from __future__ import annotations
@@ -221,9 +221,9 @@ def record_duration(path: str | Path, command: str, seconds: float) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m hindrax_ident.results_doc duration --results-doc PATH COMMAND SECONDS`` (module docstring).
+    """``python -m hindrax_tools.results_doc duration --results-doc PATH COMMAND SECONDS`` (module docstring).
     Returns 0, or 1 with one line on stderr when the document cannot be written."""
-    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.results_doc")
+    parser = argparse.ArgumentParser(prog="python -m hindrax_tools.results_doc")
     sub = parser.add_subparsers(dest="what", required=True)
     dur = sub.add_parser("duration", help="record how long a command took (section durations)")
     dur.add_argument("command", help="the command as the README names it, e.g. 'make setup (new .venv)'")

@@ -1,9 +1,9 @@
-"""The stack benchmark's IMU timing (hindrax_ident.tools.benchmarks.stack.imu_timing and its rows):
+"""The stack benchmark's IMU timing (hindrax_tools.benchmarks.stack.imu_timing and its rows):
 the rate, the largest
 gap and the sample age of the IMU as the recorder receives it in the launch layout."""
 import pytest
 
-from hindrax_ident.tools.benchmarks import stack
+from hindrax_tools.benchmarks import stack
 
 MS = 1_000_000
 

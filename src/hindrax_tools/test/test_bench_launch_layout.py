@@ -56,7 +56,7 @@ def _values(directory):
 
 
 def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
-    from hindrax_ident.tools.benchmarks.launch_layout import launch_processes, package_share
+    from hindrax_tools.benchmarks.launch_layout import launch_processes, package_share
 
     inc = tmp_path / "inner.launch.xml"
     inc.write_text('<launch><arg name="rec" default="false" description="d"/><arg name="dir" default="runs" '
@@ -94,15 +94,15 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
 
 
 def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path):
-    from hindrax_ident.tools.benchmarks.launch_layout import launch_processes, package_share
-    from hindrax_ident.tools.benchmarks.stack import LAUNCH_FILE
+    from hindrax_tools.benchmarks.launch_layout import launch_processes, package_share
+    from hindrax_tools.benchmarks.stack import LAUNCH_FILE
 
     procs = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1], {"output_dir": "/tmp/b"})
     entries = [p.module for p in procs]
-    # the identification node, the controller and the recorder, in one process (hindrax_ident.composition)
-    assert "hindrax_ident.composition:ident_record_main" in entries
+    # the identification node, the controller and the recorder, in one process (hindrax_onboard.composition)
+    assert "hindrax_onboard.composition:ident_record_main" in entries
     assert not [p for p in procs if p.module.startswith("hindrax_drivers.recording")]  # recorded once
-    controller = next(p for p in procs if p.module == "hindrax_ident.composition:ident_record_main")
+    controller = next(p for p in procs if p.module == "hindrax_onboard.composition:ident_record_main")
     assert controller.process.node_names == ("identification", "controller", "recorder")
     write, written = _values(tmp_path)
     controller.process.ros_arguments(write)
@@ -117,7 +117,7 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
     write leaves nothing behind. The reader answers None until the file is there and whole."""
     import json
 
-    from hindrax_ident.tools.benchmarks import launch_layout as ll
+    from hindrax_tools.benchmarks import launch_layout as ll
 
     path = tmp_path / "ports.json"
     ports = {"dvl75": "/dev/pts/7", "ping1d": "/dev/pts/8"}
@@ -150,8 +150,8 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
 
 
 #: modules no vehicle process may hold: the virtual pool (simulator, emulated hardware) and the bench's own code
-_POOL_MODULES = ("hindrax_ident.sim", "hindrax_ident.tools.benchmarks.launch_layout",
-                 "hindrax_ident.tools.benchmarks.stack")
+_POOL_MODULES = ("hindrax_sim", "hindrax_tools.benchmarks.launch_layout",
+                 "hindrax_tools.benchmarks.stack")
 #: the processes that run drivers or safety nodes only: they hold no scipy either (frames and mountings are numpy)
 _LEAN_PROCESSES = ("sensors", "actuation", "supervisor", "output_guard", "gateway")
 #: the identification node and the controller: no scipy or filterpy at start either (the online filters step
@@ -163,7 +163,7 @@ import importlib, json, sys
 sys.argv = ["x"]
 entry = {entry!r}
 # the bench's wrapper: must add nothing heavy
-import hindrax_ident.tools.benchmarks.launch_node as launch_node
+import hindrax_tools.benchmarks.launch_node as launch_node
 module_name, _, function = entry.partition(":")
 module = importlib.import_module(module_name)
 groups = getattr(module, "GROUPS", {{}})
@@ -184,8 +184,8 @@ def test_node_processes_import_neither_the_pool_nor_scipy():
     import sys
 
     from hindrax_drivers.testing import child_env
-    from hindrax_ident.tools.benchmarks.launch_layout import launch_processes, package_share
-    from hindrax_ident.tools.benchmarks.stack import LAUNCH_FILE
+    from hindrax_tools.benchmarks.launch_layout import launch_processes, package_share
+    from hindrax_tools.benchmarks.stack import LAUNCH_FILE
 
     layout = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1])
     assert {lp.label for lp in layout} >= set(_LEAN_PROCESSES) | set(_MODEL_PROCESSES)
@@ -239,7 +239,7 @@ def test_a_profiled_node_process_writes_its_profile_although_it_ends_itself(tmp_
     import threading
 
     from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
-    from hindrax_ident.tools.benchmarks.launch_node import PROFILE_ENV
+    from hindrax_tools.benchmarks.launch_node import PROFILE_ENV
 
     (tmp_path / "profiled_probe.py").write_text(_PROFILED_NODE)
     profile_dir = tmp_path / "prof"
@@ -247,7 +247,7 @@ def test_a_profiled_node_process_writes_its_profile_although_it_ends_itself(tmp_
     env = child_env()
     env[PROFILE_ENV] = str(profile_dir)
     env["PYTHONPATH"] = str(tmp_path) + (":" + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    with child_process([python_executable(), "-m", "hindrax_ident.tools.benchmarks.launch_node",
+    with child_process([python_executable(), "-m", "hindrax_tools.benchmarks.launch_node",
                         "profiled_probe:main"],
                        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
         lines: list[str] = []
@@ -270,7 +270,7 @@ def test_benchmarked_threads_carry_their_python_names():
     import threading
     from pathlib import Path
 
-    from hindrax_ident.tools.benchmarks import launch_node
+    from hindrax_tools.benchmarks import launch_node
 
     start = threading.Thread._bootstrap_inner
     seen = {}

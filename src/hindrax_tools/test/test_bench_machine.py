@@ -1,9 +1,9 @@
-"""The machine-speed reference of the stack benchmark (hindrax_ident.tools.benchmarks.machine) and
+"""The machine-speed reference of the stack benchmark (hindrax_tools.benchmarks.machine) and
 its use
 in the rows."""
 import pytest
 
-from hindrax_ident.tools.benchmarks import machine, stack
+from hindrax_tools.benchmarks import machine, stack
 
 
 def test_the_workload_is_the_published_n_body_computation():

@@ -1,4 +1,4 @@
-"""The pool day's churn rows (hindrax_ident.tools.benchmarks.participant_churn.pool_day_rows)
+"""The pool day's churn rows (hindrax_tools.benchmarks.participant_churn.pool_day_rows)
 listen where they claim and measure each heartbeat: the topside subscriber's topics are ones the
 gateway publishes, with their types; the internal one's are /diagnostics and the three heartbeats;
 the gap of each heartbeat is its own, and a silent one is infinite."""
@@ -8,7 +8,7 @@ import pytest
 from hindrax_drivers.gateway.interface import INTERFACE
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 
-from hindrax_ident.tools.benchmarks.participant_churn import (INTERNAL_TOPICS, _Watch,
+from hindrax_tools.benchmarks.participant_churn import (INTERNAL_TOPICS, _Watch,
                                                               subscriber_argv, topside_topics)
 
 

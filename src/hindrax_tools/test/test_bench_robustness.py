@@ -1,4 +1,4 @@
-"""The parser fuzzing of the robustness benchmark (hindrax_ident.tools.benchmarks.robustness): its
+"""The parser fuzzing of the robustness benchmark (hindrax_tools.benchmarks.robustness): its
 checks run.
 
 The benchmark's DVL check read the speed gate as ``section["max_speed_m_s"]`` after the configuration became typed
@@ -7,7 +7,7 @@ harness and not in the driver. These tests fail on that kind of harness error be
 """
 from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl
 
-from hindrax_ident.tools.benchmarks import robustness
+from hindrax_tools.benchmarks import robustness
 
 
 def test_the_dvl_check_accepts_a_valid_position_delta_within_the_gates():

@@ -1,4 +1,4 @@
-"""The safety bench's authority rows (hindrax_ident.tools.benchmarks.sealed_authority) count what
+"""The safety bench's authority rows (hindrax_tools.benchmarks.sealed_authority) count what
 they claim: a UDP socket
 on every address (read from /proc by hindrax_drivers.proc_sockets) and an accepted unsigned request are counted;
 loopback and multicast sockets and refused requests are not."""
@@ -9,7 +9,7 @@ import socket
 
 from hindrax_drivers.proc_sockets import parse_udp_table, reachable_from_network, udp_sockets
 
-from hindrax_ident.tools.benchmarks.sealed_authority import exposure_row, signing_rows
+from hindrax_tools.benchmarks.sealed_authority import exposure_row, signing_rows
 
 #: /proc/net/udp as the kernel writes it: 0.0.0.0:7400 (inode 111), 127.0.0.1:7410 (222), 239.255.0.1:7400 (333)
 UDP_TABLE = """\

@@ -13,9 +13,9 @@ import rclpy
 from hindrax_drivers.launch_xml import write_parameter_file
 from hindrax_drivers.testing import (child_env, child_process, python_executable, ros_context,
                                      wait_until)
-from hindrax_ident.tools.benchmarks import stack
-from hindrax_ident.tools.benchmarks.launch_layout import launch_processes, package_share
-from hindrax_ident.tools.benchmarks.launch_node import TOPOLOGY_ENV
+from hindrax_tools.benchmarks import stack
+from hindrax_tools.benchmarks.launch_layout import launch_processes, package_share
+from hindrax_tools.benchmarks.launch_node import TOPOLOGY_ENV
 
 #: processes of the pool-test launch that run without the virtual pool's devices
 _NO_DEVICES = ("supervisor", "gateway")
@@ -33,7 +33,7 @@ def launch_topology(tmp_path_factory):
     (tmp / "params").mkdir()
     values = functools.partial(write_parameter_file, directory=tmp / "params")
     env = child_env(**{TOPOLOGY_ENV: str(tmp)})
-    launch_node = [python_executable(), "-m", "hindrax_ident.tools.benchmarks.launch_node"]
+    launch_node = [python_executable(), "-m", "hindrax_tools.benchmarks.launch_node"]
     with contextlib.ExitStack() as stack_:
         procs = {lp.label: stack_.enter_context(child_process(
             [*launch_node, lp.module, *lp.process.ros_arguments(values)],

@@ -1,6 +1,6 @@
 """Calibration steps on the ROS graph: the run_identification goal's ``calibrate`` field, the
 operator prompt in the action feedback and in ``identification/status``, the ``identification/continue`` service
-(std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_ident.graph_campaign.
+(std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_sim.graph.graph_campaign.
 VirtualOperator`) and the ``calibration.*`` keys of the vehicle file.
 
 The graph tests shorten the ballast step's settling and averaging times (executive module constants, read at run
@@ -15,9 +15,9 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import ConfigError, default_config_path, load_config, ros_parameters_from_yaml
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.online import executive
-from hindrax_ident.graph_campaign import VirtualOperator, parse_prompt
+from hindrax_tools import cli
+from hindrax_onboard.identification.online import executive
+from hindrax_sim.graph.graph_campaign import VirtualOperator, parse_prompt
 
 # the shipped keys: 1 kg of steel (7850 kg/m^3), in water of 1000 kg/m^3 with g = 9.81 m/s^2
 W_BALLAST = (1.0 - 1000.0 / 7850.0) * 9.81
@@ -170,8 +170,8 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
     seed 3 roll 4.464 +- 0.136, pitch 4.554 +- 0.139 (within 2.3 %, |z| < 0.8). Without the thrusters' realised
     moment on the free DOF (thruster_moment_n_m, about 0.02 N m against the mass's 0.64 N m) pitch read 6 % high
     (2.8 std)."""
-    from hindrax_ident.sim.campaign import Campaign
-    from hindrax_ident.identification.online.executive import inclining_load
+    from hindrax_sim.campaign import Campaign
+    from hindrax_onboard.identification.online.executive import inclining_load
 
     monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 10.0)
     monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 21.0)

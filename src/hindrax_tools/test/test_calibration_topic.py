@@ -13,9 +13,9 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.bag_input import calibration_topic
-from hindrax_ident.identification.fit.dof_model import parameter_names
+from hindrax_tools import cli
+from hindrax_onboard.identification.model import calibration_topic
+from hindrax_onboard.identification.model.dof_model import parameter_names
 
 # step results in the steps' layout (identification/steps: Ballast, LinePull, Inclining, TiltDecay): the holding
 # forces and their parts from forward and reverse thrust
@@ -128,7 +128,7 @@ def _write_campaign_bag(path, cfg, calibration_msg, cut_s=None):
 
 def _ident(dof, values, stds, cfg):
     """A DofIdentification stand-in (what identify_all_with_errors returns; test_joint_estimation's layout)."""
-    from hindrax_ident.identification.fit.dof_model import rigid_inertia
+    from hindrax_onboard.identification.model.dof_model import rigid_inertia
 
     names = parameter_names(dof)
     vals = dict(zip(names, values))
@@ -149,9 +149,9 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     step. Without the message: no such sections and the force unscaled."""
     from builtin_interfaces.msg import Time
 
-    from hindrax_ident.identification.assessment import report
-    from hindrax_ident.identification.assessment import pipeline
-    from hindrax_ident.identification.fit.calibration import thrust_scales
+    from hindrax_fit.assessment import report
+    from hindrax_fit.assessment import pipeline
+    from hindrax_fit.fit.calibration import thrust_scales
 
     cfg = load_config(default_config_path())
     # a free decay of an earlier goal (the node's message is cumulative) has no data in this bag: left out
@@ -176,7 +176,7 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     (rec,) = seen
     z = rec.wrench_cmd_frd[:, 2]
     assert np.max(np.abs(z)) > 1.0  # the heave run's thrust
-    from hindrax_ident.identification.bag_input.from_bag import record_from_bag
+    from hindrax_fit.bag_input.from_bag import record_from_bag
     raw = record_from_bag(bag, cfg).wrench_cmd_frd[:, 2]
     if not with_calibration:
         assert np.array_equal(z, raw)
@@ -256,7 +256,7 @@ def test_tilt_decay_command_uses_the_campaigns_verdict_rule(tmp_path, capsys, mo
 
     from scipy.integrate import solve_ivp
 
-    from hindrax_ident.identification.assessment import results, verdicts
+    from hindrax_fit.assessment import results, verdicts
 
     c, inertia, b1, b2 = 4.5, 0.96, 0.05, 1.3
     sol = solve_ivp(lambda _t, x: [x[1], -(b1 * x[1] + b2 * abs(x[1]) * x[1] + c * x[0]) / inertia], (0.0, 25.0),

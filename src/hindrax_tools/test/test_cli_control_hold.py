@@ -2,7 +2,7 @@
 each, before anything is sent. The hold itself, on the launch flying in the live pool: test/test_pool_day.py."""
 import pytest
 
-from hindrax_ident.tools import cli
+from hindrax_tools import cli
 
 
 @pytest.mark.parametrize("argv, said", [

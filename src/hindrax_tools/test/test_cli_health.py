@@ -14,7 +14,7 @@ pytestmark = pytest.mark.ros
 
 
 def hindrax(*args: str, timeout: float = 60, **env: str) -> subprocess.CompletedProcess:
-    return subprocess.run([python_executable(), "-m", "hindrax_ident.tools.cli", *args],
+    return subprocess.run([python_executable(), "-m", "hindrax_tools.cli", *args],
                           env=child_env(**env),
                           capture_output=True, text=True, timeout=timeout)
 
@@ -42,7 +42,7 @@ def test_health_refuses_an_undeclared_launch_argument_in_one_line():
 
 
 def test_bringup_without_sim_says_the_vehicle_runs_the_launch_file():
-    from hindrax_ident.tools.commands.bringup import VEHICLE_NOTICE
+    from hindrax_tools.commands.bringup import VEHICLE_NOTICE
 
     assert "ros2 launch hindrax_drivers vehicle.launch.xml" in VEHICLE_NOTICE
     help_text = hindrax("bringup", "--help").stdout

@@ -17,14 +17,14 @@ HEAVY = ("numpy", "scipy", "rclpy", "yaml", "mcap", "hindrax_drivers")
 
 _PROBE = """
 import json, sys
-from hindrax_ident.tools import cli
+from hindrax_tools import cli
 try:
     status = cli.main(json.loads(sys.argv[1]))
 except SystemExit as exc:
     status = exc.code
 heavy = json.loads(sys.argv[2])
 loaded = sorted({m.split(".")[0] for m in sys.modules if m.split(".")[0] in heavy})
-commands = sorted(m for m in sys.modules if m.startswith("hindrax_ident.tools.commands."))
+commands = sorted(m for m in sys.modules if m.startswith("hindrax_tools.commands."))
 sys.stderr.write(json.dumps({"status": status, "loaded": loaded, "commands": commands}) + "\\n")
 """
 
@@ -47,7 +47,7 @@ def test_help_of_the_command_tree_imports_no_command_module(argv):
 
 
 def test_top_level_help_lists_every_command():
-    from hindrax_ident.tools.cli import COMMANDS
+    from hindrax_tools.cli import COMMANDS
 
     out = probe(["--help"])["stdout"]
     assert all(words[0] in out for words, _m, _h in COMMANDS)
@@ -57,8 +57,8 @@ def test_help_of_one_command_imports_that_command_only():
     """``hindrax bag info --help`` shows its arguments, loading bag/info.py (and no ROS, no numpy)."""
     r = probe(["bag", "info", "--help"])
     assert r["status"] == 0 and "usage: hindrax bag info [-h] bag" in r["stdout"]
-    assert r["commands"] == ["hindrax_ident.tools.commands.bag",
-                             "hindrax_ident.tools.commands.bag.info"]
+    assert r["commands"] == ["hindrax_tools.commands.bag",
+                             "hindrax_tools.commands.bag.info"]
     assert r["loaded"] == []
 
 

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.estimation.thruster_fit import point_reflection
-from hindrax_ident.identification.assessment.results import read_identification
+from hindrax_tools import cli
+from hindrax_onboard.estimation.thruster_fit import point_reflection
+from hindrax_fit.assessment.results import read_identification
 
 K, MB, MAD, ZETA, A, V = 659.9, 0.39, 0.82, 0.15, 0.02, 0.00056
 
@@ -152,7 +152,7 @@ def one_simulated_campaign(monkeypatch, _campaign_records):
     is where each run writes, so each campaign of the same settings (DOFs, levels, seed, level duration, calibration,
     excitation; the default truth: no ``--truth``) is simulated once and every run gets a copy of its record (the
     identification, report and folders still run each time)."""
-    from hindrax_ident.sim import campaign
+    from hindrax_sim import campaign
 
     class Reused(campaign.Campaign):
         def __init__(self, cfg, dofs, levels=None, seed=None, max_level_duration_s=None, **kwargs):
@@ -184,7 +184,7 @@ def test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion(t
     """Issue 45.3: the second run of the same second picks a new name with one line; an aborted run leaves latest."""
     import datetime as dt
 
-    from hindrax_ident import output_dirs
+    from hindrax_tools import output_dirs
 
     monkeypatch.chdir(tmp_path)
     frozen = dt.datetime(2026, 11, 25, 12, 0, 0)
@@ -204,7 +204,7 @@ def test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion(t
     assert os.readlink(runs / "latest") == names[1]
     assert all((runs / n / "identification.yaml").is_file() for n in names)  # the first result is intact
     # a run without a result (no DOF identified) does not move latest
-    import hindrax_ident.identification.fit.calibration as calibration
+    import hindrax_fit.fit.calibration as calibration
 
     monkeypatch.setattr(calibration, "identify_calibrated", lambda *a, **k: ({}, {"yaw": "no data"}))
     assert cli.main(argv) == 1

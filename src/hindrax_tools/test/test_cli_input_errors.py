@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from hindrax_drivers.testing import child_env
-from hindrax_ident.tools import cli
+from hindrax_tools import cli
 
 
 @pytest.fixture
@@ -31,7 +31,7 @@ def test_binary_or_deeply_nested_yaml_is_one_line(bad_inputs, argv, capsys):
 
 
 def test_a_closed_output_pipe_ends_quietly():
-    p = subprocess.Popen([sys.executable, "-m", "hindrax_ident.tools.cli", "config", "check"],
+    p = subprocess.Popen([sys.executable, "-m", "hindrax_tools.cli", "config", "check"],
                          env=child_env(),
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     p.stdout.close()  # the reader is gone before the first line: every write meets a closed pipe (| head)

@@ -15,10 +15,10 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.sim import control_evaluate as ev
-from hindrax_ident.control.model import ControlModel, model_from_config
-from hindrax_ident.sim.truth import load_truth, truth_dir
+from hindrax_tools import cli
+from hindrax_sim import control_evaluate as ev
+from hindrax_onboard.control.model import ControlModel, model_from_config
+from hindrax_sim.truth import load_truth, truth_dir
 
 CONTROL_TRUTH = truth_dir() / "control.yaml"
 
@@ -139,7 +139,7 @@ def test_the_hold_loop_keeps_its_sample_logs_bounded(cfg, monkeypatch):
     """The controller runs between goals for hours with its sensor streams open: its HoldLoop cuts the state's
     sample logs to the last LOG_HORIZON_S seconds (each log's newest sample kept), so they stop growing, while the
     depth step still holds (the law reads only recent samples)."""
-    from hindrax_ident.control import loop as loop_module
+    from hindrax_onboard.control import loop as loop_module
 
     seen = []
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.online.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band,
+from hindrax_onboard.identification.online.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band,
                                                             design_signal, steady_speed)
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -111,7 +111,7 @@ def test_box_shaping_keeps_a_double_integrator_with_drag_inside_the_box(kind):
 
 
 def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
-    from hindrax_ident.identification.online.executive import Executive
+    from hindrax_onboard.identification.online.executive import Executive
 
     cfg = load_config(default_config_path())
     assert cfg.identification.excitation == "ladder"
@@ -125,8 +125,8 @@ def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
 
 
 def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
-    from hindrax_ident.sim.campaign import Campaign
-    from hindrax_ident.identification.fit.campaign_fit import identify_dof
+    from hindrax_sim.campaign import Campaign
+    from hindrax_fit.fit.campaign_fit import identify_dof
 
     cfg = load_config(default_config_path())
     rec = Campaign(cfg, dofs=["surge"], seed=3, excitation="multisine", excitation_duration_s=40.0).run()
@@ -149,8 +149,8 @@ def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
 def test_run_options_reach_the_campaign_and_the_graph_override():
     import argparse
 
-    from hindrax_ident.tools.commands import run as run_cmd
-    from hindrax_ident.tools.commands.common import CommandError
+    from hindrax_tools.commands import run as run_cmd
+    from hindrax_tools.commands.common import CommandError
 
     parser = argparse.ArgumentParser(prog="hindrax run")
     run_cmd.add_arguments(parser)
@@ -165,7 +165,7 @@ def test_run_options_reach_the_campaign_and_the_graph_override():
 
 
 def test_excitation_table_scales_errors_to_100_s_of_pool_time():
-    from hindrax_ident.tools.commands.scenarios import format_excitation_table
+    from hindrax_tools.commands.scenarios import format_excitation_table
 
     def row(param, err, std_fit, truth, covered):
         return {"dof": "surge", "parameter": param, "rel_error": err, "std": 99.0, "std_fit": std_fit,

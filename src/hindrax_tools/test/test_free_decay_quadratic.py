@@ -15,9 +15,9 @@ import json
 import numpy as np
 import pytest
 
-from hindrax_ident.tools import cli
-from hindrax_ident.estimation.free_decay import fit_quadratic_free_decay
-from hindrax_ident.estimation.least_squares import EstimationError
+from hindrax_tools import cli
+from hindrax_onboard.estimation.free_decay import fit_quadratic_free_decay
+from hindrax_onboard.estimation.least_squares import EstimationError
 
 K, MB, MAD, B1, B2, AMP, V = 659.9, 0.39, 0.82, 0.4, 5.0, 0.02, 0.00056
 

@@ -212,7 +212,7 @@ def pool(tmp_path_factory):
 
 
 def hindrax(pool, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hindrax_ident.tools.cli", *args],
+    return subprocess.run([sys.executable, "-m", "hindrax_tools.cli", *args],
                           capture_output=True, text=True,
                           env=child_env(ROS_DOMAIN_ID=str(pool["topside"]), HINDRAX_KEYS_DIR=str(pool["keys"])),
                           timeout=120)
@@ -397,7 +397,7 @@ def test_an_arm_an_estop_overtook_is_refused_and_the_vehicle_disarmed(pool, tops
     alpha.arm_entered.clear()
     alpha.arm_gate.clear()  # the ESC takes the arm and holds its answer
     env = child_env(ROS_DOMAIN_ID=str(pool["topside"]), HINDRAX_KEYS_DIR=str(pool["keys"]))
-    with subprocess.Popen([sys.executable, "-m", "hindrax_ident.tools.cli", "arm", "--vehicle",
+    with subprocess.Popen([sys.executable, "-m", "hindrax_tools.cli", "arm", "--vehicle",
                            "alpha", "--timeout", "30"],
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) as arm:
         try:

@@ -3,8 +3,8 @@ parameters on a synthetic record simulated with a different integrator and a fin
 import numpy as np
 import pytest
 
-from hindrax_ident.tools.benchmarks import graybox
-from hindrax_ident.identification.fit.fit_core import Chunk, DofRecord
+from hindrax_tools.benchmarks import graybox
+from hindrax_fit.fit.fit_core import Chunk, DofRecord
 
 TRUTH = {"mass": 40.0, "linear_damping": 12.0, "quadratic_damping": 60.0, "bias": 0.8, "delay_s": 0.25,
          "lag_s": 0.1}

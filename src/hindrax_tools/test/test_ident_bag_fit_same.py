@@ -30,12 +30,12 @@ import yaml
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_ident.identification.assessment.pipeline import OverlappedFits, _ready, identify_bag
-from hindrax_ident.identification.bag_input import from_bag
-from hindrax_ident.identification.fit.campaign_fit import fit_dofs
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.fit.dof_model import truth_parameters
-from hindrax_ident.vehicle.signals import thrust_of_written_widths
+from hindrax_fit.assessment.pipeline import OverlappedFits, _ready, identify_bag
+from hindrax_fit.bag_input import from_bag
+from hindrax_fit.fit.campaign_fit import fit_dofs
+from hindrax_tools import cli
+from hindrax_onboard.identification.model.dof_model import truth_parameters
+from hindrax_onboard.vehicle.signals import thrust_of_written_widths
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -161,18 +161,18 @@ def test_ident_bag_and_ident_fit_give_the_same_values_and_intervals(tmp_path, ca
 
 def test_one_verdict_path_for_both_document_builders(tmp_path):
     """Issue 27 item 1, the verdicts: the same fit core result written by ``hindrax ident bag``'s builder
-    (:func:`~hindrax_ident.identification.assessment.results.build_results`: empirical priors by the joint estimate,
-    thrust-curve covariance and checks by :func:`~hindrax_ident.identification.assessment.verdicts.assess_dof`) and by
-    ``hindrax ident fit``'s (:func:`~hindrax_ident.identification.assessment.results.
+    (:func:`~hindrax_fit.assessment.results.build_results`: empirical priors by the joint estimate,
+    thrust-curve covariance and checks by :func:`~hindrax_fit.assessment.verdicts.assess_dof`) and by
+    ``hindrax ident fit``'s (:func:`~hindrax_fit.assessment.results.
     build_document`) gives the same values,
     std (with the thrust curve), std_fit, priors, intervals and verdicts; the campaign builder may add DOF-wide
     reasons only from its steady windows (evidence the generic reader does not have) and the residual whiteness.
     Fails when either builder changes its priors, thrust term, intervals or per-parameter checks alone. (The
     whiteness check is the designed campaign's only.)"""
-    from hindrax_ident.identification.assessment.results import build_document
-    from hindrax_ident.identification.fit import fit_any
-    from hindrax_ident.identification.assessment.results import build_results
-    from hindrax_ident.vehicle.uncertainty import declared_rel
+    from hindrax_fit.assessment.results import build_document
+    from hindrax_fit.fit import fit_any
+    from hindrax_fit.assessment.results import build_results
+    from hindrax_onboard.vehicle.uncertainty import declared_rel
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"
@@ -238,7 +238,7 @@ def test_a_parameter_at_its_bound_says_so_instead_of_an_interval(tmp_path, capsy
     it >= 0) puts linear_damping on its bound 0 (the empirical priors off, ``identification.prior_std_rel: 0``: they
     would pull it just off the bound). identification.yaml marks it (``at_bound``), the printed row gives that
     reason, and the report's interval cell says there is none."""
-    from hindrax_ident.tools.commands.common import update_vehicle_file
+    from hindrax_tools.commands.common import update_vehicle_file
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"

@@ -1,9 +1,9 @@
 """``hindrax ident fit`` (issues 18 and 27): identification from bags of standard messages only (WrenchStamped on
 /wrench and Odometry on /odometry, REP-103 FLU) written by a piloted virtual-pool run
-(:mod:`hindrax_ident.sim.piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
+(:mod:`hindrax_sim.piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
 late and bursty receive times, a 1.5 s gap, a 50 ms actuation delay).
 
-Acceptance (issue): the truth of the simulator (:func:`~hindrax_ident.identification.fit.dof_model.truth_parameters` on
+Acceptance (issue): the truth of the simulator (:func:`~hindrax_onboard.identification.model.dof_model.truth_parameters` on
 the truth configuration) recovered within 10 % for surge, sway, heave and yaw inertia and quadratic damping; nrmse on
 a held-out piloted bag below 0.3 for surge, sway and heave. Also: the output files and their sections, the
 preprocessing report, "not excited" DOFs, and the one-line errors (topic, type, frames, too little data).
@@ -17,13 +17,13 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.fit.dof_model import truth_parameters
-from hindrax_ident.identification.assessment.pipeline import fit_bags
-from hindrax_ident.identification.bag_input.any_topics import FitOptions, TopicChoice, preprocess_bag
-from hindrax_ident.identification.fit.fit_core import SegmentData, coriolis_products, validation_measures
-from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
-from hindrax_ident.sim.truth import load_truth
+from hindrax_tools import cli
+from hindrax_onboard.identification.model.dof_model import truth_parameters
+from hindrax_fit.assessment.pipeline import fit_bags
+from hindrax_fit.bag_input.any_topics import FitOptions, TopicChoice, preprocess_bag
+from hindrax_fit.fit.fit_core import SegmentData, coriolis_products, validation_measures
+from hindrax_sim.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_sim.truth import load_truth
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -243,7 +243,7 @@ def test_too_little_data_says_how_much_is_needed(tmp_path, capsys):
 
 
 def test_a_non_empty_out_folder_is_refused_before_the_fit(tmp_path, capsys, monkeypatch):
-    import hindrax_ident.identification.assessment.pipeline as pipeline
+    import hindrax_fit.assessment.pipeline as pipeline
 
     fits = []
     monkeypatch.setattr(pipeline, "fit_bags", lambda *a, **k: fits.append(a))

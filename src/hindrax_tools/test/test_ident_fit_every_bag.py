@@ -18,8 +18,8 @@ import pytest
 
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.bag_input.any_topics import ACCEPTED
+from hindrax_tools import cli
+from hindrax_fit.bag_input.any_topics import ACCEPTED
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

@@ -8,7 +8,7 @@
   the blocks grow and the bias std follows the correlation; with white measurement noise only, the reported std stays
   the model-based one within a factor 1.5.
 * Without ``--config`` the file holds ``inertia`` but no ``added_mass``: ``config_ready: false`` with the reason,
-  printed too, and :func:`~hindrax_ident.identification.assessment.results.to_config_overrides` refuses it in one line.
+  printed too, and :func:`~hindrax_fit.assessment.results.to_config_overrides` refuses it in one line.
 """
 from __future__ import annotations
 
@@ -20,10 +20,10 @@ import yaml
 from scipy import signal, stats
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
-from hindrax_ident.identification.assessment.results import IdentificationFileError, to_config_overrides
+from hindrax_tools import cli
+from hindrax_fit.fit import fit_core
+from hindrax_sim.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_fit.assessment.results import IdentificationFileError, to_config_overrides
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

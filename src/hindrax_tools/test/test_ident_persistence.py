@@ -12,11 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_ident.tools.commands.ident_fit import format_table
+from hindrax_tools.commands.ident_fit import format_table
 
-from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.assessment.results import assessment, build_document
-from hindrax_ident.identification.fit.fit_any import DofFit, FitResult
+from hindrax_fit.fit import fit_core
+from hindrax_fit.assessment.results import assessment, build_document
+from hindrax_fit.fit.fit_any import DofFit, FitResult
 
 
 def _noise_record(syn, seed: int = 3) -> fit_core.DofRecord:

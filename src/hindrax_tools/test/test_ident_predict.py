@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_tools import cli
+from hindrax_sim.piloted_bag import PilotSettings, write_piloted_bag
 
 
 def _read(path):
@@ -95,7 +95,7 @@ def test_predict_csv_scored_independently_matches_the_printed_nrmse(fitted, caps
 
 
 def test_residual_autocorrelation_of_the_report_follows_its_definition():
-    from hindrax_ident.identification.assessment.report import residual_acf
+    from hindrax_fit.assessment.report import residual_acf
 
     rng = np.random.default_rng(4)
     # an AR(1) residual with coefficient 0.8 in 40 segments of 100 samples: lag-k autocorrelation 0.8^k

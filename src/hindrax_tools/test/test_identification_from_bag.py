@@ -13,7 +13,7 @@ from sensor_msgs.msg import FluidPressure
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import child_env
-from hindrax_ident.identification.bag_input.from_bag import BagContentError, record_from_messages
+from hindrax_fit.bag_input.from_bag import BagContentError, record_from_messages
 from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -155,7 +155,7 @@ def test_bag_record_is_the_messages_record_by_either_decoder(tmp_path, monkeypat
     from hindrax_drivers.recording import reader
     from hindrax_drivers.recording.msgtypes import TypeNotInstalledError
     from hindrax_drivers.recording.writer import BagWriter, WriterOptions
-    from hindrax_ident.identification.bag_input.from_bag import record_from_bag
+    from hindrax_fit.bag_input.from_bag import record_from_bag
 
     cfg = load_config(default_config_path())
     msgs = _messages(cfg)

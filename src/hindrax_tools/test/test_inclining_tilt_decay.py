@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_ident.tools import cli
-from hindrax_ident.estimation.free_decay import restoring_from_inclining
-from hindrax_ident.estimation.least_squares import EstimationError
+from hindrax_tools import cli
+from hindrax_onboard.estimation.free_decay import restoring_from_inclining
+from hindrax_onboard.estimation.least_squares import EstimationError
 
 
 
@@ -121,7 +121,7 @@ def test_tilt_decay_gives_rigid_plus_added_inertia_and_compares_with_the_campaig
 def test_tilt_decay_verdict_against_identification_yaml(tmp_path, capsys, monkeypatch):
     """A self-propelled roll inertia 10 % high (thrust curve 10 % optimistic) with a tight interval is suspect;
     one within its interval agrees."""
-    from hindrax_ident.identification.assessment import results
+    from hindrax_fit.assessment import results
 
     f = tmp_path / "roll.csv"
     _roll_decay_csv(f)

@@ -1,10 +1,10 @@
-"""Result folders (hindrax_ident.output_dirs): new per result, named by input and time, latest moved atomically."""
+"""Result folders (hindrax_tools.output_dirs): new per result, named by input and time, latest moved atomically."""
 import datetime as dt
 import os
 
 import pytest
 
-from hindrax_ident.output_dirs import OutputDirError, explicit_result_dir, new_result_dir, point_latest
+from hindrax_tools.output_dirs import OutputDirError, explicit_result_dir, new_result_dir, point_latest
 
 NOW = dt.datetime(2026, 11, 25, 12, 0, 0)
 

@@ -33,9 +33,9 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import DOFS, default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.estimation.least_squares import EstimationError
-from hindrax_ident.estimation.priors import (Geometry, PriorInputs, added_mass_priors, empirical_priors,
+from hindrax_tools import cli
+from hindrax_onboard.estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.priors import (Geometry, PriorInputs, added_mass_priors, empirical_priors,
                                              priors_from_config, quadratic_damping_priors)
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -150,9 +150,9 @@ def test_cli_priors_geometry_and_config(tmp_path, capsys):
 
 
 def test_identification_yaml_shows_the_priors_beside_the_identified_values():
-    from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+    from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                             truth_parameters)
-    from hindrax_ident.identification.assessment.results import build_results
+    from hindrax_fit.assessment.results import build_results
 
     cfg = load_config(default_config_path())
     truth = truth_parameters(cfg, "surge")
@@ -172,8 +172,8 @@ def test_identification_yaml_shows_the_priors_beside_the_identified_values():
     assert prior["quadratic_damping"] == pytest.approx(expected["quadratic_damping"][0])
     assert "NTNU-Thesis" in prior["source"]
     # the report's references section shows the prior beside the identified value, and the calibration
-    from hindrax_ident.identification.fit.calibration import calibration_section
-    from hindrax_ident.identification.assessment.report import references_html
+    from hindrax_fit.fit.calibration import calibration_section
+    from hindrax_fit.assessment.report import references_html
 
     doc["calibration"] = calibration_section({"vertical": {"value": 0.9012, "std": 0.0044, "known_force_n": 8.56,
                                                            "holding_force_n": [0.85, -8.65], "method": "ballast"}})
@@ -191,7 +191,7 @@ def test_table_spline_is_scipys_not_a_knot_spline():
     import numpy as np
     from scipy.interpolate import CubicSpline
 
-    from hindrax_ident.estimation.priors import ADDED_MASS_2D, ADDED_MASS_3D, DRAG_2D, DRAG_3D, not_a_knot_spline
+    from hindrax_onboard.estimation.priors import ADDED_MASS_2D, ADDED_MASS_3D, DRAG_2D, DRAG_3D, not_a_knot_spline
 
     rng = np.random.default_rng(3)
     cases = [(np.sort(rng.choice(np.linspace(0.0, 10.0, 201), n, replace=False)), rng.normal(size=n))

@@ -4,9 +4,9 @@ import io
 import sys
 import threading
 
-from hindrax_ident import progress_run
-from hindrax_ident.progress_line import ProgressLine, Ticker
-from hindrax_ident.results_doc import duration_rows, record_duration
+from hindrax_tools import progress_run
+from hindrax_tools.progress_line import ProgressLine, Ticker
+from hindrax_tools.results_doc import duration_rows, record_duration
 
 
 def test_a_log_gets_each_state_once():

@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from hindrax_drivers.testing import child_env, python_executable
-from hindrax_ident.results_doc import ResultsDocError, markdown_table, write_section
+from hindrax_tools.results_doc import ResultsDocError, markdown_table, write_section
 
 
 def test_sections_are_created_replaced_and_kept_apart(tmp_path):
@@ -106,19 +106,19 @@ def test_markdown_table_escapes_pipes():
 
 
 def test_bench_writes_its_section_only_when_asked(tmp_path):
-    """``python -m hindrax_ident.tools.bench --results-doc PATH`` writes the rows of its
+    """``python -m hindrax_tools.bench --results-doc PATH`` writes the rows of its
     results.json into PATH's section,
     names the command, and leaves the other sections alone; without the option it writes no document."""
     doc = tmp_path / "results.md"
     write_section(doc, "scenarios", "Scenario suite", "| a |\n|---|\n| kept |", "hindrax ident scenarios")
-    cmd = [python_executable(), "-m", "hindrax_ident.tools.bench", "--only", "cli", "--quick",
+    cmd = [python_executable(), "-m", "hindrax_tools.bench", "--only", "cli", "--quick",
            "--out", str(tmp_path / "b")]
     r = subprocess.run(cmd + ["--results-doc", str(doc)], env=child_env(), capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     text = doc.read_text()
     assert "| kept |" in text  # the other section survives
     section = text[text.index("<!-- results:bench-cli:begin -->"):text.index("<!-- results:bench-cli:end -->")]
-    assert "`python -m hindrax_ident.tools.bench --only cli --quick" in section
+    assert "`python -m hindrax_tools.bench --only cli --quick" in section
     rows = json.loads((tmp_path / "b" / "results.json").read_text())["rows"]
     assert rows and all(f"| cli | {row['name']} | " in section for row in rows)
     other = tmp_path / "untouched.md"

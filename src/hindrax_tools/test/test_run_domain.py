@@ -1,7 +1,7 @@
 """hindrax run keeps its graph to itself: without ROS_DOMAIN_ID it reserves a domain that no other run holds."""
 from __future__ import annotations
 
-from hindrax_ident.graph_campaign import run_domain
+from hindrax_sim.graph.graph_campaign import run_domain
 
 
 def test_two_runs_get_different_reserved_domains_and_say_which(monkeypatch):

@@ -12,8 +12,8 @@ import pytest
 
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.testing import child_process, own_domain_env, wait_until
-from hindrax_ident.tools import cli
-from hindrax_ident.tools.commands import decode
+from hindrax_tools import cli
+from hindrax_tools.commands import decode
 
 
 @pytest.mark.ros
@@ -23,7 +23,7 @@ def test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind(tm
     tmp.mkdir()
     out = tmp_path / "out"
     lines: list[str] = []
-    with child_process([sys.executable, "-m", "hindrax_ident.tools.cli", "run", "--dofs", "surge",
+    with child_process([sys.executable, "-m", "hindrax_tools.cli", "run", "--dofs", "surge",
                         "--levels", "1",
                         "--out", str(out)], env=own_domain_env(TMPDIR=str(tmp)), stdout=subprocess.PIPE,
                        stderr=subprocess.STDOUT, text=True) as p:

@@ -16,10 +16,10 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.identification.fit.calibration import apply_thrust_calibration, calibration_section, thrust_scales
-from hindrax_ident.identification.online.executive import Executive
-from hindrax_ident.sim.truth import truth_dir
+from hindrax_tools import cli
+from hindrax_fit.fit.calibration import apply_thrust_calibration, calibration_section, thrust_scales
+from hindrax_onboard.identification.online.executive import Executive
+from hindrax_sim.truth import truth_dir
 
 THRUST_090 = truth_dir() / "scenarios" / "thrust_0.90.yaml"
 ASYMMETRIC = truth_dir() / "scenarios" / "thrust_asymmetric.yaml"
@@ -60,7 +60,7 @@ def test_steps_measure_each_direction_and_the_wrench_is_rebuilt_per_thruster():
     from scipy import signal
 
     from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
-    from hindrax_ident.identification.fit.calibration import scale_model
+    from hindrax_fit.fit.calibration import scale_model
 
     cfg = load_config(default_config_path())
     cal = _rows(cfg)
@@ -141,7 +141,7 @@ def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys
     direction's scale within 3 std. (`--calibrate ballast,line_pull` on this pool: heave damping -22 % down, +26 %
     up, all suspect.) The horizontal pulls: test_line_pull_measures_... below and test_campaign_steps.py; the whole
     `--calibrate thrust` over five seeds: the scenario suite (docs/identification.md §6.2)."""
-    from hindrax_ident.identification.online import executive
+    from hindrax_onboard.identification.online import executive
 
     monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 8.0)
     monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 18.0)
@@ -167,8 +167,8 @@ def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys
 def test_line_pull_measures_the_horizontal_scale_in_surge_and_sway():
     """Dive and the two line pulls only (no ladders): 4.905 N along body +x, then +y, under the thrust x0.90 truth;
     holds shortened (the vehicle file's calibration.hold_*: 5 s settling, 12 s averaging, four 3 s blocks)."""
-    from hindrax_ident.sim.campaign import Campaign
-    from hindrax_ident.sim.simulator import Simulator
+    from hindrax_sim.campaign import Campaign
+    from hindrax_sim.simulator import Simulator
 
     cfg = load_config(default_config_path()).with_overrides({"calibration.hold_settle_s": 5.0,
                                                              "calibration.hold_window_s": 12.0})

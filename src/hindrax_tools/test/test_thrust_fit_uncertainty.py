@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.estimation.thruster_fit import fit_thruster_curve, point_reflection
-from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+from hindrax_tools import cli
+from hindrax_onboard.estimation.thruster_fit import fit_thruster_curve, point_reflection
+from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         truth_parameters)
-from hindrax_ident.identification.assessment.verdicts import assess_dof
+from hindrax_fit.assessment.verdicts import assess_dof
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -108,7 +108,7 @@ def test_thruster_fit_write_sets_the_interval_width(tmp_path, capsys, noise_n, n
 
 def test_the_joint_estimate_scale_prior_follows_the_fit_too():
     """Each rotation direction's scale has the prior of its own curve (issue 26 item 1)."""
-    from hindrax_ident.identification.fit.calibration import scale_prior_stds
+    from hindrax_fit.fit.calibration import scale_prior_stds
 
     declared = load_config(default_config_path())
     fitted = load_config(default_config_path(), {"thrusters.thrust_fit_uncertainty_rel": [0.006, 0.008]})

@@ -1,12 +1,12 @@
-"""Tests of hindrax_ident.estimation.thruster_fit ([Hindrax-Drag] eq. 1, section 2.2.1, Table 2)."""
+"""Tests of hindrax_onboard.estimation.thruster_fit ([Hindrax-Drag] eq. 1, section 2.2.1, Table 2)."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hindrax_ident.estimation.least_squares import EstimationError
-from hindrax_ident.estimation.thruster_fit import (
+from hindrax_onboard.estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.thruster_fit import (
     fit_cubic,
     fit_thruster_curve,
     point_reflection,
@@ -148,7 +148,7 @@ def test_written_curve_coefficients_load_back_as_floats(value):
     '-4e-07' as a string and '1500' as an int."""
     import yaml
 
-    from hindrax_ident.tools.commands.common import yaml_float
+    from hindrax_tools.commands.common import yaml_float
 
     loaded = yaml.safe_load("[" + ", ".join(yaml_float(v) for v in (value, value)) + "]")
     assert all(isinstance(x, float) for x in loaded)

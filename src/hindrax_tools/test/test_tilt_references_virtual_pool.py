@@ -29,9 +29,9 @@ import pytest
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.tools import cli
-from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import truth_dir
+from hindrax_tools import cli
+from hindrax_sim.simulator import Simulator
+from hindrax_sim.truth import truth_dir
 
 TRUTH = truth_dir() / "scenarios" / "thrust_0.90.yaml"
 W_TEST = (0.5 - 1000.0 * 0.5 / 7850.0) * 9.81      # 0.5 kg of steel in water, N

@@ -9,9 +9,9 @@ import pytest
 from scipy import stats
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         truth_parameters)
-from hindrax_ident.identification.assessment.verdicts import (apply_verdicts, assess_dof,
+from hindrax_fit.assessment.verdicts import (apply_verdicts, assess_dof,
                                                               spread_reasons, thrust_covariance)
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -145,7 +145,7 @@ def test_spread_check():
 
 
 def test_scenarios_command_writes_table_and_json(tmp_path):
-    from hindrax_ident.tools.cli import main
+    from hindrax_tools.cli import main
     out = tmp_path / "suite"
     assert main(["ident", "scenarios", "--scenarios", "thrust_0.90", "--seeds", "1", "--dofs", "surge",
                  "--levels", "2", "--out", str(out)]) == 0

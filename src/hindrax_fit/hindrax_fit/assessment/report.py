@@ -34,7 +34,7 @@ from scipy import stats  # noqa: E402
 from hindrax_drivers.config import VehicleConfig  # noqa: E402
 
 from ..fit import fit_core  # noqa: E402
-from ..fit.dof_model import model_terms, truth_parameters  # noqa: E402
+from hindrax_onboard.identification.model.dof_model import model_terms, truth_parameters  # noqa: E402
 from .results import build_results, training_lines, write_identification  # noqa: E402
 
 __all__ = ["write_report", "write_outputs", "summary_rows", "write_fit_outputs", "residual_acf"]

@@ -50,16 +50,16 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-from ...estimation.drag_coefficient import (characteristic_length_from_volume, drag_coefficient,
+from hindrax_onboard.estimation.drag_coefficient import (characteristic_length_from_volume, drag_coefficient,
                                             reynolds_range)
-from ...estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.least_squares import EstimationError
 from ..fit.calibration import calibration_section, decay_inertia, joint_estimate
-from ..fit.dof_model import parameter_units, rigid_inertia
+from hindrax_onboard.identification.model.dof_model import parameter_units, rigid_inertia
 from ..fit.fit_core import NO_MODEL_VERDICT
-from ..fit.posterior import (finite_or_none as _f, prior_entries, prior_posterior, prior_std_rel_of,
+from hindrax_onboard.identification.model.posterior import (finite_or_none as _f, prior_entries, prior_posterior, prior_std_rel_of,
                              theta_priors)
-from ...vehicle.uncertainty import declared_rel
-from ...vehicle.vehicle_match import vehicle_parameters
+from hindrax_onboard.vehicle.uncertainty import declared_rel
+from hindrax_onboard.vehicle.vehicle_match import vehicle_parameters
 from .verdicts import (FitEvidence, apply_reference_verdicts, apply_verdicts, assess, core_evidence, model_selection,
                        rls_published_std, thrust_curve_check, with_added_mass)
 
@@ -92,7 +92,7 @@ REYNOLDS_MIN_SPEED_M_S = 0.05
 
 def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
     """[Hindrax-Drag] Table 4 for a translational DOF: C_D = 2 k_q / (rho A_p) with its std from the std of k_q
-    (:func:`~hindrax_ident.estimation.drag_coefficient.drag_coefficient`; heave per direction), A_p the
+    (:func:`~hindrax_onboard.estimation.drag_coefficient.drag_coefficient`; heave per direction), A_p the
     bounding-box area normal to the motion (:data:`_AREA_DIMENSIONS`), and the Reynolds range Re = |v| L / nu
     with L = V^(1/3) ([Hindrax-AM] eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
     None for rotational DOFs ([Hindrax-Drag] defines neither their area nor their radius)."""
@@ -230,7 +230,7 @@ def write_identification(path: str | Path, document: Mapping, check: bool = True
         validate(document)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text("# Hindrax identified hydrodynamics (hindrax_ident.identification.assessment.results, schema "
+    p.write_text("# Hindrax identified hydrodynamics (hindrax_fit.assessment.results, schema "
                  f"{SCHEMA_VERSION})\n" + yaml.safe_dump(dict(document), sort_keys=False, default_flow_style=None))
     return p
 

@@ -15,7 +15,7 @@ and
    inertia a = b = 1/2. When a thrust-curve fit covariance is known it replaces the declared value: the vehicle
    file's ``thrusters.thrust_fit_uncertainty_rel`` (written by ``hindrax ident thruster-fit --write``: the
    thrust-weighted relative std of the fitted curve over the pulse widths of the bollard-pull data,
-   :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`);
+   :meth:`~hindrax_onboard.estimation.thruster_fit.CubicFit.relative_std`);
 2. **uses degrees of freedom that match the independent information**: the output-error residuals are correlated
    inside a segment and between neighbouring segments, so the fit core's covariance is cluster-robust
    (docs/identification.md §7, step 5) and the 95 % interval uses the Student t quantile with its (clusters - 1)
@@ -69,8 +69,8 @@ import numpy as np
 
 from hindrax_drivers.config import ROTATIONAL_DOFS, VehicleConfig
 
-from ...vehicle.uncertainty import declared_rel
-from ..fit.dof_model import core_index, thrust_weights
+from hindrax_onboard.vehicle.uncertainty import declared_rel
+from hindrax_onboard.identification.model.dof_model import core_index, thrust_weights
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",

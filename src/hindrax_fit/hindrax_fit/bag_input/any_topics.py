@@ -51,10 +51,10 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.recording.reader import BagReader
 
 from ..fit import fit_core
-from ..fit.dof_model import restoring_regressor
+from hindrax_onboard.identification.model.dof_model import restoring_regressor
 from ..fit.fit_core import EXCITATION_MIN
-from ...vehicle.signals import samples_from_dvl, thrust_of_written_widths
-from ...vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.vehicle.signals import samples_from_dvl, thrust_of_written_widths
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed", "GridStretch",
            "preprocess_bag", "excitation", "dof_records"]

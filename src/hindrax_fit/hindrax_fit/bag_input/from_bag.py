@@ -1,14 +1,14 @@
 """The campaign bag reader: rebuild the campaign record (:class:`~.campaign_record.CampaignRecord`) from a bag.
 
 ``hindrax ident bag BAG [--out DIR] [--config FILE]``
-(:mod:`hindrax_ident.tools.commands.ident_bag`), and ``hindrax ident fit`` on a bag with the
+(:mod:`hindrax_tools.commands.ident_bag`), and ``hindrax ident fit`` on a bag with the
 campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
 :func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and
 ``hindrax run`` (docs/identification.md §7).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
-node, :mod:`...vehicle.signals`, into :class:`~hindrax_ident.vehicle.state.SensorState`), ``thrusters/pulse_width``
+node, :mod:`...vehicle.signals`, into :class:`~hindrax_onboard.vehicle.state.SensorState`), ``thrusters/pulse_width``
 (the widths the ESC node wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
@@ -37,11 +37,11 @@ from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.recording.msgtypes import TypeNotInstalledError
 from hindrax_drivers.recording.reader import BagReader
 
-from ...vehicle.state import SensorState
-from ...vehicle.thrust_lag import ThrustLag
-from . import calibration_topic
-from .campaign_record import CampaignRecord
-from ...vehicle.signals import (STILL_MESSAGE, sample_from_pressure, sample_from_range,
+from hindrax_onboard.vehicle.state import SensorState
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.identification.model import calibration_topic
+from hindrax_onboard.identification.model.campaign_record import CampaignRecord
+from hindrax_onboard.vehicle.signals import (STILL_MESSAGE, sample_from_pressure, sample_from_range,
                                 samples_from_dvl, samples_from_imu, thrust_of_written_widths)
 
 __all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "is_campaign_bag",

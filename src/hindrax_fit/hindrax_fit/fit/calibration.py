@@ -27,11 +27,11 @@ import numpy as np
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS
 
-from ...estimation.free_decay import fit_quadratic_free_decay
-from ...vehicle.thrust_lag import ThrustLag
-from ...vehicle.uncertainty import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel
-from .dof_model import rigid_inertia, thrust_weights
-from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, theta_priors
+from hindrax_onboard.estimation.free_decay import fit_quadratic_free_decay
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.vehicle.uncertainty import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel
+from hindrax_onboard.identification.model.dof_model import rigid_inertia, thrust_weights
+from hindrax_onboard.identification.model.posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, theta_priors
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -371,13 +371,13 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
     """Rigid + added inertia of ``dof`` (roll | pitch) from the campaign's free decay.
 
     The de-biased gyro rate of the recorded window ``record.decays[dof]`` (from its largest excursion on) is
-    fitted with I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
+    fitted with I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_onboard.estimation.free_decay.
     fit_quadratic_free_decay`, output = velocity), C the restoring stiffness of an inclining test (``hindrax ident
     inclining``). The thrusters only tilted the vehicle, so the result does not depend on the thrust curve.
     Returns {total_inertia_kg_m2, total_inertia_kg_m2_std (fit and C's std combined), total_inertia_kg_m2_std_fit,
     added_inertia_kg_m2 (None without the rigid inertia), linear_damping_kg_m2_s, quadratic_damping_kg_m2 (with
     _std), stiffness_n_m_per_rad, window_s}. Raises ``KeyError`` when the DOF has no recorded decay and
-    :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the fit fails.
+    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the fit fails.
     """
     t0, t1 = record.decays[dof]
     k = {"roll": 0, "pitch": 1}[dof]

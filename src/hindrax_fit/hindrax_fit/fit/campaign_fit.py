@@ -22,13 +22,13 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
-from ...estimation.filters import smooth_kinematics
-from ...estimation.least_squares import EstimationError, fit_linear_model
-from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
-from ...vehicle.state import euler_rates
-from ...vehicle.uncertainty import measurement_settings
+from hindrax_onboard.estimation.filters import smooth_kinematics
+from hindrax_onboard.estimation.least_squares import EstimationError, fit_linear_model
+from hindrax_onboard.vehicle.fusion import smooth_with_acceleration, smooth_with_rate
+from hindrax_onboard.vehicle.state import euler_rates
+from hindrax_onboard.vehicle.uncertainty import measurement_settings
 from . import fit_core
-from .dof_model import (DofIdentification, core_index, parameter_names, parameter_units,
+from hindrax_onboard.identification.model.dof_model import (DofIdentification, core_index, parameter_names, parameter_units,
                         regressor_matrix, restoring_regressor, rigid_inertia, steady_state_fit,
                         truth_parameters)
 
@@ -57,7 +57,7 @@ class CampaignSignals:
 def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord, CampaignSignals]:
     """The fit core's record of ``dof`` from a campaign record (module docstring) and its conditioned signals.
 
-    Raises :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the DOF has no window of at least
+    Raises :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the DOF has no window of at least
     50 ticks or fewer than 20 sensor samples in it.
     """
     k = DOFS.index(dof)
@@ -206,7 +206,7 @@ def identify_all_with_errors(record, cfg: VehicleConfig,
 def identify_dof(record, dof: str, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()
                  ) -> DofIdentification:
     """One DOF of :func:`identify_all_with_errors`. Raises
-    :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the DOF has no usable data."""
+    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the DOF has no usable data."""
     rec, sig = dof_record(record, dof, cfg)
     results, errors = fit_core.identify_dofs({dof: rec}, opts)
     if dof not in results:
@@ -217,7 +217,7 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, opts: fit_core.CoreOption
 # ------------------------------------------------------------------------------------------------ conditioning
 @dataclass(frozen=True)
 class AccelerometerAid:
-    """An accelerometer record aiding the smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_acceleration`):
+    """An accelerometer record aiding the smoother (:func:`~hindrax_onboard.vehicle.fusion.smooth_with_acceleration`):
     sample times ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the
     aided model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
 
@@ -229,7 +229,7 @@ class AccelerometerAid:
 
 @dataclass(frozen=True)
 class RateAid:
-    """A rate record aiding an angle smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_rate`): sample times
+    """A rate record aiding an angle smoother (:func:`~hindrax_onboard.vehicle.fusion.smooth_with_rate`): sample times
     ``t_s`` (m,) s, ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
 
     t_s: np.ndarray
@@ -242,7 +242,7 @@ def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured: str, jerk_psd: float, st
     """RTS-smoothed (pos, vel, acc) (each (n,)) at the tick times ``t_ticks`` (n,) from measurements ``z_meas`` at
     their own times ``t_meas`` (m,): ``measured`` "position" or "velocity", noise ``std``, white-jerk PSD
     ``jerk_psd``; with an :class:`AccelerometerAid` the accelerometer-aided smoother, with a :class:`RateAid` the
-    rate-aided one (``z_meas`` is then an angle), else :func:`~hindrax_ident.estimation.filters.smooth_kinematics`.
+    rate-aided one (``z_meas`` is then an angle), else :func:`~hindrax_onboard.estimation.filters.smooth_kinematics`.
     All records are merged on one time grid (microsecond keys)."""
     key_ticks = np.rint(np.asarray(t_ticks) * 1e6).astype(np.int64)
     key_meas = np.rint(np.asarray(t_meas) * 1e6).astype(np.int64)
@@ -325,7 +325,7 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     """Roll and pitch (rad) at the tick times ``t`` (n,) and the Euler-rate biases (2,) rad/s removed: the DVL-75
     attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
     times; constant bias removed by :func:`rate_bias_against_angle`) by
-    :func:`~hindrax_ident.vehicle.fusion.smooth_with_rate` (the attitude alone, zero biases, when there is no gyro
+    :func:`~hindrax_onboard.vehicle.fusion.smooth_with_rate` (the attitude alone, zero biases, when there is no gyro
     record). Angle noise from ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk
     PSD those of the roll filter (:func:`~...vehicle.uncertainty.measurement_settings`)."""
     ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)

@@ -15,7 +15,7 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS
 
-from ...estimation.least_squares import EstimationError
+from hindrax_onboard.estimation.least_squares import EstimationError
 from . import fit_core
 
 __all__ = ["DofFit", "FitResult", "fit_records"]

@@ -8,7 +8,7 @@ output-error fit (:func:`fit_terms`), model terms by cross-validation (:func:`se
 :func:`persistence`, :func:`coupling_consistent`) and intervals (:func:`cluster_covariance`).
 
 All quantities SI; forces N (N m for rotations), velocities m/s (rad/s); body FRD. Raises
-:class:`~hindrax_ident.estimation.least_squares.EstimationError` when a DOF has too little usable data.
+:class:`~hindrax_onboard.estimation.least_squares.EstimationError` when a DOF has too little usable data.
 """
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS
 
-from ...estimation.least_squares import EstimationError
-from ...vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.estimation.least_squares import EstimationError
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 from . import timing_grid
 
 __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX",

@@ -25,7 +25,7 @@ rate and acceleration under the moving vehicle are fed forward (:meth:`Controlle
 
 Why our own code: the reference model, feedforward and anti-windup are a few lines each around the
 model, and no maintained Python library implements marine model-based PID with reference
-feedforward. The floor filter steps with :class:`~hindrax_ident.estimation.kalman.LinearKalman`,
+feedforward. The floor filter steps with :class:`~hindrax_onboard.estimation.kalman.LinearKalman`,
 filterpy's predict/update equations without scipy (that module's docstring).
 
 Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from
@@ -316,7 +316,7 @@ class FloorEstimator:
     """The floor under the vehicle as a local plane (docs/control.md §2 item 6): depth z_f at the
     body origin's horizontal position (NED z, m) and its gradient (g_n, g_e) (depth change per metre
     north and east); a linear Kalman filter
-    (:class:`~hindrax_ident.estimation.kalman.LinearKalman`).
+    (:class:`~hindrax_onboard.estimation.kalman.LinearKalman`).
 
     Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement
     z_f + g_n dN + g_e dE (:meth:`update_point`); between points the state advances as

@@ -4,7 +4,7 @@
 a-priori rigid + added inertia, k_p = I w_n^2, k_d = 2 zeta w_n I (zeta = 1), the derivative on the measured rate (not
 on the error), a depth integral 0.5 m w_n^3 clipped to +-0.5 m s, the net-buoyancy feed-forward, a proportional
 velocity hold -1.5 w_n m (v - v_sp), no damping feedforward and no reference model. Same interface as
-:class:`~hindrax_ident.control.maneuvers.HoldController`, so both can drive the same loop.
+:class:`~hindrax_onboard.control.maneuvers.HoldController`, so both can drive the same loop.
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ __all__ = ["LegacyPDHold"]
 
 class LegacyPDHold:
     """The previous holds (module docstring): ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not
-    in ``free`` from a :class:`~hindrax_ident.vehicle.state.SensorState` (depth on ``depth_estimate_m`` and
+    in ``free`` from a :class:`~hindrax_onboard.vehicle.state.SensorState` (depth on ``depth_estimate_m`` and
     ``depth_rate_m_s`` when set, else the latest depth), each hold limited to ``hold_fraction`` of the axis
     authority (6,)."""
 

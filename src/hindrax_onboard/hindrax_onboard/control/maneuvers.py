@@ -13,8 +13,8 @@ simulator's truth):
   and half the vehicle height plus :data:`SURFACE_CLEARANCE_M` at the free surface (the margin key is
   documented for walls and floor only). Run lengths are planned from the distance left in the box.
 * :class:`HoldController` - holds for depth (or altitude), roll, pitch, heading and surge/sway velocity: the
-  model-based law of :mod:`hindrax_ident.control.law` with the vehicle file's model (or an identified one); the
-  former PD/PI law is :class:`hindrax_ident.control.legacy.LegacyPDHold`.
+  model-based law of :mod:`hindrax_onboard.control.law` with the vehicle file's model (or an identified one); the
+  former PD/PI law is :class:`hindrax_onboard.control.legacy.LegacyPDHold`.
 
 Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_drivers.frames`.
 """
@@ -135,15 +135,15 @@ class PoolBox:
 
 class HoldController:
     """Holds for depth (or altitude), roll, pitch, heading and body velocities from sensor values: the model-based law
-    of :mod:`hindrax_ident.control.law` (docs/control.md §2).
+    of :mod:`hindrax_onboard.control.law` (docs/control.md §2).
 
     cfg: the vehicle file. authority (6,) or (6, 2): largest wrench per axis (N, N m) from the thrust allocation
     (:func:`dof_authority`). natural_frequency_rad_s: target bandwidth w of the position holds; the velocity holds use
     ``velocity_gain`` w. hold_fraction: share of each axis' authority the holds may use. model: the
-    :class:`~hindrax_ident.control.model.ControlModel` (default: the vehicle file's, the campaign's model before any
+    :class:`~hindrax_onboard.control.model.ControlModel` (default: the vehicle file's, the campaign's model before any
     identification exists). reference_accel: DOF -> acceleration limit of the reference models (default: from the
-    model, :class:`~hindrax_ident.control.law.Controller`). settings: a
-    :class:`~hindrax_ident.control.law.ControlSettings` replacing the bandwidths and hold fraction above (the
+    model, :class:`~hindrax_onboard.control.law.Controller`). settings: a
+    :class:`~hindrax_onboard.control.law.ControlSettings` replacing the bandwidths and hold fraction above (the
     controller node's ``control.*``).
 
     ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not in ``free``: depth (Z) to
@@ -186,12 +186,12 @@ class HoldController:
     def note_allocation(self, requested_frd, achieved_frd) -> None:
         """Anti-windup from the thrust allocation's result.
 
-        As :meth:`~hindrax_ident.control.law.Controller.note_allocation`.
+        As :meth:`~hindrax_onboard.control.law.Controller.note_allocation`.
         """
         self.core.note_allocation(requested_frd, achieved_frd)
 
     def control_input(self, st: SensorState, t_s: float | None = None) -> ControlInput:
-        """The :class:`~hindrax_ident.control.law.ControlInput` of a :class:`SensorState` and the depth estimate."""
+        """The :class:`~hindrax_onboard.control.law.ControlInput` of a :class:`SensorState` and the depth estimate."""
         depth = self.depth_estimate_m if math.isfinite(self.depth_estimate_m) else st.depth_m
         alt = st.log["altitude"][-1] if st.log.get("altitude") else (math.nan, (math.nan,))
         t = t_s if t_s is not None else max((log[-1][0] for log in st.log.values() if log), default=0.0)

@@ -10,7 +10,7 @@ the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforw
   the declared thrust-curve uncertainty as the inertia's (a lower bound: the file states none for
   its added masses).
 * :func:`load_model` - ``identification.yaml``
-  (:mod:`hindrax_ident.identification.assessment.results`), read by this small tolerant loader
+  (:mod:`hindrax_fit.assessment.results`), read by this small tolerant loader
   (``provenance.vehicle_parameters`` or ``provenance.configuration_sha256``,
   ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and ``joint.scales``; other keys are
   ignored). Values are in commanded-thrust units: a calibrated file's are divided by the thrust
@@ -22,7 +22,7 @@ the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforw
 
 **Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no
 ``dofs`` mapping, or an identification of another vehicle (matched by
-:mod:`hindrax_ident.vehicle.vehicle_match`) raise :class:`ModelFileError` (one line).
+:mod:`hindrax_onboard.vehicle.vehicle_match`) raise :class:`ModelFileError` (one line).
 
 Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is
 downwards.
@@ -47,7 +47,7 @@ __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "
 
 #: Source name of a value taken from the vehicle file.
 VEHICLE_FILE = "vehicle file"
-#: Substrings of verdict reasons (:mod:`hindrax_ident.identification.assessment.verdicts`) that do not disqualify a
+#: Substrings of verdict reasons (:mod:`hindrax_fit.assessment.verdicts`) that do not disqualify a
 #: parameter for control in commanded-thrust units (docs/control.md §4, "Verdicts"); any other
 #: reason makes it fall back (if the wording changes, it falls back: safe).
 CONTROL_IRRELEVANT_REASONS = ("differs from the expected", "the thrust curves do not match the vehicle")
@@ -119,7 +119,7 @@ def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
 def declared_inertia_uncertainty_rel(cfg: VehicleConfig) -> float:
     """Relative 1-sigma uncertainty the vehicle file declares for its force model: the RMS of the two thrust-curve
     directions' relative uncertainty (the rule of the identification intervals,
-    :mod:`hindrax_ident.identification.assessment.verdicts`)."""
+    :mod:`hindrax_fit.assessment.verdicts`)."""
     neg, pos = declared_rel(cfg)
     return float(math.sqrt(0.5 * (neg * neg + pos * pos)))
 

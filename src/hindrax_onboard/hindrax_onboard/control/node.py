@@ -1,7 +1,7 @@
 """Controller node: depth or altitude, heading and surge/sway velocity holds as one more ``wrench`` source.
 
 A thin rclpy node over :class:`~.loop.HoldLoop` (the campaign's sensor conditioning) and
-:class:`~hindrax_ident.control.maneuvers.HoldController` (the model-based law of :mod:`.law`, the
+:class:`~hindrax_onboard.control.maneuvers.HoldController` (the model-based law of :mod:`.law`, the
 model of :mod:`.model`). The ESC, the thrust allocation and the supervisor are unchanged: the
 controller publishes a ``wrench`` like the identification node or a pilot, and the allocation turns
 it into pulse widths. Run alone: ``ros2 run hindrax_ident controller_node --ros-args --params-file

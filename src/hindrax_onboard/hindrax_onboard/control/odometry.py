@@ -1,6 +1,6 @@
 """The vehicle's estimate as ROS odometry (REP-105): ``odom -> base_link`` pose and twist from the conditioned sensors.
 
-The controller's sensor conditioning (:class:`~hindrax_ident.vehicle.state.SensorState`: the
+The controller's sensor conditioning (:class:`~hindrax_onboard.vehicle.state.SensorState`: the
 dead-reckoned horizontal position from the DVL velocity and heading, the depth of the body origin, the attitude,
 the DVL velocity and the gyro rates) is turned into what a ROS tool (Foxglove's 3D panel, RViz) expects: the pose
 of ``base_link`` (FLU, REP-103) in ``odom`` (ENU, REP-105; origin at the pool start position of the vehicle file,

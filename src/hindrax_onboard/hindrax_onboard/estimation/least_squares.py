@@ -39,7 +39,7 @@ class EstimationError(ValueError):
     """Bad input to an estimation routine (shape, NaN, too few samples, rank deficiency).
 
     Subclass of ``ValueError`` so callers can catch either. Raised by every module of
-    ``hindrax_ident.estimation`` for bad data; the message names the offending argument.
+    ``hindrax_onboard.estimation`` for bad data; the message names the offending argument.
     """
 
 

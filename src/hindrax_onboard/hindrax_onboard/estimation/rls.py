@@ -44,7 +44,7 @@ exceeds the bound, which is cheap to test). :meth:`RecursiveLeastSquares.reset_c
 restarts P explicitly.
 
 Honesty options (all off by default in this class; the identification executive switches them on,
-:func:`hindrax_ident.identification.online.estimators.online_rls`; why each is needed:
+:func:`hindrax_onboard.identification.online.estimators.online_rls`; why each is needed:
 docs/identification.md §1.D):
 
 * ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least

@@ -3,7 +3,7 @@
 [Hindrax-Drag] (sections 4-5) fits F = k_q |v| v + k_l v + b to "the data collected in all tests with
 constant velocity" of each DOF: a ladder of constant thrust levels, each held until the velocity
 is steady. This module finds those windows in a record of (time, velocity, applied force) so the
-steady-state LS of :func:`hindrax_ident.estimation.least_squares.fit_drag` can be run on them
+steady-state LS of :func:`hindrax_onboard.estimation.least_squares.fit_drag` can be run on them
 (docs/identification.md §3 C9: steady-window detection and averaging).
 
 Algorithm (all thresholds are arguments; defaults in brackets):

@@ -16,7 +16,7 @@ anchored at the stop point. An ESC dead band can be excluded with ``deadband_us`
 
 Conditioning: raw powers of P (P^3 ~ 7e9 us^3) make X^T X extremely ill-conditioned. We fit the
 cubic in the centred and scaled variable s = (P - neutral_us) / scale_us (scale 400 us) with
-:func:`hindrax_ident.estimation.least_squares.fit_linear_model`, then map the coefficients to the
+:func:`hindrax_onboard.estimation.least_squares.fit_linear_model`, then map the coefficients to the
 [Hindrax-Drag]'s raw form exactly: tau = sum_k a_k s^k = sum_j c_j P^j with c = T a, where
 T[j, k] = binom(k, j) (-neutral)^(k-j) / scale^k, and the covariance is propagated exactly,
 Cov(c) = T Cov(a) T^T. The raw standard deviations are large and strongly correlated (as in
@@ -31,7 +31,7 @@ relative standard deviation of the fitted mean thrust over the fitted pulse-widt
 weighting by f^2 keeps the widths near neutral, where f -> 0, from dominating). ``hindrax ident thruster-fit
 --write`` stores it as ``thrusters.thrust_fit_uncertainty_rel`` = [negative, positive], which then replaces the
 declared ``thrusters.thrust_uncertainty_rel`` in the intervals
-(:mod:`hindrax_ident.identification.assessment.verdicts`). It is the fit's statistical uncertainty at the bollard-pull
+(:mod:`hindrax_fit.assessment.verdicts`). It is the fit's statistical uncertainty at the bollard-pull
 test's battery voltage only; a voltage that sags during a session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
 
 :func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses

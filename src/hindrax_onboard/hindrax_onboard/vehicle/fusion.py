@@ -1,15 +1,15 @@
 """Kinematic Kalman filter/RTS smoother aided by the accelerometer (surge, sway, heave).
 
-Same state model as :mod:`hindrax_ident.estimation.filters` (x = [position, velocity, acceleration] of one
+Same state model as :mod:`hindrax_onboard.estimation.filters` (x = [position, velocity, acceleration] of one
 DOF, constant acceleration driven by white jerk, F(dt) and Q(dt) from its :func:`transition_matrix` and
 :func:`process_noise`), with TWO scalar measurements (dim_z = 2; a missing one gets a zero row of H, so it carries no
-information), fused online by :class:`~hindrax_ident.estimation.kalman.LinearKalman` (filterpy's equations without
+information), fused online by :class:`~hindrax_onboard.estimation.kalman.LinearKalman` (filterpy's equations without
 its import cost, that module's docstring) and offline by filterpy's ``KalmanFilter`` (batch filter, RTS smoother):
 
 * the primary sensor: DVL velocity (``measured='velocity'``, H = [0 1 0]) or depth from pressure
   (``measured='position'``, H = [1 0 0]);
 * the linear acceleration from the ICM-20948 (H = [0 0 1]): specific force + gravity in body axes - w x v -
-  bias (:class:`~hindrax_ident.vehicle.state.SensorState`).
+  bias (:class:`~hindrax_onboard.vehicle.state.SensorState`).
 
 Why: the DVL and pressure sensor report at 10 Hz, too slowly to resolve the thrust transients (thruster lag
 0.1 s, velocity time constants 0.3-0.6 s); smoothing them alone attenuates nu_dot and biases the

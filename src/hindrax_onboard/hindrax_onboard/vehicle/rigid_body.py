@@ -2,7 +2,7 @@
 
 M_RB = [m I3, -m S(r_g); m S(r_g), I_o] ([NTNU-Thesis] eq. 2.7), body frame FRD, with the
 inertia moved from the CG to the body origin by the parallel-axis theorem. The simulator's model
-(:mod:`hindrax_ident.sim.model`), the identification's priors and posterior use this one definition.
+(:mod:`hindrax_sim.model`), the identification's priors and posterior use this one definition.
 """
 from __future__ import annotations
 

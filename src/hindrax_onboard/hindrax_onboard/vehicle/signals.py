@@ -1,7 +1,7 @@
 """ROS messages -> sensor samples: the pure adapters the identification node, the controller and offline tools share.
 
-The identification executive (:class:`~hindrax_ident.vehicle.state.SensorState`) consumes samples in the simulator's
-form (:mod:`hindrax_ident.sim.sensors`: a device name and a namespace with ``stamp_s`` and the measured values).
+The identification executive (:class:`~hindrax_onboard.vehicle.state.SensorState`) consumes samples in the simulator's
+form (:mod:`hindrax_sim.sensors`: a device name and a namespace with ``stamp_s`` and the measured values).
 These functions make such samples from the drivers' ROS messages, rclpy or bag-decoded alike (they only read
 attributes), so the live node (:mod:`..identification.online.node`), the controller (:mod:`..control.node`) and the
 bag analysis (:mod:`..identification.bag_input.from_bag`) see the same numbers.
@@ -32,7 +32,7 @@ def _stamp_s(header) -> float:
 
 
 def samples_from_dvl(msg) -> list[tuple[str, Any]]:
-    """Samples of one hindrax_msgs/Dvl message in the simulator's sample form (:mod:`hindrax_ident.sim.sensors`).
+    """Samples of one hindrax_msgs/Dvl message in the simulator's sample form (:mod:`hindrax_sim.sensors`).
 
     Returns ``[("dvl75_attitude", ns(stamp_s, roll_rad, pitch_rad, yaw_rad))]`` (NED Euler angles of body FRD,
     via :func:`hindrax_drivers.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
@@ -42,7 +42,7 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 
     ``at_body_origin``: the driver publishes the velocity of base_link (it removes the lever arm with the
     ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
-    samples, so :class:`~hindrax_ident.vehicle.state.SensorState` must not remove it again.
+    samples, so :class:`~hindrax_onboard.vehicle.state.SensorState` must not remove it again.
 
     Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
     attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
@@ -74,7 +74,7 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> list[tuple[str, Any]]:
     """``icm20948_gyro`` and ``icm20948_accel`` samples of a sensor_msgs/Imu (base_link FLU).
 
-    The simulator's samples are in the sensor axes, which :class:`~hindrax_ident.vehicle.state.SensorState` rotates with
+    The simulator's samples are in the sensor axes, which :class:`~hindrax_onboard.vehicle.state.SensorState` rotates with
     the configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
     with ``mounting_frd_from_flu`` = R_mount^T (3, 3) (identity when None). Angular rate rad/s, specific
     force m/s^2.

@@ -178,7 +178,7 @@ class SensorState:
         return rpy + (t_s - t_last) * euler_rates(rpy, rates)
 
     def on_sample(self, device: str, s) -> None:
-        """Condition and store one simulator/driver sample (device names of :mod:`hindrax_ident.sim.sensors`)."""
+        """Condition and store one simulator/driver sample (device names of :mod:`hindrax_sim.sensors`)."""
         if device == "ms5837":
             depth_port = (s.pressure_pa - self._p0) / self._rho_g
             self.depth_m = float(depth_port - self._rotation(self.rpy_at(s.stamp_s))[2] @ self._r_pressure)
@@ -266,7 +266,7 @@ class DepthEstimator:
     ``predict_to(t_s)`` returns (depth m, depth rate m/s), NaN before the first depth sample.
     depth_std_m, accel_std_m_s2, jerk_psd: the filter's noise settings (the campaign passes those of
     :func:`~.uncertainty.measurement_settings` for heave). Raises
-    :class:`~hindrax_ident.estimation.least_squares.EstimationError` for a setting that is not > 0.
+    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` for a setting that is not > 0.
     """
 
     def __init__(self, depth_std_m: float = 0.005, accel_std_m_s2: float = 0.07, jerk_psd: float = 20.0) -> None:

@@ -3,11 +3,11 @@ MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the device drivers (:data:`hindrax_drivers.devices.DEVICES`: DVL-75, Ping1D, MS5837, ICM-20948, and the ESC
 output on the PCA9685), the thrust allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the
-static TF (/tf_static), the identification executive (:mod:`hindrax_ident.identification.online.node`, always: on
+static TF (/tf_static), the identification executive (:mod:`hindrax_onboard.identification.online.node`, always: on
 the vehicle as in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and,
 optionally, the recorder. On the vehicle they open the configured serial ports and ``/dev/i2c-N``. With ``sim=True``
 the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing ``/clock`` and
-:class:`~hindrax_ident.sim.hardware.VirtualHardware` (every device's emulator fed by the simulator: serial devices
+:class:`~hindrax_sim.hardware.VirtualHardware` (every device's emulator fed by the simulator: serial devices
 on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an emulated bus); every other node
 then runs with ``use_sim_time`` and the simulator takes the thrusters' pulse widths from the PCA9685 registers.
 
@@ -38,12 +38,12 @@ from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWat
 from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.srv import SetArmed
 
-from .control.node import ControllerNode
-from .identification.online.node import IdentificationNode
+from hindrax_onboard.control.node import ControllerNode
+from hindrax_onboard.identification.online.node import IdentificationNode
 from .ordered_executor import LeanWaitExecutor
-from .sim.hardware import VirtualHardware
-from .sim.node import SimulatorNode
-from .sim.simulator import Simulator
+from hindrax_sim.hardware import VirtualHardware
+from hindrax_sim.node import SimulatorNode
+from hindrax_sim.simulator import Simulator
 
 
 @dataclass
@@ -218,7 +218,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     ``controller/hold``; docs/control.md) with the model of ``model_file`` ("" = the vehicle file's).
     i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
     of opening its configured ``/dev/i2c-N`` (e.g. the emulated bus of
-    :class:`~hindrax_ident.sim.hardware.VirtualHardware`, to run the vehicle graph against emulated devices).
+    :class:`~hindrax_sim.hardware.VirtualHardware`, to run the vehicle graph against emulated devices).
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
     faster; for a graph nothing outside this process needs simulated time from, e.g. ``hindrax run``), and the
     graph is ``stepped``: drive it with :meth:`Graph.spin_once`, not ``executor.spin()``.

@@ -1,6 +1,6 @@
 """The identification campaign through the whole ROS graph in one process (``hindrax run``).
 
-:func:`run_graph_campaign`: build the graph (:func:`hindrax_ident.bringup.build_graph`: virtual pool, device
+:func:`run_graph_campaign`: build the graph (:func:`hindrax_sim.graph.bringup.build_graph`: virtual pool, device
 emulators, drivers, ESC node, thrust allocation, identification node, recorder into ``out/bag``) on one
 SingleThreadedExecutor; wait for the sensors and the ESC arming time; arm through ``esc/set_armed`` (the
 operator's service); send one ``run_identification`` goal and report its feedback; disarm; close the bag;
@@ -16,7 +16,7 @@ node measured are applied to the bag's record and estimated jointly with the fit
 (:func:`~.identification.assessment.results.build_results`), as ``hindrax ident campaign
 --calibrate`` does.
 
-Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.sim.hardware.SerialLockStep`),
+Reproducibility: with the serial devices in lock-step (:class:`~hindrax_sim.hardware.SerialLockStep`),
 simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
 every topic, and frozen again while each operator call (arm, goal, disarm) is answered, what happens at each
 simulated instant no longer depends on wall-clock timing, so the same seed gives the same run.
@@ -49,11 +49,11 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
 from .bringup import build_graph
-from .sim.campaign import PoolOperator
-from .identification.online.executive import calibration_forces, float_buoyancy, inclining_load
-from .identification.bag_input.reader import BagContentError
-from .identification.assessment.pipeline import OverlappedFits, identify_bag
-from .identification.assessment.report import write_outputs
+from hindrax_sim.campaign import PoolOperator
+from hindrax_onboard.identification.online.executive import calibration_forces, float_buoyancy, inclining_load
+from hindrax_fit.bag_input.reader import BagContentError
+from hindrax_fit.assessment.pipeline import OverlappedFits, identify_bag
+from hindrax_fit.assessment.report import write_outputs
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
 
@@ -70,12 +70,12 @@ class VirtualOperator:
     """The virtual pool's operator for the calibration steps on the ROS graph (module docstring);
     what each step code does is :class:`~.sim.campaign.PoolOperator`'s, as in-process.
 
-    simulator: the :class:`~hindrax_ident.sim.simulator.Simulator`; ballast_weight_n, line_pull_n,
+    simulator: the :class:`~hindrax_sim.simulator.Simulator`; ballast_weight_n, line_pull_n,
     inclining_load_n_m (weight in water N, arm m), float_buoyancy_n: the known forces
     (:mod:`~.identification.online.executive`: ``calibration_forces``, ``inclining_load``,
     ``float_buoyancy``); request_continue: sends one ``identification/continue`` request and returns
     its future (or None); say: progress lines; freeze / resume: hold simulated time
-    (:meth:`~hindrax_ident.bringup.Graph.freeze_time`) from acting on a prompt until the continue
+    (:meth:`~hindrax_sim.graph.bringup.Graph.freeze_time`) from acting on a prompt until the continue
     answer, so the step goes on at the simulated instant the operator acted. Feed it every feedback
     prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step and :meth:`poll`
     from the wait loop: a request with no answer within ``resend_after_s`` of wall time is sent

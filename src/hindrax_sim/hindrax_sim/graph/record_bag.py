@@ -1,9 +1,9 @@
 """Record the driver test bag from the virtual pool: ``sim_drivers_3s`` under ``src/hindrax_drivers/test/data/``.
 
-Usage: ``python -m hindrax_ident.record_bag [--out DIR]`` (default: the repository's
+Usage: ``python -m hindrax_sim.graph.record_bag [--out DIR]`` (default: the repository's
 ``src/hindrax_drivers/test/data``; the synthetic bags are :mod:`hindrax_drivers.recording.make_test_bags`).
 
-Content: the whole driver graph on the virtual pool (:func:`hindrax_ident.bringup.build_graph` with
+Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with
 ``sim=True``: simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837,
 ICM-20948 and ESC driver nodes), recorded by the stack's own recorder node (all topics), simulated time
 starting at 0 (``/clock``), as fast as possible. The vehicle floats passively from

@@ -1,7 +1,7 @@
 """The ``make bench`` benchmarks: one module per concern, each with a ``run(quick)`` function.
 
 A module that ends in :func:`run_alone` runs alone: ``python -m
-hindrax_ident.tools.benchmarks.<module> [--quick]`` prints its rows as JSON."""
+hindrax_tools.benchmarks.<module> [--quick]`` prints its rows as JSON."""
 from __future__ import annotations
 
 import argparse
@@ -77,7 +77,7 @@ def start_logged(log: Path, argv: Sequence[str], mode: str = "w",
 
 
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:
-    """Run one benchmark module alone (``python -m hindrax_ident.tools.benchmarks.<name>
+    """Run one benchmark module alone (``python -m hindrax_tools.benchmarks.<name>
     [--quick]``) on the vehicle's loopback transport: print the rows of ``run(quick)`` as JSON;
     returns the exit status 0."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

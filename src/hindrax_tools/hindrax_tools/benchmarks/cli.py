@@ -1,7 +1,7 @@
 """CLI start-up benchmark: wall time of ``hindrax --help`` (target 0.3 s on the development machine).
 
 Each run is a fresh process, the ``hindrax`` console script of this interpreter's environment (or
-``python -m hindrax_ident.tools.cli`` when the script is not installed), started with
+``python -m hindrax_tools.cli`` when the script is not installed), started with
 :mod:`subprocess` and timed
 from spawn to exit with ``time.perf_counter``. The value is the median of the runs (one unmeasured warm-up
 run first, so the file cache is warm as for an engineer typing commands). For comparison the row
@@ -39,7 +39,7 @@ def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     runs = 3 if quick else 11
     script = Path(sys.executable).with_name("hindrax")  # else the module of the console script
-    base = [str(script)] if script.is_file() else [sys.executable, "-m", "hindrax_ident.tools.cli"]
+    base = [str(script)] if script.is_file() else [sys.executable, "-m", "hindrax_tools.cli"]
     help_s = wall_times_s(base + ["--help"], runs)
     rows = [{"name": "hindrax_help_wall_s", "value": statistics.median(help_s), "unit": "s",
              "target": f"< {TARGET_S:g}",

@@ -10,9 +10,9 @@ four parameters are fitted by simulation error (each segment simulated open loop
 start) with :func:`scipy.optimize.least_squares` and forward sensitivities; ``d`` and ``T`` are chosen on a grid by
 leave-one-run-out cross-validation on the training runs only, each grid point a full fit.
 
-It shares nothing with the estimator under test but the input record (:class:`~hindrax_ident.identification.fit.
+It shares nothing with the estimator under test but the input record (:class:`~hindrax_fit.fit.
 fit_core.DofRecord`: the commanded force on the tick grid, the smoothed velocity for the initial states, the
-measurements at their own times) and the vehicle's first-order lag filter (:class:`~hindrax_ident.vehicle.
+measurements at their own times) and the vehicle's first-order lag filter (:class:`~hindrax_onboard.vehicle.
 thrust_lag.ThrustLag`): its own delay, its own simulation, its own least squares, its own timing search and score.
 Score (:func:`nrmse`): RMS(predicted - measured) / std(measured) pooled over every measurement after the start of
 its segment; segments of ``segment_s`` from each chunk's start, a last part of at least half a segment kept (the
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from ...vehicle.thrust_lag import ThrustLag
+from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 
 #: Delay grid, s, and thrust-lag grid, s, of the cross-validation
 DELAYS_S = tuple(round(0.05 * k, 2) for k in range(13))
@@ -221,7 +221,7 @@ def _subset(sg: _Segments, keep: np.ndarray) -> _Segments:
 def holdout_nrmse(train, holdout, segment_s: float = 10.0, delays=DELAYS_S, lags=LAGS_S) -> dict:
     """Fit the gray-box model on ``train`` (timing by CV on its runs) and predict ``holdout`` (DofRecords of one DOF,
     measured velocity): {"nrmse", "cv_nrmse", "delay_s", "lag_s", "mass", "linear_damping", "quadratic_damping",
-    "bias"}; mass in kg (kg m^2), damping per :class:`~hindrax_ident.identification.fit.fit_core.Terms`' units.
+    "bias"}; mass in kg (kg m^2), damping per :class:`~hindrax_fit.fit.fit_core.Terms`' units.
     ``delays``, ``lags``: the timing grid, s. Raises ValueError when either record cannot be cut into segments."""
     d, T, cv = choose_timing(train, delays, lags)
     th = fit(segments(train, d, T, segment_s), train.h)

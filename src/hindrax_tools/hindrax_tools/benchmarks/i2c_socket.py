@@ -31,7 +31,7 @@ from hindrax_drivers.testing import child_process
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
-_MODULE = "hindrax_ident.tools.benchmarks.i2c_socket"
+_MODULE = "hindrax_tools.benchmarks.i2c_socket"
 _WRITE = (0x40, 0x06, list(range(32)))  # PCA9685 at 0x40, LED0_ON_L, one 8-channel block
 
 

@@ -1,6 +1,6 @@
 """``hindrax ident fit`` on realistic virtual-pool data nobody designed: held-out prediction against two baselines.
 
-Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_ident.sim.piloted_bag`) with a
+Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_sim.piloted_bag`) with a
 different truth: three vehicles (Hindrax; a smaller BlueROV2-sized frame; a larger 45 kg work-class-like frame with
 stronger thrusters), the setpoint pilot or the closed-loop survey autopilot, the command through the thrusters (so
 the real force differs from the recorded wrench: lag, ESC latency, reverse asymmetry, battery sag, inflow loss), the
@@ -20,7 +20,7 @@ noise over the measured std, what a perfect model would still score).
 
 Acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
 ``hold``. Tune on this benchmark, never on the tests. Usage: ``python -m
-hindrax_ident.tools.benchmarks.ident_fit
+hindrax_tools.benchmarks.ident_fit
 [--only NAME,...] [--quick] [--keep DIR]`` (``make bench BENCH_ARGS=--only=ident_fit`` runs it in the suite).
 """
 from __future__ import annotations
@@ -39,12 +39,12 @@ import numpy as np
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.assessment.pipeline import fit_read
-from hindrax_ident.identification.assessment.results import assessment
-from hindrax_ident.identification.bag_input import reader
-from hindrax_ident.identification.bag_input.reader import FitOptions, TopicChoice
-from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_fit.assessment.pipeline import fit_read
+from hindrax_fit.assessment.results import assessment
+from hindrax_fit.bag_input import reader
+from hindrax_fit.bag_input.reader import FitOptions, TopicChoice
+from hindrax_fit.fit import fit_core
+from hindrax_sim.piloted_bag import PilotSettings, write_piloted_bag
 
 from . import graybox
 
@@ -289,7 +289,7 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (``argv`` without the program name); returns the exit code."""
-    p = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.ident_fit",
+    p = argparse.ArgumentParser(prog="python -m hindrax_tools.benchmarks.ident_fit",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--only", default="", help="comma-separated data sets: " + ", ".join(d.name for d in DATASETS))
     p.add_argument("--quick", action="store_true", help="shorter bags")

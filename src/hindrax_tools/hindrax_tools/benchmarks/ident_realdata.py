@@ -1,7 +1,7 @@
 """Real-like data to tune ``hindrax ident fit`` on, and the figures it gives: piloted and closed-loop
 virtual-pool bags with what real pool days have and the vehicle file does not.
 
-Two data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_ident.identification.piloted_bag`, the
+Two data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_onboard.identification.piloted_bag`, the
 command through the thrust allocation to the simulated thrusters and sensors), both on Hindrax:
 
 * ``realdata_piloted``: the setpoint pilot; ``realdata_closedloop``: the survey autopilot (integral action against
@@ -20,7 +20,7 @@ model the fit must not lose to by more than :data:`NESTED_MARGIN`), of a plain l
 velocity (:func:`.ident_fit.evaluate`), the cross-validated scores, the verdict (never worse than persistence)
 and whether the delay sat at its bound.
 
-Usage: ``python -m hindrax_ident.tools.benchmarks.ident_realdata [--keep DIR] [--only NAME,...]
+Usage: ``python -m hindrax_tools.benchmarks.ident_realdata [--keep DIR] [--only NAME,...]
 [--results-doc docs/results.md]``: prints the table; with ``--results-doc`` writes section ``ident-realdata`` of that
 document and the figure ``figures/ident_realdata.png`` next to it. Tune on this, never on the tests.
 """
@@ -34,7 +34,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
-from hindrax_ident import results_doc
+from hindrax_tools import results_doc
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -137,7 +137,7 @@ def figure(res: dict, path: Path) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (``argv`` without the program name); returns the exit code."""
-    p = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.ident_realdata",
+    p = argparse.ArgumentParser(prog="python -m hindrax_tools.benchmarks.ident_realdata",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--only", default="", help="comma-separated data sets: " + ", ".join(d.name for d in DATASETS))
     p.add_argument("--keep", default=None, help="directory for the bags (reused on the next run)")
@@ -155,10 +155,10 @@ def main(argv: list[str] | None = None) -> int:
                           for n, r in res.items())
         body = ("Three bags fitted, two predicted, no vehicle file; held-out nrmse = RMS(predicted - measured) / "
                 "std(measured) of 10 s open-loop predictions from the measured velocity "
-                "(`python -m hindrax_ident.tools.benchmarks.ident_realdata`). Gray-box 1-DOF: "
+                "(`python -m hindrax_tools.benchmarks.ident_realdata`). Gray-box 1-DOF: "
                 "M v' = u - k_l v - k_q |v| v - b with a delayed, lagged command, fitted by simulation error, delay "
                 "and lag chosen by leave-one-run-out cross-validation on the fitted bags "
-                "(`hindrax_ident.tools.benchmarks.graybox`, independent of the fit).\n\n"
+                "(`hindrax_tools.benchmarks.graybox`, independent of the fit).\n\n"
                 + notes + "\n\n"
                 + results_doc.markdown_table(HEADER, table_rows(res))
                 + f"\n\n![held-out nrmse per data set and DOF]({png.relative_to(doc.parent).as_posix()})\n")

@@ -13,8 +13,8 @@ import math
 import time
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim.campaign import Campaign
-from hindrax_ident.identification.fit.campaign_fit import identify_all_with_errors
+from hindrax_sim.campaign import Campaign
+from hindrax_fit.fit.campaign_fit import identify_all_with_errors
 
 
 def run(quick: bool = False) -> list[dict]:

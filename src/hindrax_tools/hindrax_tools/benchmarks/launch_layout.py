@@ -7,7 +7,7 @@ project's one reader of launch files, each with its console script's function; t
 them with the arguments ``ros2 launch`` would give (the ``launch`` package is not installable here,
 docs/architecture.md §11.3).
 
-``python -m hindrax_ident.tools.benchmarks.launch_layout pool --socket PATH --ports-file FILE``:
+``python -m hindrax_tools.benchmarks.launch_layout pool --socket PATH --ports-file FILE``:
 the virtual pool in its own process (excluded from the stack's CPU): the simulator
 at real-time factor 1 (no ``/clock``, no ground truth: every node on system time), the serial
 emulators on pseudo-terminals, the I2C emulators on an
@@ -37,9 +37,9 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.launch_xml import NodeProcess, read_launch
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
-from hindrax_ident.sim.hardware import VirtualHardware
-from hindrax_ident.sim.node import SimulatorNode
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.hardware import VirtualHardware
+from hindrax_sim.node import SimulatorNode
+from hindrax_sim.simulator import Simulator
 
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -131,7 +131,7 @@ def read_ports_file(path: str | Path) -> dict | None:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (``argv`` without the program name; module docstring): runs the
     virtual pool until interrupted; returns the exit code."""
-    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.launch_layout")
+    parser = argparse.ArgumentParser(prog="python -m hindrax_tools.benchmarks.launch_layout")
     parser.add_argument("command", choices=["pool"])
     parser.add_argument("--socket", required=True)
     parser.add_argument("--ports-file", required=True)

@@ -1,7 +1,7 @@
 """One node process of the stack benchmark's launch layout: a console script's function, as
 installed.
 
-``python -m hindrax_ident.tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs
+``python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs
 ``MODULE.FUNCTION()`` (default ``main``, e.g. ``hindrax_drivers.composition:i2c_sensors_main``) as
 the installed console script does. The I2C drivers reach the virtual pool's emulated bus through
 their own ``open_smbus`` (:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     (``sys.argv`` without the program name by default); returns its exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv:
-        print("usage: python -m hindrax_ident.tools.benchmarks.launch_node MODULE[:FUNCTION] "
+        print("usage: python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] "
               "[--ros-args ...]", file=sys.stderr)
         return 2
     entry, rest = argv[0], argv[1:]

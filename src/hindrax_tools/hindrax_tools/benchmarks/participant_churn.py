@@ -3,8 +3,8 @@
 The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its
 own process on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as
 ``vehicle.launch.xml`` starts them:
-:func:`~hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`; the layout of
-:func:`hindrax_ident.tools.benchmarks.safety.running_layout`) are armed and commanded at 1700 us.
+:func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`; the layout of
+:func:`hindrax_tools.benchmarks.safety.running_layout`) are armed and commanded at 1700 us.
 This process stands for the hardware (it serves the emulated PCA9685 and its /OE line) and watches
 the heartbeats; hardware is never starved by a CPU load, so it takes ``SCHED_FIFO`` at
 :data:`HARDWARE_STAND_IN_PRIORITY`, above the safety processes (:func:`hardware_priority`; without
@@ -22,7 +22,7 @@ heartbeat gaps as received, with a target, and between send stamps; tick gaps) u
   ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's
   nice -5 only), no target: what the priority buys here (docs/deployment.md §1).
 * ``pool_day_churn_*``: the same processes with the gateway beside them
-  (:func:`~hindrax_ident.tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz
+  (:func:`~hindrax_tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz
   beside :data:`NEIGHBOURS` CPU-bound processes; each of :data:`TRIALS` trials starts three
   processes together and waits for them to exit, as an operator and a curious user do on the pool
   day: a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three heartbeats on the Pi's
@@ -108,7 +108,7 @@ def hardware_priority() -> Iterator[str]:
 class _VehicleLayout(_Layout):
     """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
     is refused, as ``vehicle.launch.xml`` starts them
-    (:func:`~hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`), each in a session of its own as a
+    (:func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`), each in a session of its own as a
     launched process is."""
 
     new_session = True
@@ -228,7 +228,7 @@ def churn_rows(quick: bool = False) -> list[dict]:
                     if k % 2 == 0:
                         argv = subscriber_argv(str(k), 3.0)
                     else:
-                        argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health",
+                        argv = [python_executable(), "-m", "hindrax_tools.cli", "health",
                                 "--quiet", "--timeout", "3"]
                     started.append(stack.enter_context(child_process(
                         argv, env=lay.env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)))
@@ -308,7 +308,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
         internal_default = ({k: v for k, v in lay.env.items() if k != PROFILE_ENV}
                             | {RANGE_ENV: "LOCALHOST"})
         topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
-        health = [lay.py, "-m", "hindrax_ident.tools.cli", "health", "--quiet", "--timeout", "3"]
+        health = [lay.py, "-m", "hindrax_tools.cli", "health", "--quiet", "--timeout", "3"]
         topics = topside_topics(lay.vehicle)
         quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
         with gateway_running(lay, topside):
@@ -336,7 +336,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
 
 def run(quick: bool = False) -> list[dict]:
     """This module's rows of the ``safety`` section (``make bench``,
-    :mod:`hindrax_ident.tools.bench`), in the order of the module docstring."""
+    :mod:`hindrax_tools.bench`), in the order of the module docstring."""
     return (churn_rows(quick) + busy_rows(quick) + busy_rows(quick, realtime=False)
             + pool_day_rows(quick))
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 
-from hindrax_ident.tools.commands.scenarios import run_case, summarise
+from hindrax_tools.commands.scenarios import run_case, summarise
 
 
 def run(quick: bool = False) -> list[dict]:

@@ -1,7 +1,7 @@
 """Safety benchmark rows of the vehicle's authority (docs/architecture.md §8.2): a sealed internal graph and signed
 operator requests.
 
-The layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes` (the ESC node, the
+The layout of :func:`hindrax_tools.benchmarks.safety.run_processes` (the ESC node, the
 supervisor and the output guard, each in its own process on the vehicle's transport) with the
 gateway beside them, started as ``python -m hindrax_drivers.gateway.node`` on the layout's internal
 domain and a topside domain of its own, with an operator key for the vehicle (``HINDRAX_KEYS_DIR``):
@@ -63,7 +63,7 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
 @contextmanager
 def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
     """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
-    (:func:`~hindrax_ident.tools.benchmarks.safety.running_layout`), on its internal domain and the
+    (:func:`~hindrax_tools.benchmarks.safety.running_layout`), on its internal domain and the
     topside domain ``topside`` (LOCALHOST, the shipped file's range), with operator keys from
     ``keys_dir`` (none: every operator request refused); yields its process once its internal
     participant has sockets, and stops it on the way out."""

@@ -1,7 +1,7 @@
 """Benchmark of the virtual pool (``make bench``, name "simulator").
 
 Rows:
-* ``steps_per_s``: :meth:`hindrax_ident.sim.simulator.Simulator.step` calls per wall second at the default step
+* ``steps_per_s``: :meth:`hindrax_sim.simulator.Simulator.step` calls per wall second at the default step
   (``simulation.step_s``) with every sensor model on, thrust changing every 0.5 s;
 * ``real_time_factor``: simulated seconds per wall second of the same run (target >= 20);
 * ``node_real_time_factor``: the ROS node at real_time_factor 0 in one SingleThreadedExecutor with a
@@ -19,8 +19,8 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.sim.node import SimulatorNode
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.node import SimulatorNode
+from hindrax_sim.simulator import Simulator
 
 from . import spinning
 

@@ -11,7 +11,7 @@ the recorder (every topic except ``sim/*`` and ``/clock``), devices emulated and
 stack's CPU. Two phases of ``duration_s`` each: ``running`` (the identification node runs a surge
 goal) and ``idle`` (goal cancelled, a 50 Hz ``wrench`` stream from the benchmark).
 
-``inproc``: the graph of ``hindrax run`` (:func:`hindrax_ident.bringup.build_graph`,
+``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`,
 ``drive_clocks``) in one executor; per node the CPU of its callbacks less the emulators' time in
 them, plus its own threads; the rest is ``executor+dds``. ``launch``: the processes of
 :data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the virtual pool in another process;
@@ -65,7 +65,7 @@ from hindrax_drivers.recording.selection import TopicSelection
 from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
-from hindrax_ident.bringup import build_graph
+from hindrax_sim.graph.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
@@ -326,7 +326,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
         try:
-            pool = ["-m", "hindrax_ident.tools.benchmarks.launch_layout", "pool", "--socket", sock,
+            pool = ["-m", "hindrax_tools.benchmarks.launch_layout", "pool", "--socket", sock,
                     "--ports-file", str(ports_file)]
             procs["pool"] = start_logged(tmp / "pool.log", [py, *pool], env=env)
             ports = wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and read_ports_file(ports_file), 60,
@@ -336,7 +336,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
             # so every process may get them: a node ignores the keys it does not declare.
             bench = ["-p", f"sensors.dvl75.port:={ports['dvl75']}", "-p", f"sensors.ping1d.port:={ports['ping1d']}",
                      "-p", "esc.arming_time_s:=1.0", "-p", "esc.oscillator_calibrated:=true"]
-            wrap = ["-m", "hindrax_ident.tools.benchmarks.launch_node"]  # no simulator here
+            wrap = ["-m", "hindrax_tools.benchmarks.launch_node"]  # no simulator here
             (tmp / "params").mkdir(exist_ok=True)
             values_file = functools.partial(write_parameter_file, directory=tmp / "params")
             for lp in layout:
@@ -619,8 +619,8 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
 
 
 def _skeleton_argv(spec_file: Path, label: str) -> list[str]:
-    return [python_executable(), "-m", "hindrax_ident.tools.benchmarks.launch_node",
-            "hindrax_ident.tools.benchmarks.launch_node:skeleton_main", str(spec_file), label]
+    return [python_executable(), "-m", "hindrax_tools.benchmarks.launch_node",
+            "hindrax_tools.benchmarks.launch_node:skeleton_main", str(spec_file), label]
 
 
 def _endpoint(topic: str, type_name: str, raw: bool | None = None) -> dict:
@@ -698,7 +698,7 @@ PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (publ
 
 #: The virtual pool's CPU (simulator and emulators, fraction of a core) in the running windows of the launch layout
 #: on the reference machine: docs/results.md, make bench at c7544b1, machine_nbody_cpu_s 27.2 s (the reference
-#: machine of :data:`~hindrax_ident.tools.benchmarks.machine.REFERENCE_NBODY_CPU_S`)
+#: machine of :data:`~hindrax_tools.benchmarks.machine.REFERENCE_NBODY_CPU_S`)
 REFERENCE_POOL_CPU = 0.203
 
 #: the launch file the launch layout starts (package, path in its share directory), with recording on
@@ -714,7 +714,7 @@ def _median(values: list[float]) -> float:
 def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
     """Rows of the launch layout: per process, total, largest process and messages per second of each phase, each
     the median over the phase's windows (the notes list every window's value). ``nbody_s``: this machine's n-body
-    time (:func:`~hindrax_ident.tools.benchmarks.machine.nbody_cpu_s`), for the total and the
+    time (:func:`~hindrax_tools.benchmarks.machine.nbody_cpu_s`), for the total and the
     largest process at the reference machine's speed (``..._at_reference_speed``); None: none."""
     rows: list[dict] = []
     for phase in ("idle", "running"):
@@ -970,7 +970,7 @@ def baseline_launch(ref: str, windows: int, duration_s: float) -> list[dict]:
                 [str(tree / "src" / "hindrax_drivers"), str(tree / "src" / "hindrax_ident")]))
             print(f"stack benchmark: the baseline {ref} first", flush=True)
             done = subprocess.run([python_executable(), "-m",
-                                   "hindrax_ident.tools.benchmarks.stack", "--layouts", "launch",
+                                   "hindrax_tools.benchmarks.stack", "--layouts", "launch",
                                    "--no-baselines", "--windows", str(windows), "--window-s", str(duration_s),
                                    "--json", str(out)], env=env, cwd=tree, capture_output=True, text=True)
             if done.returncode != 0 or not out.is_file():
@@ -1006,10 +1006,10 @@ def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m hindrax_ident.tools.benchmarks.stack``: the stack benchmark alone, with the
+    """``python -m hindrax_tools.benchmarks.stack``: the stack benchmark alone, with the
     options ``make bench`` does not take (``--help``); prints the rows as JSON (to a file too:
     ``--json``). :func:`baseline_launch` runs a baseline commit's this way."""
-    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.stack",
+    parser = argparse.ArgumentParser(prog="python -m hindrax_tools.benchmarks.stack",
                                      description="The Pi budget: CPU of the vehicle graph in the launch layout "
                                                  "(one process per <node> of pool_test.launch.xml) and in one "
                                                  "process. CPU = process CPU time / wall time.")

@@ -1,7 +1,7 @@
 """``hindrax bringup [--config FILE] [--sim] [--record [--record-dir DIR]] [--rtf X] [--seed N] [--controller
 [--model YAML]]``.
 
-Starts the whole node graph in this process (:mod:`hindrax_ident.bringup`): with ``--sim`` against the virtual pool
+Starts the whole node graph in this process (:mod:`hindrax_sim.graph.bringup`): with ``--sim`` against the virtual pool
 and the device emulators (the virtual pool's and the tests' graph). ``--controller`` adds the controller node
 (depth/altitude, heading and velocity holds from ``--model``, disabled until ``controller/hold``; docs/control.md §3).
 Runs until Ctrl-C / SIGTERM, then commands neutral thrust and closes any bag.
@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import default_config_path
 
-    from hindrax_ident.bringup import run as run_graph
+    from hindrax_sim.graph.bringup import run as run_graph
 
     if not args.sim:
         print(VEHICLE_NOTICE, file=sys.stderr, flush=True)

@@ -1,9 +1,9 @@
 """What every ``hindrax`` command shares: the ``--config`` option, loading the vehicle file, the error exit.
 
 A command raises :class:`CommandError` for a problem it found (bad input, invalid configuration): the
-``hindrax`` entry point (:func:`hindrax_ident.tools.cli.main`) prints its one-line message on stderr and
+``hindrax`` entry point (:func:`hindrax_tools.cli.main`) prints its one-line message on stderr and
 exits 1. Only the standard library is imported here at module level, so defining a command's arguments
-stays cheap (``hindrax --help`` imports no command module at all, :mod:`hindrax_ident.tools.cli`).
+stays cheap (``hindrax --help`` imports no command module at all, :mod:`hindrax_tools.cli`).
 """
 from __future__ import annotations
 
@@ -54,11 +54,11 @@ def load_vehicle(path: str | None = None) -> Any:
 
 
 def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:
-    """The folder of one result (:mod:`hindrax_ident.output_dirs`): ``out`` when given (new or
+    """The folder of one result (:mod:`hindrax_tools.output_dirs`): ``out`` when given (new or
     empty), else a new ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was
     taken). Raises CommandError: ``out`` unusable, or ``unwritable`` (its ``{why}`` filled in) when
     ``root`` is not writable."""
-    from ...output_dirs import OutputDirError, explicit_result_dir, new_result_dir
+    from hindrax_tools.output_dirs import OutputDirError, explicit_result_dir, new_result_dir
 
     try:
         if out:

@@ -2,7 +2,7 @@
 
 * ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...]
   [--seed N] [--seeds N]``: closed-loop runs in the in-process virtual pool on the truth FILE
-  (:mod:`hindrax_ident.sim.control_evaluate`): a 0.3 m depth step, an altitude hold at 0.5 m over a
+  (:mod:`hindrax_sim.control_evaluate`): a 0.3 m depth step, an altitude hold at 0.5 m over a
   sloped floor and a 30 degree heading step, each with the model of YAML, the vehicle file's model
   and the former PD hold. Prints the table (RMSE, overshoot, settling time, RMS thrust) and the
   ratios, writes ``control.json`` and ``report/index.html`` in DIR (default
@@ -24,7 +24,7 @@ import datetime as _dt
 import math
 from pathlib import Path
 
-from ... import results_doc
+from hindrax_tools import results_doc
 from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run"]
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load_model(path, cfg):
-    from ...control.model import ModelFileError, load_model, model_from_config
+    from hindrax_onboard.control.model import ModelFileError, load_model, model_from_config
 
     try:
         model = model_from_config(cfg) if path is None else load_model(path, cfg)
@@ -93,8 +93,8 @@ def _load_model(path, cfg):
 
 
 def _model(args, cfg) -> int:
-    from ...control.law import ControlSettings, Controller
-    from ...control.maneuvers import dof_authority
+    from hindrax_onboard.control.law import ControlSettings, Controller
+    from hindrax_onboard.control.maneuvers import dof_authority
     from hindrax_drivers.allocation.core import AllocationCore
     from hindrax_drivers.config import DOFS
 
@@ -107,8 +107,8 @@ def _model(args, cfg) -> int:
 
 
 def _evaluate(args, cfg) -> int:
-    from ...sim import control_evaluate as ev
-    from ...sim.truth import TruthError, load_truth
+    from hindrax_sim import control_evaluate as ev
+    from hindrax_sim.truth import TruthError, load_truth
 
     maneuvers = choices("--maneuvers", args.maneuvers, ev.MANEUVERS, "manoeuvre", empty_ok=False)
     models = choices("--models", args.models, ev.MODELS, "model", empty_ok=False)
@@ -149,7 +149,7 @@ def _evaluate(args, cfg) -> int:
 
 
 def _scenarios(args, cfg) -> int:
-    from ...sim import control_suite as suite
+    from hindrax_sim import control_suite as suite
 
     try:
         names, truth_dir = suite.scenario_names(args.scenarios, args.truth_dir)

@@ -11,7 +11,7 @@ exit code is 1.
 
 On the topside the names are the gateway's ``/<name>/controller/...`` (docs/architecture.md §8.2); on the vehicle
 they are the controller's own. The vehicle is the one named, or the only one on the domain
-(:mod:`hindrax_ident.tools.commands.vehicle`). Prints ``<name>: <the controller's message>``.
+(:mod:`hindrax_tools.commands.vehicle`). Prints ``<name>: <the controller's message>``.
 """
 from __future__ import annotations
 

@@ -3,11 +3,11 @@
 * ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO] [--model linear|quadratic]``:
   [Hindrax-AM] analysis of a free-decay record (CSV with a header row; column 1 time in s, column 2
   acceleration in m/s^2). Prints one JSON object
-  (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
+  (:meth:`hindrax_onboard.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
   added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8),
   kc (eq. 9)... ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear +
   quadratic damping, [SmallROV] eq. 12;
-  :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`).
+  :func:`hindrax_onboard.estimation.free_decay.quadratic_free_decay_keys`).
 * ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
   ``{"negative": {c4..c1, c4_std..c1_std, thrust_relative_std, ...}, "positive": {...},
@@ -15,7 +15,7 @@
   relative thrust std in a vehicle file (:func:`write_thruster_curves`), which the identification
   intervals then use instead of the declared ``thrust_uncertainty_rel``.
 * ``hindrax ident campaign``: the identification campaign on the simulator, same as ``hindrax run``
-  (:mod:`hindrax_ident.tools.commands.run`).
+  (:mod:`hindrax_tools.commands.run`).
 
 Exit status 0 on success, 1 on bad input (one-line message on stderr).
 """
@@ -89,8 +89,8 @@ def read_two_columns(path: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _free_decay(args) -> int:
-    from ...estimation.free_decay import analyse_free_decay, quadratic_free_decay_keys
-    from ...estimation.least_squares import EstimationError
+    from hindrax_onboard.estimation.free_decay import analyse_free_decay, quadratic_free_decay_keys
+    from hindrax_onboard.estimation.least_squares import EstimationError
     try:
         t, a = read_two_columns(args.file)
         res = analyse_free_decay(t, a, args.stiffness, args.mass, args.volume, fluid_density_kg_m3=args.density)
@@ -104,8 +104,8 @@ def _free_decay(args) -> int:
 
 
 def _thruster_fit(args) -> int:
-    from ...estimation.least_squares import EstimationError
-    from ...estimation.thruster_fit import fit_thruster_curve
+    from hindrax_onboard.estimation.least_squares import EstimationError
+    from hindrax_onboard.estimation.thruster_fit import fit_thruster_curve
     try:
         pw, thrust = read_two_columns(args.file)
         fit = fit_thruster_curve(pw, thrust, neutral_us=args.neutral)

@@ -3,7 +3,7 @@ identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag,
 ``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints
-the summary table; the pipeline is :mod:`hindrax_ident.identification.assessment.pipeline`
+the summary table; the pipeline is :mod:`hindrax_fit.assessment.pipeline`
 (docs/identification.md §7). Calibration steps' results in the bag (``identification/calibration``)
 are applied as ``hindrax run`` applies them (docs/identification.md §6). A DOF whose chosen model
 does not beat holding the velocity in the cross-validation gets that verdict, as in ``hindrax ident
@@ -52,9 +52,9 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
     for an unusable bag or when no DOF is identified."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ...identification.assessment import pipeline
-    from ...identification.bag_input.reader import BagContentError
-    from ...progress_line import ProgressLine, Ticker
+    from hindrax_fit.assessment import pipeline
+    from hindrax_fit.bag_input.reader import BagContentError
+    from hindrax_tools.progress_line import ProgressLine, Ticker
 
     try:
         with Ticker(ProgressLine(lambda s: print(s, flush=True)), f"{command}: reading and fitting {bag}"):
@@ -82,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
     """Identify from a bag, write the outputs, print the summary. Raises :class:`CommandError` on bad input."""
     import yaml
 
-    from ...identification.assessment.verdicts import format_advice, no_model_line
-    from ...identification.fit.fit_core import NO_MODEL_VERDICT
+    from hindrax_fit.assessment.verdicts import format_advice, no_model_line
+    from hindrax_fit.fit.fit_core import NO_MODEL_VERDICT
     from .run import format_summary
 
     cfg = load_vehicle(args.config)

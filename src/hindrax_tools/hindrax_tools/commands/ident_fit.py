@@ -1,14 +1,14 @@
 """``hindrax ident fit BAG [BAG ...]``: identify from any bag (piloted, closed-loop, another vehicle's) and validate.
 
-One bag reader with two adapters feeds one fit core (:mod:`hindrax_ident.identification.bag_input.reader`,
-:mod:`hindrax_ident.identification.assessment.pipeline`, docs/identification.md §7). A bag with the campaign's topics,
+One bag reader with two adapters feeds one fit core (:mod:`hindrax_fit.bag_input.reader`,
+:mod:`hindrax_fit.assessment.pipeline`, docs/identification.md §7). A bag with the campaign's topics,
 given alone with ``--config`` and no topic, DOF or holdout choice, is read as the campaign (as ``hindrax ident bag``
 reads it) and written as ``hindrax ident bag`` writes it: the same values and intervals. Any other bag is read by
 message type (preprocessing, K-fold and holdout validation). Writes ``identification.yaml``
 (``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
 validation data) in ``--out`` (new or empty; default: a new ``<first bag>_fit_<time>`` beside it) and prints a
 table. Without ``--config`` the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready:
-false`` with the reason, also printed (:func:`hindrax_ident.identification.assessment.results.to_config_overrides`
+false`` with the reason, also printed (:func:`hindrax_fit.assessment.results.to_config_overrides`
 refuses it). Exit 0, or 1 with one line on stderr for an unusable bag, topic, frame or too little data.
 """
 from __future__ import annotations
@@ -65,8 +65,8 @@ def format_table(res, cfg=None) -> str:
     thrust-curve uncertainty)."""
     import numpy as np
 
-    from ...identification.assessment.results import assessment, training_lines
-    from ...identification.assessment.verdicts import no_model_line
+    from hindrax_fit.assessment.results import assessment, training_lines
+    from hindrax_fit.assessment.verdicts import no_model_line
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
@@ -112,7 +112,7 @@ def _run_campaign(args: argparse.Namespace, cfg, out: Path) -> int:
     """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of
     ``hindrax ident bag`` (:func:`~.ident_bag.identify_campaign_bag`) into ``out`` and this
     command's table of the core's results."""
-    from ...identification.assessment.pipeline import campaign_result, core_options
+    from hindrax_fit.assessment.pipeline import campaign_result, core_options
     from .ident_bag import identify_campaign_bag
 
     bag = Path(args.bags[0])
@@ -129,7 +129,7 @@ def _run_campaign(args: argparse.Namespace, cfg, out: Path) -> int:
 def _campaign_hint(args: argparse.Namespace, cfg) -> str:
     """'; it is a campaign bag: ...' when the first bag, not read as the campaign (no --config, several bags, a
     holdout, DOFs or topics chosen), has the campaign's topics, else ''."""
-    from ...identification.bag_input.reader import is_campaign_bag
+    from hindrax_fit.bag_input.reader import is_campaign_bag
 
     try:
         if not is_campaign_bag(args.bags[0]):
@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     output folder that cannot be used: before anything is fitted)."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ...identification.bag_input.reader import FitOptions, TopicChoice, reads_as_campaign
+    from hindrax_fit.bag_input.reader import FitOptions, TopicChoice, reads_as_campaign
     from .ident_bag import result_dir_for_bag
 
     cfg = None if args.config is None else load_vehicle(args.config)
@@ -182,9 +182,9 @@ def _run_any(args: argparse.Namespace, cfg, out: Path, choice, dofs, options) ->
     into ``out``, print."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ...identification.assessment.pipeline import fit_bags, write_any_outputs
-    from ...identification.assessment.verdicts import format_advice
-    from ...identification.bag_input.reader import FitInputError
+    from hindrax_fit.assessment.pipeline import fit_bags, write_any_outputs
+    from hindrax_fit.assessment.verdicts import format_advice
+    from hindrax_fit.bag_input.reader import FitInputError
 
     try:
         res = fit_bags(args.bags, choice, cfg, dofs, args.holdout, options)

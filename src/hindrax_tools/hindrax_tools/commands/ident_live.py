@@ -4,7 +4,7 @@
 * ``hindrax ident start [--dofs ...] [--levels N] [--fractions F1,F2,...] [--calibrate STEPS
   [--calibration-only]] [--server-timeout S]`` sends one ``run_identification`` goal
   (hindrax_msgs/action/RunIdentification) and prints its feedback as one updating line on a terminal
-  (:mod:`hindrax_ident.progress_line`), a calibration step's operator prompt once, prefixed ``>>>``.
+  (:mod:`hindrax_tools.progress_line`), a calibration step's operator prompt once, prefixed ``>>>``.
   Ctrl-C cancels the goal: the node brings the vehicle to a zero wrench and holds it until the ESC
   reports neutral widths, and the command waits for that end (a second Ctrl-C stops waiting). Exit 0
   when the campaign completed, 1 when it was rejected, aborted or cancelled, or no server answered.
@@ -14,7 +14,7 @@
   did what the prompt asked; exit 1 when nothing was awaited or no service answered.
 
 Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain
-(:mod:`hindrax_ident.tools.commands.vehicle`): on the topside through the vehicle's gateway
+(:mod:`hindrax_tools.commands.vehicle`): on the topside through the vehicle's gateway
 (``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
 The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise.
 """
@@ -93,7 +93,7 @@ def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float], list[
     :class:`CommandError` for a bad one, or ``--calibration-only`` without a step."""
     from hindrax_drivers.config import DOFS
 
-    from ...identification.online.executive import CALIBRATION_STEPS
+    from hindrax_onboard.identification.online.executive import CALIBRATION_STEPS
 
     dofs = choices("--dofs", args.dofs, DOFS, "DOF")
     steps = choices("--calibrate", args.calibrate, CALIBRATION_STEPS, "step")
@@ -120,14 +120,14 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
     (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
     ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside); ``sign``:
-    signs the goal for the gateway (:meth:`~hindrax_ident.tools.commands.vehicle.Target.sign`).
+    signs the goal for the gateway (:meth:`~hindrax_tools.commands.vehicle.Target.sign`).
     Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
     from rclpy.action import ActionClient
 
     from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
-    from ...progress_line import ProgressLine
+    from hindrax_tools.progress_line import ProgressLine
 
     client = ActionClient(node, RunIdentification, action_name)
     goals = GoalSender(node, client, action_name)

@@ -2,7 +2,7 @@
 model's open-loop predictions on bags, as CSV anyone can score.
 
 Per bag and DOF of the model, ``DIR/<bag>_<dof>.csv`` with ``t_s,segment,measured,predicted`` (SI, body FRD, the
-frame and time origin in the first ``#`` line; :mod:`hindrax_ident.identification.assessment.predict`). With
+frame and time origin in the first ``#`` line; :mod:`hindrax_fit.assessment.predict`). With
 ``--segment-s S`` the prediction restarts from the measured velocity every S seconds from the first instant with both
 force and velocity; without it, the tool's own rule (its holdout validation's 10 s segments). Prints per bag and DOF the
 segments, samples and nrmse, nrmse_hold, nrmse_zero of those rows (the definition in the predict module). Exit 0,
@@ -38,8 +38,8 @@ def run(args: argparse.Namespace) -> int:
 
     from hindrax_drivers.recording.reader import BagError
 
-    from ...identification.bag_input.reader import FitInputError, TopicChoice
-    from ...identification.assessment.predict import (ModelError, dofs_of, load_model, predict_bag,
+    from hindrax_fit.bag_input.reader import FitInputError, TopicChoice
+    from hindrax_fit.assessment.predict import (ModelError, dofs_of, load_model, predict_bag,
                                                       rule_text, write_csv)
 
     if args.segment_s is not None and not 0.5 <= args.segment_s <= 3600.0:

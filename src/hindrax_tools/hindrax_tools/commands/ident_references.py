@@ -3,7 +3,7 @@
 * ``hindrax ident priors (--config FILE | --length-m L --width-m W --height-m H --density-kg-m3 RHO
   --frontal-area-m2 AF --side-area-m2 AS --top-area-m2 AT) [--mass-kg M --bg-m BG | --restoring-n-m-per-rad C]
   [--roll-inertia-kg-m2 I44 --pitch-inertia-kg-m2 I55]``: empirical added mass and damping from geometry
-  ([NTNU-Thesis] Sec. 3.1, App. A.1/A.2; :mod:`hindrax_ident.estimation.priors`). Prints one JSON object
+  ([NTNU-Thesis] Sec. 3.1, App. A.1/A.2; :mod:`hindrax_onboard.estimation.priors`). Prints one JSON object
   with 6-element lists ``added_mass``, ``linear_damping``, ``quadratic_damping`` (SI, surge..yaw; null where an
   input is missing), ``units``, ``inputs`` and ``notes``. Frontal area: normal to x; side: normal to y; top: normal
   to z. With ``--config`` the box, density, mass, inertias and BG come from the vehicle file, the areas from the
@@ -11,7 +11,7 @@
 * ``hindrax ident inclining FILE --test-mass-kg M [--test-volume-m3 V] [--degrees] [--vehicle-mass-kg MV]``:
   restoring stiffness from an inclining test (CSV with a header; column 1 the signed arm of the test mass in m,
   column 2 the IMU-measured tilt, rad or with ``--degrees`` deg). Prints
-  :meth:`~hindrax_ident.estimation.free_decay.IncliningResult.to_dict` (restoring_n_m_per_rad, its std, bg_m...).
+  :meth:`~hindrax_onboard.estimation.free_decay.IncliningResult.to_dict` (restoring_n_m_per_rad, its std, bg_m...).
 * ``hindrax ident tilt-decay FILE --stiffness C [--stiffness-std S] [--rigid-inertia I] [--signal rate|angle]
   [--identification YAML --dof roll|pitch]``: roll or pitch free decay (CSV with a header; column 1
   time s, column 2 the gyro rate in rad/s or the attitude angle in rad), fitted from its largest
@@ -75,8 +75,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _priors(args) -> int:
-    from ...estimation.least_squares import EstimationError
-    from ...estimation.priors import Geometry, PriorInputs, empirical_priors, priors_from_config
+    from hindrax_onboard.estimation.least_squares import EstimationError
+    from hindrax_onboard.estimation.priors import Geometry, PriorInputs, empirical_priors, priors_from_config
 
     try:
         if args.config:
@@ -100,8 +100,8 @@ def _priors(args) -> int:
 
 
 def _inclining(args) -> int:
-    from ...estimation.free_decay import restoring_from_inclining
-    from ...estimation.least_squares import EstimationError
+    from hindrax_onboard.estimation.free_decay import restoring_from_inclining
+    from hindrax_onboard.estimation.least_squares import EstimationError
     from .ident import read_two_columns
 
     try:
@@ -119,11 +119,11 @@ def _inclining(args) -> int:
 def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
     """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the
     free-decay result ``out`` (in place) by the campaign's verdict rule itself
-    (:func:`~hindrax_ident.identification.assessment.verdicts.apply_reference_verdicts` on a one-DOF
+    (:func:`~hindrax_fit.assessment.verdicts.apply_reference_verdicts` on a one-DOF
     document: suspect beyond ``REFERENCE_Z_MAX`` combined std). Raises ``ValueError`` when ``path``
     has no ``dofs.<dof>``."""
-    from ...identification.assessment.results import read_identification
-    from ...identification.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
+    from hindrax_fit.assessment.results import read_identification
+    from hindrax_fit.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
 
     entry = read_identification(path)["dofs"].get(dof)
     if entry is None:
@@ -138,8 +138,8 @@ def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
 
 
 def _tilt_decay(args) -> int:
-    from ...estimation.free_decay import find_release_index, fit_quadratic_free_decay
-    from ...estimation.least_squares import EstimationError
+    from hindrax_onboard.estimation.free_decay import find_release_index, fit_quadratic_free_decay
+    from hindrax_onboard.estimation.least_squares import EstimationError
     from .ident import read_two_columns
 
     try:

@@ -1,6 +1,6 @@
 """``hindrax pool rehearse [--topside-domain N] [--dir DIR] [--truth FILE]``: the README's pool day on a laptop.
 
-One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_ident.sim.live_pool`: the simulator
+One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_sim.live_pool`: the simulator
 behind the five emulated devices, in a process of its own, on the wall clock) and the *installed*
 ``hindrax_ident/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
 process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.process_runner.ProcessRunner`), the drivers pointed at
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.operator_signing import KEYS_DIR_ENV, create_key
     from hindrax_drivers.process_runner import ProcessRunner
 
-    from ...sim.live_pool import LivePool
+    from hindrax_sim.live_pool import LivePool
 
     internal, topside = _domains(args)
     try:

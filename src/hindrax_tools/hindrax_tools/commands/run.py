@@ -1,19 +1,19 @@
 """``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--in-process]``: the main job.
 
 Default: the campaign through the whole ROS graph in one process
-(:mod:`hindrax_ident.graph_campaign`: virtual pool, device emulators, drivers, ESC, allocation,
+(:mod:`hindrax_sim.graph.graph_campaign`: virtual pool, device emulators, drivers, ESC, allocation,
 identification node and recorder; armed through ``esc/set_armed``, one ``run_identification``
 goal, disarmed, then identified from the bag), in lock-step with the identification node's control
 tick, so CPU load slows the run but does not change it.
 
 ``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the
-simulator (:mod:`hindrax_ident.sim.campaign`: no drivers, no ROS graph, no bag), about four times
+simulator (:mod:`hindrax_sim.campaign`: no drivers, no ROS graph, no bag), about four times
 faster; for quick studies of the method.
 
 Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
 ``--in-process``), with a ``latest`` link beside it moved once the run has completed
-(:mod:`hindrax_ident.output_dirs`), or ``--out``, which must be new or empty. It holds
-``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`),
+(:mod:`hindrax_tools.output_dirs`), or ``--out``, which must be new or empty. It holds
+``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
 ``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF
 and parameter the identified value with its std, the configured value ("truth" in simulation) and
 the relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
@@ -25,7 +25,7 @@ import math
 import os
 from pathlib import Path
 
-from ... import results_doc
+from hindrax_tools import results_doc
 from .common import (CommandError, WallProgress, add_config_argument, choices, load_vehicle,
                      result_dir)
 
@@ -89,10 +89,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _summary(identifications: dict) -> list[tuple[dict, str, str, str]]:
-    """Per row of :func:`~hindrax_ident.identification.assessment.report.summary_rows`: (the row,
+    """Per row of :func:`~hindrax_fit.assessment.report.summary_rows`: (the row,
     its relative error or ``-``, its configured value or ``-``, its verdict with the first reason: a
     parameter at a bound that one, it has no interval)."""
-    from ...identification.assessment.report import summary_rows
+    from hindrax_fit.assessment.report import summary_rows
 
     out = []
     for r in summary_rows(identifications):
@@ -148,7 +148,7 @@ def _finish(args: argparse.Namespace, progress: WallProgress, out: Path, idents:
     if not (ok and idents):
         return 1
     if not args.out:
-        from ...output_dirs import point_latest
+        from hindrax_tools.output_dirs import point_latest
 
         try:
             point_latest(out)
@@ -196,7 +196,7 @@ def _check_args(args) -> tuple[object, list[str]]:
     dur = getattr(args, "excitation_duration", None)
     if dur is not None and not (5.0 <= dur <= 1800.0):
         raise CommandError(f"--excitation-duration {dur}: allowed 5-1800 s (identification.excitation_duration_s)")
-    from ...identification.online.executive import expand_calibration
+    from hindrax_onboard.identification.online.executive import expand_calibration
 
     cal = expand_calibration(_calibration_steps(args))
     if "float" in cal and cfg.known_forces.float_net_buoyancy_n is None:
@@ -206,7 +206,7 @@ def _check_args(args) -> tuple[object, list[str]]:
 
 
 def _calibration_steps(args) -> list[str]:
-    from ...identification.online.executive import CALIBRATION_STEPS
+    from hindrax_onboard.identification.online.executive import CALIBRATION_STEPS
 
     return choices("--calibrate", getattr(args, "calibrate", ""), CALIBRATION_STEPS, "step")
 
@@ -223,8 +223,8 @@ def run_graph(args: argparse.Namespace) -> int:
 
     from hindrax_drivers.vehicle_graph import ForeignVehicleError
 
-    from ...graph_campaign import run_graph_campaign
-    from ...identification.assessment.results import reference_sections
+    from hindrax_sim.graph.graph_campaign import run_graph_campaign
+    from hindrax_fit.assessment.results import reference_sections
 
     cfg, dofs = _check_args(args)
     progress = WallProgress()
@@ -252,22 +252,22 @@ def run_graph(args: argparse.Namespace) -> int:
 
 def run_in_process(args: argparse.Namespace) -> int:
     """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
-    from ...sim.campaign import Campaign
-    from ...identification.fit.campaign_fit import identify_all_with_errors
-    from ...identification.assessment.report import write_outputs
-    from ...identification.assessment.results import reference_sections
+    from hindrax_sim.campaign import Campaign
+    from hindrax_fit.fit.campaign_fit import identify_all_with_errors
+    from hindrax_fit.assessment.report import write_outputs
+    from hindrax_fit.assessment.results import reference_sections
 
     cfg, dofs = _check_args(args)
     progress = WallProgress()
     print("campaign in-process on the simulator (no ROS graph, no bag)", flush=True)
-    from ...sim.simulator import Simulator
-    from ...sim.truth import TruthError
+    from hindrax_sim.simulator import Simulator
+    from hindrax_sim.truth import TruthError
     try:
         sim = Simulator(cfg, seed=args.seed, truth=getattr(args, "truth", None))
     except TruthError as exc:
         raise CommandError(f"--truth: {exc}") from exc
     cal = _calibration_steps(args)
-    from ...identification.online.executive import calibration_forces, inclining_load
+    from hindrax_onboard.identification.online.executive import calibration_forces, inclining_load
     w_ballast, f_line = calibration_forces(cfg)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
@@ -278,7 +278,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
-    from ...identification.fit.calibration import identify_calibrated
+    from hindrax_fit.fit.calibration import identify_calibrated
 
     # the calibration's per-direction scales applied, the thrust shares attached for the joint estimate
     idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)

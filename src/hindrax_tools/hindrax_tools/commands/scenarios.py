@@ -1,10 +1,10 @@
 """``hindrax ident scenarios [--scenarios NAMES] [--seeds N] [--dofs ...] [--out DIR] [--jobs N]``: the scenario suite.
 
-For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :mod:`hindrax_ident.sim.truth`) and
-every seed 1..N, one in-process identification campaign (:class:`~hindrax_ident.sim.campaign.Campaign`, the simulator
+For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :mod:`hindrax_sim.truth`) and
+every seed 1..N, one in-process identification campaign (:class:`~hindrax_sim.campaign.Campaign`, the simulator
 running on the scenario's truth, every estimator on the vehicle file), the offline identification and the verdicts
-(:mod:`hindrax_ident.identification.assessment.verdicts`). Each parameter is compared with the truth's value
-(:func:`~hindrax_ident.identification.fit.dof_model.truth_parameters` of the truth configuration): relative error, z =
+(:mod:`hindrax_fit.assessment.verdicts`). Each parameter is compared with the truth's value
+(:func:`~hindrax_onboard.identification.model.dof_model.truth_parameters` of the truth configuration): relative error, z =
 (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
 
 Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
@@ -13,7 +13,7 @@ truth in at least 90 % of the seeds or the parameter is suspect in every case wh
 no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
 
 ``--excitation ladder,multisine,prbs`` runs every case once per force input
-(:mod:`hindrax_ident.identification.online.excitation`); the label becomes
+(:mod:`hindrax_onboard.identification.online.excitation`); the label becomes
 ``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
 (:func:`format_excitation_table`). ``--calibrate thrust`` (or other reference steps) runs them
 before the manoeuvres of every case and identifies as ``hindrax ident campaign --calibrate`` does
@@ -32,7 +32,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Sequence
 
-from ... import results_doc
+from hindrax_tools import results_doc
 from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
@@ -47,7 +47,7 @@ REPORTED = ("inertia", "quadratic_damping", "quadratic_damping_positive", "quadr
 
 def scenario_dir() -> Path:
     """``ros_ws/config/truth/scenarios/``."""
-    from ...sim.truth import truth_dir
+    from hindrax_sim.truth import truth_dir
     return truth_dir() / "scenarios"
 
 
@@ -107,9 +107,9 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     excitation / excitation_duration_s: the force input (default the vehicle file's ``identification.excitation``);
     another than ``ladder`` is appended to the label as `` [<excitation>]`` and to the cache key. calibrate: reference
-    steps run first (:data:`~hindrax_ident.identification.online.executive.CALIBRATION_STEPS`; the virtual pool plays
+    steps run first (:data:`~hindrax_onboard.identification.online.executive.CALIBRATION_STEPS`; the virtual pool plays
     the operator): the record is identified with its thrust scales applied and estimated jointly with the fits
-    (:func:`~hindrax_ident.identification.fit.calibration.identify_calibrated`, :func:`~hindrax_ident.identification.
+    (:func:`~hindrax_fit.fit.calibration.identify_calibrated`, :func:`~hindrax_onboard.identification.
     calibration.joint_estimate`, as ``hindrax ident campaign``); the label gains `` [calibrate <steps>]``.
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
@@ -118,12 +118,12 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     """
     from hindrax_drivers.config import or_default
 
-    from ...sim.campaign import Campaign
-    from ...identification.fit.campaign_fit import identify_all_with_errors
-    from ...identification.fit.dof_model import truth_parameters
-    from ...identification.assessment.verdicts import apply_verdicts, rls_published_std
-    from ...sim.simulator import Simulator
-    from ...sim.truth import load_truth
+    from hindrax_sim.campaign import Campaign
+    from hindrax_fit.fit.campaign_fit import identify_all_with_errors
+    from hindrax_onboard.identification.model.dof_model import truth_parameters
+    from hindrax_fit.assessment.verdicts import apply_verdicts, rls_published_std
+    from hindrax_sim.simulator import Simulator
+    from hindrax_sim.truth import load_truth
 
     import pickle
 
@@ -144,8 +144,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
     else:
-        from ...identification.fit.calibration import identify_calibrated, joint_estimate
-        from ...identification.online.executive import calibration_forces, inclining_load
+        from hindrax_fit.fit.calibration import identify_calibrated, joint_estimate
+        from hindrax_onboard.identification.online.executive import calibration_forces, inclining_load
 
         operator = {}
         if cal:
@@ -227,7 +227,7 @@ def _case_star(args):
 def summarise(results: Sequence[dict]) -> dict:
     """Per scenario: per DOF and parameter the mean error, max |z|, covered / suspect / ok counts (ok = covered
     or suspect); totals; whether the scenario meets the target (module docstring)."""
-    from ...identification.assessment.verdicts import spread_reasons
+    from hindrax_fit.assessment.verdicts import spread_reasons
 
     out: dict = {}
     by: dict = {}
@@ -349,11 +349,11 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--seeds and --jobs must be >= 1")
     if args.cached_only and not args.cache:
         raise CommandError("--cached-only needs --cache DIR")
-    from ...identification.online.excitation import EXCITATIONS
+    from hindrax_onboard.identification.online.excitation import EXCITATIONS
     excitations = choices("--excitation", args.excitation, EXCITATIONS, "excitation") or [None]
     if args.excitation_duration is not None and not args.excitation_duration > 0:
         raise CommandError(f"--excitation-duration must be > 0 s, got {args.excitation_duration}")
-    from ...identification.online.executive import CALIBRATION_STEPS
+    from hindrax_onboard.identification.online.executive import CALIBRATION_STEPS
     cal = choices("--calibrate", args.calibrate, CALIBRATION_STEPS, "step")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -367,10 +367,10 @@ def run(args: argparse.Namespace) -> int:
         jobs = keep
     progress, results = WallProgress(), []
     # import everything the workers need before they fork (the tree may change during a long suite)
-    from ...identification.assessment import verdicts  # noqa: F401
-    from ...identification.fit import dof_model  # noqa: F401
-    from ...identification.online import estimators  # noqa: F401
-    from ...sim import campaign, disturbances, simulator, truth  # noqa: F401
+    from hindrax_fit.assessment import verdicts  # noqa: F401
+    from hindrax_onboard.identification.model import dof_model  # noqa: F401
+    from hindrax_onboard.identification.online import estimators  # noqa: F401
+    from hindrax_sim import campaign, disturbances, simulator, truth  # noqa: F401
     import multiprocessing as mp
     with mp.get_context("fork").Pool(args.jobs) if args.jobs > 1 else nullcontext() as pool:
         for res in (pool.imap if pool else map)(_case_star, jobs):

@@ -22,7 +22,7 @@ class CampaignRecord:
     under test (-1 none). level: the test level commanded in a run (NaN outside runs). run_id: run counter
     (-1 outside runs). truth_position_ned_m / truth_euler_rad (n, 3): simulator truth, for tests and plots
     only (never used by control or estimation; NaN on the ROS graph). sensors: the conditioned sensor log of
-    :class:`~hindrax_ident.vehicle.state.SensorState`. windows: DOF -> (t_start, t_end). online: DOF ->
+    :class:`~hindrax_onboard.vehicle.state.SensorState`. windows: DOF -> (t_start, t_end). online: DOF ->
     OnlineDofEstimator. levels / authority: DOF -> ladder (N or N m) / (positive, negative) authority. aborted,
     abort_reason, wall_time_s, tick_s, time_constant_s, seed, final_pulse_width_us.
     """

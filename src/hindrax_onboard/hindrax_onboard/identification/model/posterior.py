@@ -2,7 +2,7 @@
 ident fit`` (docs/identification.md §6.3 and §7 step 6).
 
 The fit core's estimate theta_fit (p,) with covariance C (p, p) is a Gaussian measurement of the parameters; the
-empirical priors ([NTNU-Thesis] App. A.1/A.2 through :func:`~hindrax_ident.estimation.priors.priors_from_config`)
+empirical priors ([NTNU-Thesis] App. A.1/A.2 through :func:`~hindrax_onboard.estimation.priors.priors_from_config`)
 are independent Gaussians N(mu_i, sd_i^2) on some of them. The posterior ([Tarantola2005] Ch. 3, eqs. 3.37-3.38
 for a linear problem) is
 
@@ -48,7 +48,7 @@ def finite_or_none(x) -> float | None:
 
 def prior_entries(cfg) -> dict[str, dict]:
     """Per DOF ``{added_mass, linear_damping, quadratic_damping, source}``: the empirical priors from the
-    configured geometry ([NTNU-Thesis] App. A.1/A.2, :func:`~hindrax_ident.estimation.priors.priors_from_config`;
+    configured geometry ([NTNU-Thesis] App. A.1/A.2, :func:`~hindrax_onboard.estimation.priors.priors_from_config`;
     no projected areas in the vehicle file, so a solid prism: an upper bound). A value that cannot be computed is
     None; ``{}`` if the configuration lacks the geometry."""
     try:

@@ -2,7 +2,7 @@
 
 RLS with forgetting (``identification.forgetting_factor``) on the regressor row of the per-DOF model
 (:mod:`..fit.dof_model`), with calibrated covariance and the persistence-of-excitation measure of
-:class:`~hindrax_ident.estimation.rls.RecursiveLeastSquares`; directional forgetting, the excitation gate,
+:class:`~hindrax_onboard.estimation.rls.RecursiveLeastSquares`; directional forgetting, the excitation gate,
 physical-sign bounds, the change detector and the start at the empirical priors as :func:`online_rls` sets them
 from ``identification.rls_*``. The causal filter lags the fast transients and the forgetting window
 (1 / (1 - lambda) = 500 ticks, 20 s at the 25 Hz tick) is short, so the online values are a live indicator (a few
@@ -22,10 +22,10 @@ from ...estimation.filters import KinematicKalmanFilter
 from ...estimation.rls import RecursiveLeastSquares
 from ...vehicle.fusion import AccelAidedFilter
 from ...vehicle.uncertainty import measurement_settings
-from ..assessment.verdicts import rls_published_std
-from ..fit.dof_model import (parameter_names, regressor_matrix, restoring_regressor,
+from hindrax_fit.assessment.verdicts import rls_published_std
+from hindrax_onboard.identification.model.dof_model import (parameter_names, regressor_matrix, restoring_regressor,
                              rigid_inertia, truth_parameters)
-from ..fit.posterior import prior_entries
+from hindrax_onboard.identification.model.posterior import prior_entries
 
 __all__ = ["OnlineDofEstimator", "online_rls", "rls_setting", "rls_prior"]
 

@@ -69,7 +69,7 @@ from .estimators import OnlineDofEstimator
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
 from ...control.maneuvers import level_ladder
 from ...vehicle.signals import STILL_MESSAGE
-from ..bag_input.campaign_record import CampaignRecord
+from hindrax_onboard.identification.model.campaign_record import CampaignRecord
 from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Confirm, Dive,
                     Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder,
                     undo_line)
@@ -129,7 +129,7 @@ class TickInput:
 
     t_s: time of the tick (s, the plant's clock). elapsed_s: time the last command was held (s; the lag of the
     recorded force runs over it). samples: new sensor samples ``(device, sample)`` in the simulator's form
-    (:mod:`hindrax_ident.sim.sensors`, or :mod:`...vehicle.signals` from ROS messages), in the order to condition them.
+    (:mod:`hindrax_sim.sensors`, or :mod:`...vehicle.signals` from ROS messages), in the order to condition them.
     armed: the ESC output is armed. cancel: the operator asked to stop.
     """
 

@@ -16,7 +16,7 @@ The force in the regression is the thrust model of the pulse widths the ESC node
 [Hindrax-Drag] eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust allocation
 matrix, [Hindrax-Drag] eq. 9), body FRD.
 
-Run alone: ``python -m hindrax_ident.identification.online.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+Run alone: ``python -m hindrax_onboard.identification.online.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 
 Interfaces
 ----------
@@ -112,10 +112,10 @@ from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
-from ..bag_input import calibration_topic
-from ..bag_input.campaign_record import CampaignRecord
+from hindrax_onboard.identification.model import calibration_topic
+from hindrax_onboard.identification.model.campaign_record import CampaignRecord
 from ...vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
-from ..fit.dof_model import parameter_units
+from hindrax_onboard.identification.model.dof_model import parameter_units
 from .core import IDLE_STATUS_PERIOD_S, Event, GoalRun, IdentificationCore, goal_problem
 from .executive import ExecutiveStatus, command_ticks
 
@@ -356,7 +356,7 @@ class IdentificationNode(VehicleNode):
                 self._end_goal(ev.data[0])
 
     def clock_may_advance(self, t_s: float) -> bool:
-        """Step gate for a simulator in the same process (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`):
+        """Step gate for a simulator in the same process (:meth:`~hindrax_sim.node.SimulatorNode.add_step_gate`):
         False while a goal's control ticks run (manoeuvre and the neutral hold at its end) and the tick due at
         simulated time ``t_s`` (s) has not run yet, so the simulation never runs ahead of the control loop."""
         return self.core.clock_may_advance(t_s)

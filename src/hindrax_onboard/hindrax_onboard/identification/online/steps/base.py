@@ -59,7 +59,7 @@ class Dive(Step):
     """Dive to the altitude setpoint (``identification.altitude_setpoint_m``, from the Ping1D altitude and the
     depth; inside the pool box's depth range) with the depth setpoint ramped at 0.25 m/s, at most 25 s, heading
     held at ``pool.start_heading_rad``; then hold 3 s, the gyro and accelerometer biases averaged over the last 2 s
-    (:meth:`~hindrax_ident.vehicle.state.SensorState.start_gyro_bias`; the average includes the body's mean rate
+    (:meth:`~hindrax_onboard.vehicle.state.SensorState.start_gyro_bias`; the average includes the body's mean rate
     while the holds keep it, up to about 1.5 mrad/s over 2 s in the virtual pool). Sets
     :attr:`~.context.StepContext.depth_hold_m`."""
 

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ...fit.calibration import KNOWN_FORCE_AXES
+from hindrax_fit.fit.calibration import KNOWN_FORCE_AXES
 from ....control.maneuvers import DOF_INDEX
 from .base import Step
 from .context import CampaignAbort, StepContext, Wrenches
@@ -197,7 +197,7 @@ class Inclining(Step):
     from the thrusters; depth, position and the other angles held) average the angle a1; the operator hangs the
     test mass (weight in water w) at arm d to starboard (roll: body +y) or forward (pitch: body +x), a moment
     K = w d (roll) or -w d (pitch); average a2; the mass is removed. Equilibrium w d cos(a) = C sin(a) + M0 gives
-    C = K / (tan a2 - tan a1) (:func:`~hindrax_ident.estimation.free_decay.restoring_from_inclining`, two points),
+    C = K / (tan a2 - tan a1) (:func:`~hindrax_onboard.estimation.free_decay.restoring_from_inclining`, two points),
     std from the two means' std. The thrusters only hold the other DOFs, but the moment they realise on the free DOF
     is not exactly the zero commanded (pulse widths near neutral); its change between the two holds, M2 - M1 (thrust
     model, recorded), is added: C = (K + M2 - M1) / (tan a2 - tan a1). It is a few % of K, so a thrust-curve error

@@ -1,10 +1,10 @@
 """What a campaign step sees and does: :class:`StepContext` (pure, no rclpy, no plant).
 
 A step (:class:`~.base.Step`) is a generator over control ticks: each ``yield`` hands out the FRD wrench (6,) of one
-tick, and the step resumes once the sequencer (:class:`~hindrax_ident.identification.online.executive.Executive`) has
+tick, and the step resumes once the sequencer (:class:`~hindrax_onboard.identification.online.executive.Executive`) has
 conditioned that tick's sensor samples. Between yields the step reads the campaign's state through the context:
 
-* the conditioned sensors (:attr:`state`, :class:`~hindrax_ident.vehicle.state.SensorState`), the holds (:attr:`ctrl`,
+* the conditioned sensors (:attr:`state`, :class:`~hindrax_onboard.vehicle.state.SensorState`), the holds (:attr:`ctrl`,
   :class:`~....control.maneuvers.HoldController`, used through its public interface only: setpoints and ``wrench``), the
   pool box (:attr:`box`), each DOF's authority and the allocation model (:attr:`core`, :attr:`matrix`);
 * the tick log: the thrust-model wrench of every tick and its parts from the thrusters turning forward (positive
