@@ -1,25 +1,13 @@
-"""ament_python package hindrax_ident (colcon on the Pi; editable pip install in the dev venv).
-
-Python dependencies are declared once, in the repository's requirements.txt (dev venv) and
-package.xml (rosdep on the Pi); they are deliberately not repeated here. Colcon also installs
-``bin/hindrax``, a wrapper on PATH once ``install/setup.bash`` is sourced.
+"""ament_python package hindrax_onboard: what runs on the vehicle above the drivers (colcon on the Pi; editable pip
+install in the dev venv). Python dependencies are declared once, in the repository's requirements.txt (dev venv) and
+package.xml (rosdep on the Pi); they are deliberately not repeated here.
 """
-import sys
 from glob import glob
 from pathlib import Path
 
 from setuptools import find_packages, setup
 
-PACKAGE = "hindrax_ident"
-
-
-#: bin/hindrax only for what colcon runs: `setup.py install` (a plain build), `setup.py develop ...
-#: symlink_data` (colcon build --symlink-install; symlink_data is colcon's own command, which links
-#: the data files colcon read from `setup.py --dry-run` beforehand, so that run must list it too). A
-#: pip install (editable or wheel) already puts the console script itself in the environment's bin/,
-#: which the wrapper must not replace.
-COLCON_COMMANDS = {"install", "symlink_data", "--dry-run"}
-BIN = [("bin", ["bin/hindrax"])] if COLCON_COMMANDS & set(sys.argv[1:]) else []
+PACKAGE = "hindrax_onboard"
 
 
 def _files(pattern: str) -> list[str]:
@@ -35,17 +23,15 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/launch", _files("launch/*.launch.xml")),
         (f"share/{PACKAGE}/foxglove", _files("foxglove/*.json")),
-    ] + BIN,
+    ],
     zip_safe=True,
     maintainer="Hindrax onboard team",
     maintainer_email="dev@hindrax.invalid",
-    description="Hindrax ROV hydrodynamic identification, simulator and the hindrax command",
+    description="Hindrax ROV onboard: estimation, vehicle state, control, online identification",
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "hindrax = hindrax_tools.cli:main",
             "identification_node = hindrax_onboard.identification.online.node:main",
-            "simulator_node = hindrax_sim.node:main",
             "controller_node = hindrax_onboard.control.node:main",
             "ident_control_node = hindrax_onboard.composition:ident_control_main",
             "ident_record_node = hindrax_onboard.composition:ident_record_main",

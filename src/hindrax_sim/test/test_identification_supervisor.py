@@ -108,7 +108,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             c.clock.sec, c.clock.nanosec = divmod(clock["ns"], 1_000_000_000)
             pubs["clock"].publish(c)
             ex.spin_once(timeout_sec=0.01)
-            for _ in range(10_000):  # then every callback that is ready (as hindrax_sim.graph.bringup's spin_until_idle)
+            for _ in range(10_000):  # then every callback that is ready (as bringup's spin_until_idle)
                 try:
                     handler, _entity, _node = ex.wait_for_ready_callbacks(0.0)
                 except (TimeoutException, ShutdownException):

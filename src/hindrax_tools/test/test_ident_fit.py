@@ -3,8 +3,9 @@
 (:mod:`hindrax_sim.piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
 late and bursty receive times, a 1.5 s gap, a 50 ms actuation delay).
 
-Acceptance (issue): the truth of the simulator (:func:`~hindrax_onboard.identification.model.dof_model.truth_parameters` on
-the truth configuration) recovered within 10 % for surge, sway, heave and yaw inertia and quadratic damping; nrmse on
+Acceptance (issue): the truth of the simulator
+(:func:`~hindrax_onboard.identification.model.dof_model.truth_parameters` on the truth configuration) recovered
+within 10 % for surge, sway, heave and yaw inertia and quadratic damping; nrmse on
 a held-out piloted bag below 0.3 for surge, sway and heave. Also: the output files and their sections, the
 preprocessing report, "not excited" DOFs, and the one-line errors (topic, type, frames, too little data).
 """

@@ -56,8 +56,8 @@ from hindrax_onboard.estimation.least_squares import EstimationError
 from ..fit.calibration import calibration_section, decay_inertia, joint_estimate
 from hindrax_onboard.identification.model.dof_model import parameter_units, rigid_inertia
 from ..fit.fit_core import NO_MODEL_VERDICT
-from hindrax_onboard.identification.model.posterior import (finite_or_none as _f, prior_entries, prior_posterior, prior_std_rel_of,
-                             theta_priors)
+from hindrax_onboard.identification.model.posterior import (finite_or_none as _f, prior_entries, prior_posterior,
+                             prior_std_rel_of, theta_priors)
 from hindrax_onboard.vehicle.uncertainty import declared_rel
 from hindrax_onboard.vehicle.vehicle_match import vehicle_parameters
 from .verdicts import (FitEvidence, apply_reference_verdicts, apply_verdicts, assess, core_evidence, model_selection,

@@ -70,7 +70,8 @@ import numpy as np
 from hindrax_drivers.config import ROTATIONAL_DOFS, VehicleConfig
 
 from hindrax_onboard.vehicle.uncertainty import declared_rel
-from hindrax_onboard.identification.model.dof_model import core_index, thrust_weights
+from hindrax_onboard.identification.model.dof_model import (RLS_STD_DOFS, core_index, rls_published_std,
+                                                            thrust_covariance, thrust_weights)
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
@@ -93,17 +94,6 @@ METHODS_MAX = 0.05
 DIRECTION_MAX = 0.05
 #: Relative 95 % half-width above which a parameter is too uncertain for controller design.
 WIDTH_MAX = 0.3
-
-
-def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float]) -> np.ndarray:
-    """(p, p) covariance of the parameters from the thrust-scale uncertainty ``rel`` = [neg, pos] (1-sigma)."""
-    theta = np.asarray(theta, dtype=float)
-    w = thrust_weights(dof, names)
-    cov = np.zeros((theta.size, theta.size))
-    for k, sigma in ((0, float(rel[1])), (1, float(rel[0]))):
-        g = theta * w[:, k]
-        cov += sigma ** 2 * np.outer(g, g)
-    return cov
 
 
 @dataclass
@@ -487,27 +477,6 @@ def thrust_curve_check(assessments: Mapping[str, dict], dofs: Sequence[str]) -> 
             e["verdict"] = "suspect"
         if a["verdict"] != NO_MODEL_VERDICT:
             a["verdict"] = "suspect"
-
-
-#: DOFs whose online RLS damping std the scenario suite measured. Elsewhere it is not published.
-RLS_STD_DOFS = ("surge", "sway", "heave", "yaw")
-
-
-def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg: VehicleConfig) -> np.ndarray:
-    """The online RLS standard deviations worth publishing (p,), NaN = "not converged / not trusted".
-
-    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping
-    parameters of :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty
-    (:func:`thrust_covariance`): the RLS inertia and bias carry the lag of the causal filter behind
-    the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
-    suite.
-    """
-    std = np.asarray(converged_std, dtype=float)
-    keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
-                    dtype=bool)
-    thrust = np.diag(thrust_covariance(dof, names, theta, declared_rel(cfg)))
-    out = np.sqrt(std ** 2 + thrust)
-    return np.where(keep & np.isfinite(std), out, np.nan)
 
 
 def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float = 2.0) -> list[str]:

@@ -30,8 +30,10 @@ from hindrax_drivers.config import DOFS
 from hindrax_onboard.estimation.free_decay import fit_quadratic_free_decay
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag
 from hindrax_onboard.vehicle.uncertainty import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel
+from hindrax_onboard.identification.model.calibration_topic import KNOWN_FORCE_AXES
 from hindrax_onboard.identification.model.dof_model import rigid_inertia, thrust_weights
-from hindrax_onboard.identification.model.posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, theta_priors
+from hindrax_onboard.identification.model.posterior import (DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of,
+                                                            theta_priors)
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -40,10 +42,6 @@ __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "
 
 GROUPS = ("vertical", "horizontal")
 DIRECTIONS = ("forward", "reverse")
-#: Calibration keys of the known-force steps -> (thruster group, FRD axis index, sense of the known force).
-KNOWN_FORCE_AXES = {"vertical": ("vertical", 2, 1), "vertical_negative": ("vertical", 2, -1),
-                    "surge": ("horizontal", 0, 1), "surge_negative": ("horizontal", 0, -1),
-                    "sway": ("horizontal", 1, 1), "sway_negative": ("horizontal", 1, -1)}
 #: The step that produces each calibration key (an older result may not name it).
 _METHOD = {"vertical": "ballast", "vertical_negative": "float", "surge": "line_pull", "surge_negative": "line_pull",
            "sway": "line_pull", "sway_negative": "line_pull"}

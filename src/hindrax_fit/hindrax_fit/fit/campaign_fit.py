@@ -28,8 +28,8 @@ from hindrax_onboard.vehicle.fusion import smooth_with_acceleration, smooth_with
 from hindrax_onboard.vehicle.state import euler_rates
 from hindrax_onboard.vehicle.uncertainty import measurement_settings
 from . import fit_core
-from hindrax_onboard.identification.model.dof_model import (DofIdentification, core_index, parameter_names, parameter_units,
-                        regressor_matrix, restoring_regressor, rigid_inertia, steady_state_fit,
+from hindrax_onboard.identification.model.dof_model import (DofIdentification, core_index, parameter_names,
+                        parameter_units, regressor_matrix, restoring_regressor, rigid_inertia, steady_state_fit,
                         truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",

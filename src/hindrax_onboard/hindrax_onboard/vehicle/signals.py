@@ -74,8 +74,8 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> list[tuple[str, Any]]:
     """``icm20948_gyro`` and ``icm20948_accel`` samples of a sensor_msgs/Imu (base_link FLU).
 
-    The simulator's samples are in the sensor axes, which :class:`~hindrax_onboard.vehicle.state.SensorState` rotates with
-    the configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
+    The simulator's samples are in the sensor axes, which :class:`~hindrax_onboard.vehicle.state.SensorState` rotates
+    with the configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
     with ``mounting_frd_from_flu`` = R_mount^T (3, 3) (identity when None). Angular rate rad/s, specific
     force m/s^2.
     """

@@ -41,9 +41,9 @@ from hindrax_msgs.srv import SetArmed
 from hindrax_onboard.control.node import ControllerNode
 from hindrax_onboard.identification.online.node import IdentificationNode
 from .ordered_executor import LeanWaitExecutor
-from hindrax_sim.hardware import VirtualHardware
-from hindrax_sim.node import SimulatorNode
-from hindrax_sim.simulator import Simulator
+from ..hardware import VirtualHardware
+from ..node import SimulatorNode
+from ..simulator import Simulator
 
 
 @dataclass

@@ -49,7 +49,7 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
 from .bringup import build_graph
-from hindrax_sim.campaign import PoolOperator
+from ..campaign import PoolOperator
 from hindrax_onboard.identification.online.executive import calibration_forces, float_buoyancy, inclining_load
 from hindrax_fit.bag_input.reader import BagContentError
 from hindrax_fit.assessment.pipeline import OverlappedFits, identify_bag

@@ -58,7 +58,7 @@ def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:
     empty), else a new ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was
     taken). Raises CommandError: ``out`` unusable, or ``unwritable`` (its ``{why}`` filled in) when
     ``root`` is not writable."""
-    from hindrax_tools.output_dirs import OutputDirError, explicit_result_dir, new_result_dir
+    from ..output_dirs import OutputDirError, explicit_result_dir, new_result_dir
 
     try:
         if out:

@@ -24,7 +24,7 @@ import datetime as _dt
 import math
 from pathlib import Path
 
-from hindrax_tools import results_doc
+from .. import results_doc
 from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run"]

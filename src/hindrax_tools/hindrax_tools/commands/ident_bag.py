@@ -54,7 +54,7 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
 
     from hindrax_fit.assessment import pipeline
     from hindrax_fit.bag_input.reader import BagContentError
-    from hindrax_tools.progress_line import ProgressLine, Ticker
+    from ..progress_line import ProgressLine, Ticker
 
     try:
         with Ticker(ProgressLine(lambda s: print(s, flush=True)), f"{command}: reading and fitting {bag}"):

@@ -127,7 +127,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
-    from hindrax_tools.progress_line import ProgressLine
+    from ..progress_line import ProgressLine
 
     client = ActionClient(node, RunIdentification, action_name)
     goals = GoalSender(node, client, action_name)

@@ -25,7 +25,7 @@ import math
 import os
 from pathlib import Path
 
-from hindrax_tools import results_doc
+from .. import results_doc
 from .common import (CommandError, WallProgress, add_config_argument, choices, load_vehicle,
                      result_dir)
 
@@ -148,7 +148,7 @@ def _finish(args: argparse.Namespace, progress: WallProgress, out: Path, idents:
     if not (ok and idents):
         return 1
     if not args.out:
-        from hindrax_tools.output_dirs import point_latest
+        from ..output_dirs import point_latest
 
         try:
             point_latest(out)

@@ -4,8 +4,8 @@ For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :m
 every seed 1..N, one in-process identification campaign (:class:`~hindrax_sim.campaign.Campaign`, the simulator
 running on the scenario's truth, every estimator on the vehicle file), the offline identification and the verdicts
 (:mod:`hindrax_fit.assessment.verdicts`). Each parameter is compared with the truth's value
-(:func:`~hindrax_onboard.identification.model.dof_model.truth_parameters` of the truth configuration): relative error, z =
-(estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
+(:func:`~hindrax_onboard.identification.model.dof_model.truth_parameters` of the truth configuration): relative
+error, z = (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
 
 Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
 table) and prints the table. A scenario *meets the target* when every parameter's interval covers the
@@ -32,7 +32,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Sequence
 
-from hindrax_tools import results_doc
+from .. import results_doc
 from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",

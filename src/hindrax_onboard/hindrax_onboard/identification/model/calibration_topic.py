@@ -38,12 +38,17 @@ from typing import Any, Iterable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ["TOPIC", "HARDWARE_ID", "statuses", "calibration_array", "results_from_array", "merge_results"]
+__all__ = ["TOPIC", "HARDWARE_ID", "statuses", "calibration_array", "results_from_array", "merge_results",
+           "KNOWN_FORCE_AXES"]
 
 #: topic name (relative: the node's namespace)
 TOPIC = "identification/calibration"
 #: ``DiagnosticStatus.hardware_id`` of the statuses
 HARDWARE_ID = "hindrax identification"
+#: Calibration keys of the known-force steps -> (thruster group, FRD axis index, sense of the known force).
+KNOWN_FORCE_AXES = {"vertical": ("vertical", 2, 1), "vertical_negative": ("vertical", 2, -1),
+                    "surge": ("horizontal", 0, 1), "surge_negative": ("horizontal", 0, -1),
+                    "sway": ("horizontal", 1, 1), "sway_negative": ("horizontal", 1, -1)}
 
 _GROUP = {"vertical": "vertical", "vertical_negative": "vertical", "surge": "horizontal", "sway": "horizontal",
           "surge_negative": "horizontal", "sway_negative": "horizontal"}

@@ -33,10 +33,11 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from ...estimation.least_squares import EstimationError, fit_drag
 from ...estimation.steady_windows import detect_steady_windows
 from ...vehicle.rigid_body import rigid_body_mass_matrix
+from ...vehicle.uncertainty import declared_rel
 
 __all__ = ["core_index", "model_terms", "parameter_names", "parameter_units", "regressor_matrix",
            "rigid_inertia", "truth_parameters", "DofIdentification", "steady_state_fit",
-           "thrust_weights"]
+           "thrust_weights", "thrust_covariance", "RLS_STD_DOFS", "rls_published_std"]
 
 def core_index(names: Sequence[str], core_names: Sequence[str]) -> list:
     """Index in ``core_names`` (the fit core's) of each of ``names`` (heave's ``*_positive`` and
@@ -242,3 +243,35 @@ def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
                 w[i] = (0.0, 1.0)
     w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
     return w
+
+
+def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float]) -> np.ndarray:
+    """(p, p) covariance of the parameters from the thrust-scale uncertainty ``rel`` = [neg, pos] (1-sigma)."""
+    theta = np.asarray(theta, dtype=float)
+    w = thrust_weights(dof, names)
+    cov = np.zeros((theta.size, theta.size))
+    for k, sigma in ((0, float(rel[1])), (1, float(rel[0]))):
+        g = theta * w[:, k]
+        cov += sigma ** 2 * np.outer(g, g)
+    return cov
+
+
+#: DOFs whose online RLS damping std the scenario suite measured. Elsewhere it is not published.
+RLS_STD_DOFS = ("surge", "sway", "heave", "yaw")
+
+
+def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg: VehicleConfig) -> np.ndarray:
+    """The online RLS standard deviations worth publishing (p,), NaN = "not converged / not trusted".
+
+    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping
+    parameters of :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty
+    (:func:`thrust_covariance`): the RLS inertia and bias carry the lag of the causal filter behind
+    the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
+    suite.
+    """
+    std = np.asarray(converged_std, dtype=float)
+    keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
+                    dtype=bool)
+    thrust = np.diag(thrust_covariance(dof, names, theta, declared_rel(cfg)))
+    out = np.sqrt(std ** 2 + thrust)
+    return np.where(keep & np.isfinite(std), out, np.nan)

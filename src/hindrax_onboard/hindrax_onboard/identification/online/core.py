@@ -46,8 +46,8 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from hindrax_onboard.identification.model import calibration_topic
-from hindrax_onboard.identification.model.campaign_record import CampaignRecord
+from ..model import calibration_topic
+from ..model.campaign_record import CampaignRecord
 from ...vehicle.signals import thrust_of_written_widths
 from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput, calibration_forces, inclining_load,
                         ordered_samples)

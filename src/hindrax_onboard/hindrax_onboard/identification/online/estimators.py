@@ -22,10 +22,9 @@ from ...estimation.filters import KinematicKalmanFilter
 from ...estimation.rls import RecursiveLeastSquares
 from ...vehicle.fusion import AccelAidedFilter
 from ...vehicle.uncertainty import measurement_settings
-from hindrax_fit.assessment.verdicts import rls_published_std
-from hindrax_onboard.identification.model.dof_model import (parameter_names, regressor_matrix, restoring_regressor,
-                             rigid_inertia, truth_parameters)
-from hindrax_onboard.identification.model.posterior import prior_entries
+from ..model.dof_model import (parameter_names, regressor_matrix, restoring_regressor,
+                             rigid_inertia, rls_published_std, truth_parameters)
+from ..model.posterior import prior_entries
 
 __all__ = ["OnlineDofEstimator", "online_rls", "rls_setting", "rls_prior"]
 

@@ -69,7 +69,7 @@ from .estimators import OnlineDofEstimator
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
 from ...control.maneuvers import level_ladder
 from ...vehicle.signals import STILL_MESSAGE
-from hindrax_onboard.identification.model.campaign_record import CampaignRecord
+from ..model.campaign_record import CampaignRecord
 from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Confirm, Dive,
                     Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder,
                     undo_line)

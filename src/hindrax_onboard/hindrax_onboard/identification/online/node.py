@@ -112,10 +112,10 @@ from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
-from hindrax_onboard.identification.model import calibration_topic
-from hindrax_onboard.identification.model.campaign_record import CampaignRecord
+from ..model import calibration_topic
+from ..model.campaign_record import CampaignRecord
 from ...vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
-from hindrax_onboard.identification.model.dof_model import parameter_units
+from ..model.dof_model import parameter_units
 from .core import IDLE_STATUS_PERIOD_S, Event, GoalRun, IdentificationCore, goal_problem
 from .executive import ExecutiveStatus, command_ticks
 

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from hindrax_onboard.identification.model.dof_model import truth_parameters
+from ...model.dof_model import truth_parameters
 from ..excitation import BROADBAND, BoxShaping, design_band, design_signal
 from hindrax_drivers.frames import wrap_angle
 

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from hindrax_fit.fit.calibration import KNOWN_FORCE_AXES
+from ...model.calibration_topic import KNOWN_FORCE_AXES
 from ....control.maneuvers import DOF_INDEX
 from .base import Step
 from .context import CampaignAbort, StepContext, Wrenches
