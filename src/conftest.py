@@ -1,4 +1,4 @@
-"""Fixtures of the hindrax_ident tests.
+"""Fixtures shared by the tests of the packages under src/ (the fit's, the simulator's, the tools').
 
 ``synthetic_runs``: the pieces the identification tests build their data from, each from its definition and none
 from the code under test: a pilot's held force steps, the exact response of a first-order model to a force held

@@ -103,7 +103,7 @@ def test_every_vehicle_process_has_an_enclave_with_the_internal_graph(policies):
 
     processes = read_launch(ament_share("hindrax_drivers") / "launch" / "vehicle.launch.xml",
                             {"record": "true", "controller": "true"})
-    processes += read_launch(ament_share("hindrax_ident") / "launch" / "pool_test.launch.xml", {})
+    processes += read_launch(ament_share("hindrax_onboard") / "launch" / "pool_test.launch.xml", {})
     hindrax = [p for p in processes if p.package.startswith("hindrax")]
     enclaves = launch_enclaves(hindrax)  # raises for a process without --enclave
     tree = policies["internal"]

@@ -1,4 +1,4 @@
-"""hindrax_ident's composed processes: the identification node and the controller in one process,
+"""hindrax_onboard's composed processes: the identification node and the controller in one process,
 with or without the recorder.
 
 ``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their names (``identification``,

@@ -152,7 +152,7 @@ def _tick_period_s(node) -> float:
 
 
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
-    """``python -m hindrax_onboard.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
+    """``python -m hindrax_onboard.control.node`` (what ``ros2 run hindrax_onboard controller_node`` runs): ready with
     the vehicle file's model, SIGINT -> 0; a bad ``control.*`` value, or a model file of another vehicle (never a
     silent fallback, issue 45.4) -> 1 with one line naming key, value and allowed range."""
     import subprocess

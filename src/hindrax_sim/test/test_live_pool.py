@@ -1,4 +1,4 @@
-"""The live pool process (hindrax_ident/sim/live_pool.py) as a driver process meets it: the PCA9685 over the I2C
+"""The live pool process (hindrax_sim/live_pool.py) as a driver process meets it: the PCA9685 over the I2C
 socket moves the simulated vehicle, the DVL-75 port speaks its protocol, the operator's hands push, and simulated
 time follows the wall clock. The whole launch against it: test/test_pool_day.py."""
 from __future__ import annotations

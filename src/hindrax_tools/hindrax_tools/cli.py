@@ -3,7 +3,7 @@
 Subcommands are registered in :data:`COMMANDS` as (words, module, help); each module provides
 ``add_arguments(parser)`` and ``run(args) -> int``. Only the module of the subcommand named on the
 command line is imported, so ``hindrax --help`` imports nothing but argparse and ``hindrax config
-check`` does not import ROS (src/hindrax_ident/test/test_cli_help.py; time: ``make bench``).
+check`` does not import ROS (src/hindrax_tools/test/test_cli_help.py; time: ``make bench``).
 
 Exit status: 0 on success, 1 when the command found a problem (it raises
 :class:`~hindrax_tools.commands.common.CommandError`, whose one-line message goes to

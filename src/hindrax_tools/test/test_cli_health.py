@@ -24,13 +24,13 @@ def test_health_without_a_vehicle_says_so_in_one_line_naming_the_domain():
     # A ROS domain of its own, reserved like the workers' (conftest.py): nothing else this worker ran (an
     # in-process node of another test, a process a failed test left behind) can be mistaken for the vehicle.
     with domain_id() as domain:
-        r = hindrax("health", "--launch", "hindrax_ident/pool_test.launch.xml", "output_dir:=/tmp/x", "--timeout",
+        r = hindrax("health", "--launch", "hindrax_onboard/pool_test.launch.xml", "output_dir:=/tmp/x", "--timeout",
                     "1.5", ROS_DOMAIN_ID=str(domain))
         quiet = hindrax("health", "--quiet", "--timeout", "0.5", ROS_DOMAIN_ID=str(domain))
     assert r.returncode == 1, r.stdout + r.stderr
     assert r.stdout.splitlines() == [
-        f"NOT READY: no node of hindrax_ident/pool_test.launch.xml seen on ROS_DOMAIN_ID={domain} (this machine only, "
-        "UDP on 127.0.0.1) within 1.5 s: is the vehicle running, on this domain? (from the topside: "
+        f"NOT READY: no node of hindrax_onboard/pool_test.launch.xml seen on ROS_DOMAIN_ID={domain} (this machine "
+        "only, UDP on 127.0.0.1) within 1.5 s: is the vehicle running, on this domain? (from the topside: "
         "docs/deployment.md §6)"]
     assert quiet.returncode == 1 and len(quiet.stdout.splitlines()) == 1
 

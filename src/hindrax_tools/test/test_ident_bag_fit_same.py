@@ -14,8 +14,8 @@ Both commands must read it as the campaign (its DOF windows from the status) and
 ``value`` and ``ci95`` of identification.yaml equal, and the fit near the vehicle file's surge parameters (so the
 equality is not that of two empty fits). RuntimeWarning is an error.
 
-The offline fits overlapped with the campaign (``hindrax run``; :class:`~hindrax_ident.
-identification.assessment.pipeline.OverlappedFits`) give the serial ``identify_bag``'s: a DOF's
+The offline fits overlapped with the campaign (``hindrax run``; :class:`~hindrax_fit.
+assessment.pipeline.OverlappedFits`) give the serial ``identify_bag``'s: a DOF's
 fit on the bag still being written, once ready, is the whole bag's; the worker's result is the
 serial one.
 """

@@ -4,7 +4,7 @@ A thin rclpy node over :class:`~.loop.HoldLoop` (the campaign's sensor condition
 :class:`~hindrax_onboard.control.maneuvers.HoldController` (the model-based law of :mod:`.law`, the
 model of :mod:`.model`). The ESC, the thrust allocation and the supervisor are unchanged: the
 controller publishes a ``wrench`` like the identification node or a pilot, and the allocation turns
-it into pulse widths. Run alone: ``ros2 run hindrax_ident controller_node --ros-args --params-file
+it into pulse widths. Run alone: ``ros2 run hindrax_onboard controller_node --ros-args --params-file
 hindrax.yaml -p model_file:=identification.yaml``.
 
 Interfaces, and who owns ``wrench``: docs/control.md §3. The controller publishes only while

@@ -702,7 +702,7 @@ PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (publ
 REFERENCE_POOL_CPU = 0.203
 
 #: the launch file the launch layout starts (package, path in its share directory), with recording on
-LAUNCH_FILE = ("hindrax_ident", "launch/pool_test.launch.xml")
+LAUNCH_FILE = ("hindrax_onboard", "launch/pool_test.launch.xml")
 #: running-phase windows of the launch layout in ``make bench`` (their medians are the rows)
 RUNNING_WINDOWS = 3
 
@@ -967,7 +967,7 @@ def baseline_launch(ref: str, windows: int, duration_s: float) -> list[dict]:
         try:
             out = Path(tmpdir) / "rows.json"
             env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-                [str(tree / "src" / "hindrax_drivers"), str(tree / "src" / "hindrax_ident")]))
+                str(p) for p in sorted((tree / "src").iterdir()) if (p / "setup.py").is_file()))
             print(f"stack benchmark: the baseline {ref} first", flush=True)
             done = subprocess.run([python_executable(), "-m",
                                    "hindrax_tools.benchmarks.stack", "--layouts", "launch",

@@ -182,7 +182,7 @@ def _on_vehicle(args: argparse.Namespace, body: Callable[[Any, Any, Target], Any
     """``body(node, executor, target)`` with the vehicle the arguments name (:func:`find_vehicle`)."""
     def on_ros(node, ex):
         return body(node, ex, find_vehicle(node, ex, args.vehicle, args.discovery_timeout))
-    return with_ros(on_ros, "hindrax_ident_cli")  # Ctrl-C is ours (cancel)
+    return with_ros(on_ros, "hindrax_cli_ident")  # Ctrl-C is ours (cancel)
 
 
 def _start(args: argparse.Namespace) -> int:

@@ -2,7 +2,7 @@
 
 One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_sim.live_pool`: the simulator
 behind the five emulated devices, in a process of its own, on the wall clock) and the *installed*
-``hindrax_ident/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
+``hindrax_onboard/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
 process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.process_runner.ProcessRunner`), the drivers pointed at
 the pool's serial ports and I2C socket. The vehicle file is the installed one with its oscillator marked measured
 (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
@@ -30,7 +30,7 @@ from .common import CommandError
 
 __all__ = ["add_arguments", "run", "rehearsal_env"]
 
-LAUNCH = ("hindrax_ident", "pool_test.launch.xml")
+LAUNCH = ("hindrax_onboard", "pool_test.launch.xml")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -24,7 +24,7 @@ from .common import CommandError, add_config_argument, load_vehicle
 __all__ = ["add_arguments", "run", "write_policies"]
 
 #: the launch files whose processes get an internal enclave: PACKAGE/FILE
-LAUNCH_FILES = ("hindrax_drivers/vehicle.launch.xml", "hindrax_ident/pool_test.launch.xml")
+LAUNCH_FILES = ("hindrax_drivers/vehicle.launch.xml", "hindrax_onboard/pool_test.launch.xml")
 #: what the missing sros2 package means, and where it comes from
 NO_SROS2 = ("sros2 is not installed: on the Pi, `sudo apt install ros-jazzy-sros2` (the development machines' ROS 2 "
             "wheels have no sros2 and no DDS Security); `hindrax sros2 policy` writes the policy files without it")
