@@ -1,5 +1,4 @@
-"""The per-DOF model: parameters, units, regressors, the offline result and its comparisons, the thrust-curve
-covariance and the online RLS std worth publishing.
+"""The per-DOF model: parameters, units, regressors, the offline result, the thrust covariance, the RLS std shown.
 
 Model per DOF (docs/architecture.md §5; [Hindrax-Drag] eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
