@@ -10,7 +10,7 @@ SETUP_INPUTS := requirements.txt requirements-colcon.txt constraints.txt scripts
 	src/hindrax_msgs/CMakeLists.txt src/hindrax_msgs/package.xml \
 	$(wildcard src/hindrax_msgs/msg/*.msg src/hindrax_msgs/srv/*.srv src/hindrax_msgs/action/*.action) \
 	src/hindrax_drivers/setup.py src/hindrax_drivers/package.xml \
-	src/hindrax_ident/setup.py src/hindrax_ident/package.xml \
+	$(foreach p,onboard fit sim tools,src/hindrax_$(p)/setup.py src/hindrax_$(p)/package.xml) \
 	third_party/tf2_msgs/CMakeLists.txt third_party/tf2_msgs/package.xml $(wildcard third_party/tf2_msgs/msg/*.msg)
 
 .PHONY: setup run test bench clean ros-install
@@ -35,20 +35,21 @@ test: setup
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 bench: setup
-	$(PY) -m hindrax_ident.tools.bench --results-doc docs/results.md $(BENCH_ARGS)
+	$(PY) -m hindrax_tools.bench --results-doc docs/results.md $(BENCH_ARGS)
 
-# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels (the
-# Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
+# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, hindrax_msgs, hindrax_drivers and
+# hindrax_onboard only (the fit, the simulator and the tools are topside: the venv's editable installs), against the
+# venv's ROS wheels (the Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
 # .venv/bin/activate && source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/)
 # and share/ are there. Extra colcon options: COLCON_ARGS="--symlink-install" (docs/deployment.md §3). A progress line
-# shows what colcon builds (hindrax_ident.progress_run); RECORD_DURATIONS=1: a plain build's time into docs/results.md.
+# shows what colcon builds (hindrax_tools.progress_run); RECORD_DURATIONS=1: a plain build's time into docs/results.md.
 COLCON_ARGS ?=
 ROS_INSTALL_RECORD := $(if $(and $(RESULTS_FOR_DURATIONS),$(if $(COLCON_ARGS),,plain)),--results-doc \
 	$(abspath docs/results.md) --record "make ros-install")
 ros-install: setup
 	cd ros_ws && source $(abspath $(VENV))/bin/activate && \
-	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV python -m hindrax_ident.progress_run ros-install \
-	    $(ROS_INSTALL_RECORD) -- colcon build --merge-install $(COLCON_ARGS) \
+	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV python -m hindrax_tools.progress_run ros-install \
+	    $(ROS_INSTALL_RECORD) -- colcon build --merge-install --packages-up-to hindrax_onboard $(COLCON_ARGS) \
 	    --event-handlers console_cohesion- --cmake-args -DPython3_EXECUTABLE=$$VIRTUAL_ENV/bin/python3 -DBUILD_TESTING=OFF
 
 clean:

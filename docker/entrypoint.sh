@@ -12,7 +12,7 @@
 #   HINDRAX_INTERNAL_DOMAIN_ID  the vehicle's internal domain, 0-101 (default 0): its own processes, and every
 #                            command run here, on loopback only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
 #   HINDRAX_LAUNCH           "<package> <launch file>" (default "hindrax_drivers vehicle.launch.xml"; a pool campaign:
-#                            "hindrax_ident pool_test.launch.xml")
+#                            "hindrax_onboard pool_test.launch.xml")
 #   HINDRAX_RECORD           1 (default): record every topic; 0: no recording
 #   HINDRAX_RUNS_DIR         root folder of the bags, a new timestamped bag per start (default /var/lib/hindrax/runs)
 #   HINDRAX_CONFIG           a vehicle file to use instead of the installed one (a mounted file); must exist

@@ -10,7 +10,7 @@ from sensor_msgs.msg import FluidPressure, Imu, Range
 
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.bringup import build_graph
+from hindrax_sim.graph.bringup import build_graph
 from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 

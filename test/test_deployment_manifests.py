@@ -32,9 +32,11 @@ ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-y
 ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs",
                 "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "rosgraph_msgs", "tf2_msgs",
                 "domain_coordinator", "action_msgs", "unique_identifier_msgs", "hindrax_msgs", "hindrax_drivers",
-                "hindrax_ident", "sros2"}
-#: a development tool inside hindrax_drivers that drives the hindrax_ident graph to regenerate test bags; a
-#: package dependency on hindrax_ident would be a cycle (dependencies flow msgs <- drivers <- ident)
+                "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools", "sros2"}
+#: the Python packages, in their dependency order (msgs <- drivers <- onboard <- fit <- sim <- tools)
+PACKAGES = ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools")
+#: development tools inside a package that drive a higher package (none today; a package dependency back would be
+#: a cycle)
 DEV_TOOLS: set[str] = set()
 
 
@@ -65,18 +67,20 @@ def key_of(module: str) -> str:
 
 
 def test_each_package_xml_lists_what_its_package_imports():
-    for pkg in ("hindrax_drivers", "hindrax_ident"):
+    for i, pkg in enumerate(PACKAGES):
         deps = depends(pkg)
         run_keys = deps["exec_depend"] | deps["depend"]
         code = imports((REPO / "src" / pkg / pkg).rglob("*.py")) - {pkg}
         missing = sorted(key_of(m) for m in code if key_of(m) not in run_keys)
         assert not missing, f"{pkg}/package.xml lacks exec_depend {missing}"
-        # the drivers' tests also drive the hindrax command (hindrax_ident): a test_depend on it would be a cycle
-        # for colcon, which orders packages by test dependencies too
-        tests = imports((REPO / "src" / pkg / "test").rglob("*.py")) - {pkg, "hindrax_ident"}
+        # the drivers' tests also drive the graph and the hindrax command (higher packages): a test_depend on them
+        # would be a cycle for colcon, which orders packages by test dependencies too
+        higher = set(PACKAGES[i + 1:])
+        tests = imports((REPO / "src" / pkg / "test").rglob("*.py")) - {pkg} - higher
         missing = sorted(key_of(m) for m in tests if key_of(m) not in run_keys | deps["test_depend"])
         assert not missing, f"{pkg}/package.xml lacks test_depend {missing}"
-        assert "hindrax_ident" not in run_keys or pkg == "hindrax_ident"
+        # no dependency on a higher package (the order of PACKAGES)
+        assert not (run_keys | deps["test_depend"]) & higher, f"{pkg}/package.xml depends on a higher package"
 
 
 def test_every_key_is_a_ros_package_a_rosdistro_key_or_defined_in_rosdep_yaml():
@@ -84,7 +88,7 @@ def test_every_key_is_a_ros_package_a_rosdistro_key_or_defined_in_rosdep_yaml():
     requirements = {re.split(r"[<>=\[ ]", line.strip())[0].lower() for line in
                     (REPO / "requirements.txt").read_text().splitlines() if line.strip() and not line.startswith("#")}
     used = set()
-    for pkg in ("hindrax_drivers", "hindrax_ident"):
+    for pkg in PACKAGES:
         for keys in depends(pkg).values():
             used |= keys
     ours = used - ROS_PACKAGES - ROSDISTRO_KEYS

@@ -1,7 +1,7 @@
 """The cause of a disarm reaches the topside in one line with the next step (supervisor/disarm_cause.py).
 
 The vehicle's emulated safety layout (ESC, supervisor and output guard each in its own process, the PCA9685 and its
-/OE line served by this process: :mod:`hindrax_ident.tools.benchmarks.safety`), armed at 1700 us,
+/OE line served by this process: :mod:`hindrax_tools.benchmarks.safety`), armed at 1700 us,
 with the gateway
 process relaying to a topside domain of its own; a probe there reads ``/<vehicle>/supervisor/status`` as the
 operator's tools do. Three stops, each from a fresh arming: a tripped limit (a depth beyond
@@ -29,7 +29,7 @@ from rclpy.executors import SingleThreadedExecutor
 from hindrax_drivers.config import load_config
 from hindrax_drivers.operator_signing import create_key
 from hindrax_drivers.testing import child_process, interrupt, ros_context, wait_until
-from hindrax_ident.tools.benchmarks.safety import running_layout
+from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(600)]
 

@@ -82,7 +82,7 @@ def test_the_launch_arguments_the_entrypoint_passes_are_declared_by_both_launch_
     share = lambda pkg: REPO / "src" / pkg  # noqa: E731
     cfg = tmp_path / "vehicle.yaml"
     cfg.write_text(default_config_path().read_text())
-    for launch in ("hindrax_drivers vehicle.launch.xml", "hindrax_ident pool_test.launch.xml"):
+    for launch in ("hindrax_drivers vehicle.launch.xml", "hindrax_onboard pool_test.launch.xml"):
         for extra in ({}, {"HINDRAX_RECORD": "0", "HINDRAX_CONFIG": str(cfg)}):
             pkg, name, given = entrypoint_launch_arguments(tmp_path, HINDRAX_LAUNCH=launch, **extra)
             processes = read_launch(share(pkg) / "launch" / name, given, find_share=share)  # refuses undeclared ones
@@ -116,8 +116,8 @@ def test_entrypoint_runs_a_given_command_and_health_checks_the_same_launch(tmp_p
     runs = tmp_path / "runs"
     # the HEALTHCHECK runs /usr/local/bin/hindrax, which passes the installed command's full path
     r = run_entrypoint(tmp_path, [str(tmp_path / "bin" / "hindrax"), "health", "--quiet"], ROS_DOMAIN_ID="42",
-                       HINDRAX_LAUNCH="hindrax_ident pool_test.launch.xml")
-    assert f"RUN=hindrax health --quiet --launch hindrax_ident/pool_test.launch.xml record:=true output_dir:={runs}" \
+                       HINDRAX_LAUNCH="hindrax_onboard pool_test.launch.xml")
+    assert f"RUN=hindrax health --quiet --launch hindrax_onboard/pool_test.launch.xml record:=true output_dir:={runs}" \
         in r.stdout
     r = run_entrypoint(tmp_path, ["hindrax", "health", "--launch", "x/y.launch.xml"], ROS_DOMAIN_ID="42")
     assert "RUN=hindrax health --launch x/y.launch.xml" in r.stdout.splitlines()[0]  # given: left alone
@@ -169,8 +169,12 @@ def test_image_layers_put_the_dependencies_before_the_sources():
     colcon = next(i for i, r in idx.items() if ins[i][0] == "RUN" and "colcon build" in r)
     manifests = [i for i, r in idx.items() if ins[i][0] == "COPY" and r.split()[0].endswith("/package.xml")]
     assert len(manifests) == 3 and max(manifests) < rosdep_install < copy_src < colcon
-    packages = {p.parent.name for p in REPO.glob("src/*/package.xml")}
-    assert {idx[i].split()[0].split("/")[1] for i in manifests} == packages
+    # the vehicle's packages only; the topside ones stay out of the build context (issue 75)
+    vehicle = {"hindrax_msgs", "hindrax_drivers", "hindrax_onboard"}
+    assert {idx[i].split()[0].split("/")[1] for i in manifests} == vehicle
+    ignored = (REPO / ".dockerignore").read_text().split()
+    topside = {p.parent.name for p in REPO.glob("src/*/package.xml")} - vehicle
+    assert topside == {"hindrax_fit", "hindrax_sim", "hindrax_tools"} and all(f"src/{p}" in ignored for p in topside)
     assert "COPY rosdep.yaml" in dockerfile() and "rosdep install --from-paths src --ignore-src" in dockerfile()
 
 

@@ -1,7 +1,7 @@
 """Issue 43 item 2: a forged heartbeat publisher or a replayed heartbeat stream changes nothing.
 
 The vehicle's emulated layout (ESC, supervisor and output guard each in its own process, the PCA9685 and its /OE
-line served by this process: :mod:`hindrax_ident.tools.benchmarks.safety`), armed at 1700 us. A
+line served by this process: :mod:`hindrax_tools.benchmarks.safety`), armed at 1700 us. A
 plain rclpy script then
 publishes level-0 ``hindrax_msgs/Heartbeat`` on ``supervisor/heartbeat`` and ``esc/heartbeat`` (or replays the live
 heartbeats it captured), and the supervisor is SIGKILLed: the outputs must stop as they do without the script.
@@ -17,7 +17,7 @@ import time
 import pytest
 
 from hindrax_drivers.testing import ConditionTimeout, wait_until
-from hindrax_ident.tools.benchmarks.safety import running_layout
+from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = pytest.mark.vehicle_launch
 

@@ -12,7 +12,7 @@ import re
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-LAYOUT = REPO / "src" / "hindrax_ident" / "foxglove" / "pool_test.json"
+LAYOUT = REPO / "src" / "hindrax_onboard" / "foxglove" / "pool_test.json"
 
 
 def published_topics() -> dict[str, type]:

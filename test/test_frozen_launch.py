@@ -1,6 +1,6 @@
 """Issue 44 item 1: a frozen launch (SIGSTOP of the ESC, the supervisor and the guard together, as Ctrl-Z, ``docker
 pause`` or a cgroup freeze do) while armed at 1700 us stops the outputs through the hardware watchdog on /OE
-(docs/watchdog.md), in the vehicle's emulated layout (:mod:`hindrax_ident.tools.benchmarks.safety`,
+(docs/watchdog.md), in the vehicle's emulated layout (:mod:`hindrax_tools.benchmarks.safety`,
 which has the
 watchdog fitted). Before, thrust stayed on for 100 % of 5 s and of 10 s: the frozen guard still held /OE low.
 """
@@ -13,7 +13,7 @@ import time
 import pytest
 
 from hindrax_drivers.testing import wait_until
-from hindrax_ident.tools.benchmarks.safety import running_layout
+from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = pytest.mark.vehicle_launch
 

@@ -2,7 +2,7 @@
 
 The graph is the one ``hindrax bringup`` starts on the vehicle (no ``--sim``, wall clock, the identification node
 included), its serial drivers opening the emulators' pseudo-terminals as their configured ports and its I2C nodes
-using the emulated bus (what ``--sim`` uses, :class:`~hindrax_ident.sim.hardware.VirtualHardware`); a simulator in
+using the emulated bus (what ``--sim`` uses, :class:`~hindrax_sim.hardware.VirtualHardware`); a simulator in
 this process moves the emulated vehicle in real time with the pulse widths of the emulated PCA9685. A goal sent by
 the ``hindrax ident start`` command (a child process) is cancelled with Ctrl-C while a level runs: the node
 brings the vehicle to a zero wrench and the ESC to neutral before the action ends.
@@ -22,10 +22,10 @@ import rclpy
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import child_env, ros_context, wait_until
-from hindrax_ident.bringup import build_graph
-from hindrax_ident.sim.hardware import VirtualHardware
-from hindrax_ident.sim.node import SimulatorNode
-from hindrax_ident.sim.simulator import Simulator
+from hindrax_sim.graph.bringup import build_graph
+from hindrax_sim.hardware import VirtualHardware
+from hindrax_sim.node import SimulatorNode
+from hindrax_sim.simulator import Simulator
 from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 

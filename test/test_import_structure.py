@@ -1,11 +1,12 @@
-"""Import structure of the two Python packages (issue 14, "Pure cores, thin nodes, one direction").
+"""Import structure of the project's Python packages (issue 14, "Pure cores, thin nodes, one direction"; issue 75,
+packages by where the code runs).
 
-Every module of ``hindrax_drivers`` and ``hindrax_ident`` is parsed with :mod:`ast` (nothing is imported), and
-the intra-project import graph is built from every ``import`` / ``from ... import`` statement anywhere in the
-module, function-local imports included (a lazy import is still a dependency). ``from pkg import name`` is an
-edge to ``pkg.name`` when that is a module, else to ``pkg``; importing ``a.b.c`` also imports the packages
-``a`` and ``a.b`` (their ``__init__``), so those are edges too, except to the importing module's own ancestor
-packages (Python initialises them before the module runs).
+Every module of ``hindrax_drivers``, ``hindrax_onboard``, ``hindrax_fit``, ``hindrax_sim`` and ``hindrax_tools`` is
+parsed with :mod:`ast` (nothing is imported), and the intra-project import graph is built from every ``import`` /
+``from ... import`` statement anywhere in the module, function-local imports included (a lazy import is still a
+dependency). ``from pkg import name`` is an edge to ``pkg.name`` when that is a module, else to ``pkg``; importing
+``a.b.c`` also imports the packages ``a`` and ``a.b`` (their ``__init__``), so those are edges too, except to the
+importing module's own ancestor packages (Python initialises them before the module runs).
 
 Rules checked:
 
@@ -15,17 +16,17 @@ Rules checked:
   need live in pure modules that the nodes import too.
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
   (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``;
-- layers (:data:`LAYERS`), one strict order: drivers < estimation < vehicle < control < identification < simulator
-  < the graph builders < the runs on the composed graph and the tools room (:data:`TOOLS`: the
-  command line, its
-  commands and the benchmarks); no module imports a module of a higher layer, without exceptions,
-  and nothing outside
-  the tools room imports it;
-- the identification package keeps its rooms (:data:`ROOMS`): fit < bag input < assessment < online (the fit core
-  defines the per-DOF record the bag reader returns; the assessment runs the pipeline and writes its outputs); the
-  online campaign does not import the identification.yaml writer; only the bag input room reads bags
-  (:data:`BAG_READER`) and, outside the identification package, only the pipeline's faces are used
-  (:data:`PIPELINE_FACES`);
+- the packages in one order, msgs <- drivers <- onboard <- fit <- sim <- tools (:data:`PACKAGE_ORDER`): no module
+  imports a higher package, each package.xml's ``exec_depend`` names exactly the project packages its modules
+  import, and the vehicle's build (msgs, drivers, onboard: :data:`VEHICLE_PACKAGES`) runs no topside code;
+- rooms in layers (:data:`LAYERS`), one strict order across the packages: drivers < estimation < vehicle <
+  control < the shared per-DOF model < online identification < the composed processes < fit < bag input <
+  assessment < the virtual pool < the graph in one process < tools; no module imports a module of a higher layer,
+  without exceptions, and no module is loose at a package's root but its public surface (:data:`ROOT_MODULES`);
+- only the bag input room reads bags (:data:`BAG_READER`) and, outside the fit package, only the pipeline's faces
+  are used (:data:`PIPELINE_FACES`);
+- each process of the vehicle's launch files can import at most :data:`VEHICLE_PROCESS_MAX_LINES` lines of project
+  code outside the drivers and messages; no package over :data:`PACKAGE_MAX_LINES` source lines;
 - the vehicle's shared physics is defined once (:data:`DEFINED_ONCE`): the angle wrap, the thrust lag, the thrust
   curve and the rigid-body mass matrix, each in its one module, and no other module writes their formulas out.
 
@@ -39,19 +40,22 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = {"hindrax_drivers": ROOT / "src" / "hindrax_drivers" / "hindrax_drivers",
-            "hindrax_ident": ROOT / "src" / "hindrax_ident" / "hindrax_ident"}
+#: The Python packages, lowest first (hindrax_msgs, the generated interfaces, is below them all).
+PACKAGE_ORDER = ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools")
+PACKAGES = {p: ROOT / "src" / p / p for p in PACKAGE_ORDER}
+#: What the vehicle's build installs (make ros-install, the image); the other packages are topside.
+VEHICLE_PACKAGES = ("hindrax_msgs", "hindrax_drivers", "hindrax_onboard")
 
 #: Modules allowed to import node modules: the graph builders (the whole stack in one process; the driver nodes
 #: on replayed device data) and the entry points that start nodes (``hindrax bag play|record``).
 ENTRY_POINTS = frozenset({
-    "hindrax_ident.bringup",
+    "hindrax_sim.graph.bringup",
     "hindrax_drivers.recording.replay_devices",
-    "hindrax_ident.tools.commands.bag.play",
-    "hindrax_ident.tools.commands.bag.record",
+    "hindrax_tools.commands.bag.play",
+    "hindrax_tools.commands.bag.record",
 })
 #: Packages whose every module is an entry point: the ``make bench`` benchmarks start the nodes they measure.
-ENTRY_POINT_PACKAGES = ("hindrax_ident.tools.benchmarks",)
+ENTRY_POINT_PACKAGES = ("hindrax_tools.benchmarks",)
 
 
 def is_entry_point(name: str) -> bool:
@@ -188,14 +192,14 @@ def graph() -> dict[str, set[str]]:
     return import_graph()
 
 
-def test_graph_covers_both_packages(graph):
+def test_graph_covers_every_package(graph):
     """Sanity: the graph holds the known modules and edges (a broken parser would pass the rules vacuously)."""
-    assert "hindrax_ident.identification.bag_input.from_bag" in graph
+    assert "hindrax_fit.bag_input.from_bag" in graph
     assert "hindrax_drivers.recording.writer" in graph
     # function-local import
-    assert "hindrax_ident.bringup" in graph["hindrax_ident.tools.commands.bringup"]
+    assert "hindrax_sim.graph.bringup" in graph["hindrax_tools.commands.bringup"]
     assert "hindrax_drivers.recording.recover" in graph["hindrax_drivers.recording.reader"]  # from . import x
-    assert len(graph) > 80
+    assert {m.split(".")[0] for m in graph} == set(PACKAGE_ORDER) and len(graph) > 80
 
 
 def test_no_import_cycles(graph):
@@ -228,31 +232,111 @@ def test_entry_points_exist(graph):
     assert all(p in graph for p in ENTRY_POINT_PACKAGES)
 
 
+# ------------------------------------------------------------------------------------------------ packages
+def setup_kwargs(pkg: str) -> dict:
+    """The keyword arguments ``src/<pkg>/setup.py`` passes to setuptools.setup (as colcon's ``setup.py install``)."""
+    import os
+    import runpy
+    from unittest import mock
+
+    captured: dict = {}
+    cwd = os.getcwd()
+    os.chdir(ROOT / "src" / pkg)
+    try:
+        with mock.patch("setuptools.setup", lambda **kw: captured.update(kw)), \
+                mock.patch("sys.argv", ["setup.py", "install"]):
+            runpy.run_path("setup.py", run_name="__main__")
+    finally:
+        os.chdir(cwd)
+    return captured
+
+
+def package_of(module: str) -> str:
+    return module.split(".", 1)[0]
+
+
+def upward_package_imports(graph: dict[str, set[str]]) -> list[str]:
+    """``"importer -> imported"`` for every import of a higher package (:data:`PACKAGE_ORDER`)."""
+    rank = {p: i for i, p in enumerate(PACKAGE_ORDER)}
+    return sorted(f"{a} -> {b}" for a, deps in graph.items() for b in deps
+                  if rank[package_of(b)] > rank[package_of(a)])
+
+
+def test_the_package_checker_sees_an_upward_import():
+    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_drivers.frames"},
+             "hindrax_fit.fit.fit_core": {"hindrax_onboard.vehicle.state"}}
+    assert upward_package_imports(graph) == ["hindrax_onboard.control.law -> hindrax_fit.fit.fit_core"]
+
+
+def test_no_package_imports_a_higher_one_and_package_xml_says_which_it_imports(graph):
+    """msgs <- drivers <- onboard <- fit <- sim <- tools: no import back up, and each package.xml's exec_depend
+    names exactly the project packages its modules import (colcon's build order is the import order)."""
+    import xml.etree.ElementTree as ET
+
+    assert "hindrax_onboard.identification.model.dof_model" in graph["hindrax_fit.fit.campaign_fit"]  # not vacuous
+    assert upward_package_imports(graph) == []
+    for pkg in PACKAGE_ORDER:
+        root = ET.parse(ROOT / "src" / pkg / "package.xml").getroot()
+        declared = {e.text.strip() for e in root.iter("exec_depend")} & {"hindrax_msgs", *PACKAGE_ORDER}
+        imported = {package_of(d) for m, deps in graph.items() if package_of(m) == pkg for d in deps} - {pkg}
+        imported |= {"hindrax_msgs"} & {package_of(n.module or "") if isinstance(n, ast.ImportFrom) else
+                                        package_of(n.names[0].name) for path in _modules({pkg: PACKAGES[pkg]}).values()
+                                        for n in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+                                        if isinstance(n, (ast.Import, ast.ImportFrom))}
+        assert declared == imported, f"{pkg}/package.xml exec_depend {sorted(declared)}, imports {sorted(imported)}"
+
+
+def test_the_vehicle_build_holds_no_topside_module():
+    """make ros-install and the image build msgs, drivers and onboard: none of their console scripts or launch files
+    runs a topside package's code."""
+    import re
+
+    for pkg in VEHICLE_PACKAGES[1:]:
+        scripts = setup_kwargs(pkg)["entry_points"]["console_scripts"]
+        assert scripts and all(package_of(s.split("=")[1].strip()) in VEHICLE_PACKAGES for s in scripts), scripts
+        for launch in (ROOT / "src" / pkg / "launch").glob("*.launch.xml"):
+            used = set(re.findall(r'pkg="(hindrax_\w+)"', launch.read_text()))
+            assert used <= set(VEHICLE_PACKAGES), f"{launch.name}: {sorted(used)}"
+    make = (ROOT / "Makefile").read_text()
+    assert "--packages-up-to hindrax_onboard" in make
+
+
 # ------------------------------------------------------------------------------------------------ layers
-#: (module prefix, layer), the longest matching prefix wins; a module matching none is in the top layer (commands,
-#: benchmarks, the command line, the runs on the composed graph). docs/architecture.md §2. The controller the vehicle
-#: runs sits below identification (which holds with it); the simulator above both (it runs their campaigns and
-#: closed-loop evaluations); the graph builders above every node they compose.
+#: (module prefix, layer), the longest matching prefix wins; every module falls under one (a package's root prefix
+#: is its lowest room, which holds only its public surface). docs/architecture.md §2. The controller the vehicle runs
+#: sits below identification (which holds with it); the per-DOF model that the online campaign and the topside fit
+#: share below both; the simulator above the fit (it runs the campaign and fits it); the graph in one process above
+#: every node it composes; the tools on top.
 LAYERS = (
     ("hindrax_drivers", 0),
-    ("hindrax_ident.estimation", 1),
-    ("hindrax_ident.vehicle", 2),
-    ("hindrax_ident.control", 3),
-    ("hindrax_ident.identification", 4),
-    ("hindrax_ident.sim", 5),
-    ("hindrax_ident.ordered_executor", 6),  # the graph builders' executor
-    ("hindrax_ident.bringup", 6),
-    ("hindrax_ident.composition", 6),
+    ("hindrax_onboard", 1),
+    ("hindrax_onboard.estimation", 1),
+    ("hindrax_onboard.vehicle", 2),
+    ("hindrax_onboard.control", 3),
+    ("hindrax_onboard.identification", 4),
+    ("hindrax_onboard.identification.model", 4),
+    ("hindrax_onboard.identification.online", 5),
+    ("hindrax_onboard.composition", 6),  # the composed processes of the pool test launch
+    ("hindrax_fit", 7),
+    ("hindrax_fit.fit", 7),
+    ("hindrax_fit.bag_input", 8),  # the fit core defines the per-DOF record (Chunk) the bag reader returns
+    ("hindrax_fit.assessment", 9),  # verdicts, identification.yaml, reports: reads, fits and writes
+    ("hindrax_sim", 10),  # the virtual pool: its modules are the package's root room
+    ("hindrax_sim.graph", 11),  # the graph in one process, its executor, the runs on it
+    ("hindrax_tools", 12),  # the command line, its commands, the benchmarks, progress and results doc
 )
-TOP_LAYER = 7
+#: Modules that may sit at a package's root beside its public surface (``__init__``): the sim's root room, the tools'
+#: command line and its helpers, the composed processes.
+ROOT_MODULES = {"hindrax_onboard": {"composition"}, "hindrax_fit": set(), "hindrax_tools": {
+    "cli", "bench", "progress_run", "results_doc", "output_dirs"}}
 
 
 def layer_of(module: str) -> int:
-    """Layer of ``module`` (:data:`LAYERS`; the package ``hindrax_ident`` itself is below everything)."""
-    if module == "hindrax_ident":
-        return 0
+    """Layer of ``module`` (:data:`LAYERS`); ValueError for a module outside every package."""
     best = [(len(p), lay) for p, lay in LAYERS if module == p or module.startswith(p + ".")]
-    return max(best)[1] if best else TOP_LAYER
+    if not best:
+        raise ValueError(f"{module}: in no layer of LAYERS")
+    return max(best)[1]
 
 
 def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
@@ -267,177 +351,213 @@ def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
 
 
 def test_the_layer_checker_sees_an_upward_import():
-    graph = {"hindrax_ident.vehicle.x": {"hindrax_ident.sim", "hindrax_ident.sim.model"},
-             "hindrax_ident.sim.model": {"hindrax_ident.vehicle.x", "hindrax_drivers.frames"},
+    graph = {"hindrax_onboard.vehicle.x": {"hindrax_sim", "hindrax_sim.model"},
+             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.frames"},
              "hindrax_drivers.frames": set()}
-    assert upward_imports(graph) == {("hindrax_ident.vehicle.x", "hindrax_ident.sim.model")}
-    assert layer_of("hindrax_ident.tools.commands.run") == TOP_LAYER
-    assert layer_of("hindrax_drivers.frames") == 0
-    assert [layer_of(f"hindrax_ident.{m}") for m in ("vehicle.state", "control.node", "identification.online.node",
-                                                     "sim.campaign", "bringup", "graph_campaign")] == [2, 3, 4, 5, 6, 7]
-
-
-#: The tools room: what engineers run beside the vehicle (``hindrax``, ``make bench``), never what
-#it runs.
-TOOLS = "hindrax_ident.tools"
-
-
-def imports_of_tools(graph: dict[str, set[str]]) -> list[str]:
-    """``"importer -> tools module"`` for every import of the tools room from outside it."""
-    def inside(m: str) -> bool:
-        return m == TOOLS or m.startswith(TOOLS + ".")
-
-    return sorted(f"{src} -> {dst}" for src, deps in graph.items() for dst in deps
-                  if inside(dst) and not inside(src))
-
-
-def test_nothing_outside_the_tools_room_imports_it(graph):
-    assert f"{TOOLS}.commands.run" in graph and f"{TOOLS}.benchmarks.stack" in graph  # not vacuous
-    seen = imports_of_tools({"hindrax_ident.sim.x": {f"{TOOLS}.cli"},
-                             f"{TOOLS}.cli": {f"{TOOLS}.bench"}})
-    assert seen == [f"hindrax_ident.sim.x -> {TOOLS}.cli"]
-    assert imports_of_tools(graph) == []
+    assert upward_imports(graph) == {("hindrax_onboard.vehicle.x", "hindrax_sim.model")}
+    assert [layer_of(m) for m in (
+        "hindrax_drivers.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
+        "hindrax_onboard.identification.model.dof_model", "hindrax_onboard.identification.online.node",
+        "hindrax_onboard.composition", "hindrax_fit.fit.fit_core", "hindrax_fit.bag_input.reader",
+        "hindrax_fit.assessment.report", "hindrax_sim.campaign", "hindrax_sim.graph.bringup",
+        "hindrax_tools.commands.run")] == [0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
+    with pytest.raises(ValueError):
+        layer_of("hindrax_other.x")
 
 
 def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
     # the order is not vacuous: identification holds with the controller's law, the simulator runs the campaign
-    assert "hindrax_ident.control.maneuvers" in graph["hindrax_ident.identification.online.steps.context"]
-    assert "hindrax_ident.identification.online.executive" in graph["hindrax_ident.sim.campaign"]
+    assert "hindrax_onboard.control.maneuvers" in graph["hindrax_onboard.identification.online.steps.context"]
+    assert "hindrax_onboard.identification.online.executive" in graph["hindrax_sim.campaign"]
     up = sorted(f"{a} -> {b}" for a, b in upward_imports(graph))
-    assert not up, "imports from a lower layer to a higher one (drivers < estimation < vehicle < control < " \
-                   "identification < sim < bringup < commands):\n" + "\n".join(up)
-    assert all(layer_of(m) <= layer_of("hindrax_ident.vehicle")
-               for m in graph.get("hindrax_ident.vehicle.rigid_body", set()) if m in graph)
+    assert not up, "imports from a lower layer to a higher one (LAYERS):\n" + "\n".join(up)
+    assert all(layer_of(m) <= layer_of("hindrax_onboard.vehicle")
+               for m in graph.get("hindrax_onboard.vehicle.rigid_body", set()) if m in graph)
 
 
-# ------------------------------------------------------------------------------------------------ identification rooms
-IDENT = "hindrax_ident.identification"
-#: The rooms of the identification package, lowest first: a module imports its own room and the rooms below it. The
-#: fit core defines the per-DOF record (``fit_core.DofRecord``, ``Chunk``) that the bag reader returns; the
-#: assessment (verdicts, identification.yaml, report, the pipeline) reads, fits and writes.
-ROOMS = {"fit": 0, "bag_input": 1, "assessment": 2, "online": 3}
-#: Imports a room may not make although the target is below it: the online campaign never writes
-#: identification.yaml (its estimator's priors come from the fit's posterior module, not from the writer).
-ROOM_FORBIDDEN = {("online", f"{IDENT}.assessment.results")}
+def loose_modules(graph: dict[str, set[str]]) -> list[str]:
+    """Modules at the root of onboard, fit or tools that are neither the package nor in :data:`ROOT_MODULES`."""
+    return sorted(m for m in graph if m.count(".") == 1 and package_of(m) in ROOT_MODULES
+                  and m.split(".")[1] not in ROOT_MODULES[package_of(m)]
+                  and not any(k.startswith(m + ".") for k in graph))  # a subpackage is a room
 
 
-def room_of(module: str) -> tuple[str, int] | None:
-    """(room, level) of an identification module; the package itself and modules outside it None. A flat module
-    outside the rooms is ("?", -1)."""
-    if not module.startswith(IDENT + "."):
-        return None
-    room = module[len(IDENT) + 1:].split(".")[0]
-    return (room, ROOMS[room]) if room in ROOMS else ("?", -1)
+def test_every_module_is_in_a_room(graph):
+    """No loose module at a package's root but its public surface (:data:`ROOT_MODULES`); each room a layer."""
+    assert loose_modules({"hindrax_fit.flat": set(), "hindrax_fit.fit": set(), "hindrax_fit.fit.x": set()}) == [
+        "hindrax_fit.flat"]
+    assert loose_modules(graph) == []
+    assert {m for m in graph if m.count(".") == 1 and package_of(m) in ROOT_MODULES} >= {
+        f"{p}.{m}" for p, ms in ROOT_MODULES.items() for m in ms}  # no stale allowance
 
 
-def room_violations(graph: dict[str, set[str]]) -> list[str]:
-    """``"importer -> imported (why)"`` for each import against the rooms' order and for each module outside any
-    room."""
-    out = [f"{m} (in no room: move it into one of {sorted(ROOMS)})" for m in graph if room_of(m) == ("?", -1)]
-    for src, deps in graph.items():
-        rs = room_of(src)
-        for dst in deps:
-            rd = room_of(dst)
-            if rs is None or rd is None:
-                continue
-            if rd[1] > rs[1]:
-                out.append(f"{src} -> {dst} (room {rd[0]} is above {rs[0]})")
-            elif (rs[0], dst) in ROOM_FORBIDDEN:
-                out.append(f"{src} -> {dst} (forbidden for room {rs[0]})")
-    return sorted(out)
-
-
-def test_the_room_checker_sees_a_wrong_import():
-    graph = {f"{IDENT}.fit.fit_core": {f"{IDENT}.online.executive"},
-             f"{IDENT}.fit.calibration": {f"{IDENT}.assessment.verdicts"},
-             f"{IDENT}.online.estimators": {f"{IDENT}.assessment.results", f"{IDENT}.fit.posterior"},
-             f"{IDENT}.assessment.verdicts": {f"{IDENT}.fit.fit_core", f"{IDENT}.bag_input.from_bag"},
-             f"{IDENT}.flat": set()}
-    assert room_violations(graph) == [
-        f"{IDENT}.fit.calibration -> {IDENT}.assessment.verdicts (room assessment is above fit)",
-        f"{IDENT}.fit.fit_core -> {IDENT}.online.executive (room online is above fit)",
-        f"{IDENT}.flat (in no room: move it into one of ['assessment', 'bag_input', 'fit', 'online'])",
-        f"{IDENT}.online.estimators -> {IDENT}.assessment.results (forbidden for room online)"]
-
-
-def test_identification_keeps_its_rooms(graph):
-    """fit < bag input < assessment < online; online does not write identification.yaml."""
-    rooms = {room_of(m)[0] for m in graph if room_of(m)}
-    assert set(ROOMS) <= rooms  # the rule is not vacuous
-    assert f"{IDENT}.fit.posterior" in graph[f"{IDENT}.online.estimators"]
-    assert f"{IDENT}.fit.fit_core" in graph[f"{IDENT}.bag_input.any_topics"]
-    assert room_violations(graph) == []
-
-
-#: The bag reader: within the identification package, only the bag input room imports it.
+# ------------------------------------------------------------------------------------------------ the fit's faces
+FIT = "hindrax_fit"
+#: The bag reader: within the identification rooms (the fit package and onboard's identification), only the bag
+#: input room imports it.
 BAG_READER = "hindrax_drivers.recording.reader"
-#: What modules outside the identification package may import of it: the pipeline (read, fit, write), the campaign's
-#: own pieces (its record, its calibration topic, the record's fit and references), the yaml's reader and schema, and
-#: the rooms below the assessment's writers. The adapters (``bag_input.from_bag``, ``bag_input.any_topics``), the
-#: fits of bags (``fit.fit_any``) and the writers' internals stay behind these faces.
+#: What modules outside the fit package may import of it: the pipeline (read, fit, write), the yaml's reader and
+#: schema, the verdicts, reports and predictions, the bag reader. The adapters (``bag_input.from_bag``,
+#: ``bag_input.any_topics``), the fits of bags (``fit.fit_any``) and the writers' internals stay behind these faces.
 PIPELINE_FACES = frozenset({
-    f"{IDENT}.assessment.pipeline", f"{IDENT}.assessment.results", f"{IDENT}.assessment.report",
-    f"{IDENT}.assessment.verdicts", f"{IDENT}.assessment.predict", f"{IDENT}.bag_input.reader",
-    f"{IDENT}.bag_input.campaign_record", f"{IDENT}.bag_input.calibration_topic",
+    f"{FIT}.assessment.pipeline", f"{FIT}.assessment.results", f"{FIT}.assessment.report",
+    f"{FIT}.assessment.verdicts", f"{FIT}.assessment.predict", f"{FIT}.bag_input.reader",
 })
-#: Rooms whose every module is a face (the fit's maths and the online campaign are used by the controller, the
-#: simulator and the benchmarks directly); the fits of bags in ``fit.fit_any`` are not (:data:`PIPELINE_ONLY`).
-OPEN_ROOMS = ("fit", "online")
-PIPELINE_ONLY = frozenset({f"{IDENT}.fit.fit_any"})
+#: Rooms whose every module is a face (the fit's maths are used by the simulator and the benchmarks directly); the
+#: fits of bags in ``fit.fit_any`` are not (:data:`PIPELINE_ONLY`).
+OPEN_ROOMS = ("fit",)
+PIPELINE_ONLY = frozenset({f"{FIT}.fit.fit_any"})
+IDENTIFICATION_ROOMS = (f"{FIT}.", "hindrax_onboard.identification.")
 
 
 def pipeline_violations(graph: dict[str, set[str]]) -> list[str]:
     """``"importer -> imported (why)"`` for a bag read outside the bag input room and for an import of the pipeline's
-    insides from outside the identification package (:data:`PIPELINE_FACES`)."""
+    insides from outside the fit package (:data:`PIPELINE_FACES`)."""
     out = []
     for src, deps in graph.items():
-        rs = room_of(src)
-        if rs is not None and rs[0] != "bag_input" and BAG_READER in deps:
+        if src.startswith(IDENTIFICATION_ROOMS) and not src.startswith(f"{FIT}.bag_input.") and BAG_READER in deps:
             out.append(f"{src} -> {BAG_READER} (only the bag input room reads bags)")
-        if rs is not None:
+        if package_of(src) == FIT:
             continue
         for dst in deps:
-            rd = room_of(dst)
-            if rd is None or dst in PIPELINE_FACES or dst == f"{IDENT}.{rd[0]}" or (
-                    rd[0] in OPEN_ROOMS and dst not in PIPELINE_ONLY):
+            if package_of(dst) != FIT or dst in PIPELINE_FACES or dst.count(".") < 2 or (
+                    dst.split(".")[1] in OPEN_ROOMS and dst not in PIPELINE_ONLY):
                 continue
-            out.append(f"{src} -> {dst} (outside identification: use the pipeline, "
-                       f"{IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)")
+            out.append(f"{src} -> {dst} (outside the fit package: use the pipeline, "
+                       f"{FIT}.assessment.pipeline, or the bag reader, {FIT}.bag_input.reader)")
     return sorted(out)
 
 
 def test_the_pipeline_checker_sees_a_reader_or_an_adapter_used_elsewhere():
-    graph = {f"{IDENT}.fit.fit_any": {BAG_READER},
-             "hindrax_ident.tools.commands.ident_fit": {
-                 f"{IDENT}.bag_input.any_topics", f"{IDENT}.fit.fit_any",
-                 f"{IDENT}.assessment.pipeline", f"{IDENT}.fit.fit_core"},
-             f"{IDENT}.bag_input.from_bag": {BAG_READER}}
+    graph = {f"{FIT}.fit.fit_any": {BAG_READER},
+             "hindrax_tools.commands.ident_fit": {
+                 f"{FIT}.bag_input.any_topics", f"{FIT}.fit.fit_any",
+                 f"{FIT}.assessment.pipeline", f"{FIT}.fit.fit_core"},
+             "hindrax_onboard.identification.online.node": {BAG_READER},
+             f"{FIT}.bag_input.from_bag": {BAG_READER}}
     assert pipeline_violations(graph) == [
-        f"{IDENT}.fit.fit_any -> {BAG_READER} (only the bag input room reads bags)",
-        f"hindrax_ident.tools.commands.ident_fit -> {IDENT}.bag_input.any_topics "
-        "(outside identification: use the "
-        f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)",
-        f"hindrax_ident.tools.commands.ident_fit -> {IDENT}.fit.fit_any "
-        "(outside identification: use the "
-        f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)"]
+        f"{FIT}.fit.fit_any -> {BAG_READER} (only the bag input room reads bags)",
+        f"hindrax_onboard.identification.online.node -> {BAG_READER} (only the bag input room reads bags)",
+        f"hindrax_tools.commands.ident_fit -> {FIT}.bag_input.any_topics (outside the fit package: use the "
+        f"pipeline, {FIT}.assessment.pipeline, or the bag reader, {FIT}.bag_input.reader)",
+        f"hindrax_tools.commands.ident_fit -> {FIT}.fit.fit_any (outside the fit package: use the "
+        f"pipeline, {FIT}.assessment.pipeline, or the bag reader, {FIT}.bag_input.reader)"]
 
 
 def test_one_pipeline_reads_bags_and_writes_identification(graph):
     """Only the bag input room reads bags; commands, the simulator and the graph runs go through the pipeline."""
-    assert BAG_READER in graph[f"{IDENT}.bag_input.any_topics"]  # the rule is not vacuous
-    assert f"{IDENT}.assessment.pipeline" in graph["hindrax_ident.tools.commands.ident_fit"]
+    assert BAG_READER in graph[f"{FIT}.bag_input.any_topics"]  # the rule is not vacuous
+    assert f"{FIT}.assessment.pipeline" in graph["hindrax_tools.commands.ident_fit"]
     assert all(m in graph for m in PIPELINE_FACES | PIPELINE_ONLY)
     assert pipeline_violations(graph) == []
+
+
+# ------------------------------------------------------------------------------------------------ what runs where
+#: The launch files the vehicle runs (the pool test includes the vehicle's).
+VEHICLE_LAUNCHES = (ROOT / "src" / "hindrax_drivers" / "launch" / "vehicle.launch.xml",
+                    ROOT / "src" / "hindrax_onboard" / "launch" / "pool_test.launch.xml")
+#: Lines (``wc -l``) of project code outside hindrax_drivers and hindrax_msgs that one process of the vehicle's
+#: launch files may import (issue 75: the identification process could import 11.3k, the topside fit among them).
+VEHICLE_PROCESS_MAX_LINES = 8_500
+#: Source lines (tests excluded) of one package at most (issue 75). hindrax_drivers is over it (26.4k) and has its
+#: own ceiling until it is split: it may not grow.
+PACKAGE_MAX_LINES = 15_000
+PACKAGE_CEILINGS = {"hindrax_drivers": 26_400}
+
+
+def class_path_edges(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """{module: modules it names as ``"package.module:Class"`` strings} (the composed processes import their nodes'
+    classes by name at run time, :mod:`hindrax_drivers.composition`)."""
+    import re
+
+    out: dict[str, set[str]] = {}
+    for mod, path in modules.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                m = re.fullmatch(r"(hindrax_\w+(?:\.\w+)*):\w+", node.value)
+                if m and m.group(1) in modules:
+                    out.setdefault(mod, set()).add(m.group(1))
+    return out
+
+
+def process_closure(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every project module that the process whose entry module is ``start`` can import: the transitive closure of
+    the import graph, plus the classes named by ``module:Class`` strings (:func:`class_path_edges`)."""
+    seen, todo = {start}, [start]
+    while todo:
+        for dep in graph.get(todo.pop(), ()):
+            if dep not in seen:
+                seen.add(dep)
+                todo.append(dep)
+    return seen
+
+
+def vehicle_processes() -> dict[str, str]:
+    """{"package/executable": entry module} of every ``<node>`` of :data:`VEHICLE_LAUNCHES` that is this
+    workspace's (external ones, foxglove_bridge, left out), whatever its launch condition."""
+    import xml.etree.ElementTree as ET
+
+    scripts: dict[str, str] = {}
+    out = {}
+    for launch in VEHICLE_LAUNCHES:
+        for node in ET.parse(launch).getroot().iter("node"):
+            pkg, exe = node.get("pkg"), node.get("exec")
+            if pkg not in PACKAGES:
+                continue
+            if pkg not in {k.split("/")[0] for k in scripts}:
+                for s in setup_kwargs(pkg)["entry_points"]["console_scripts"]:
+                    name, target = (x.strip() for x in s.split("="))
+                    scripts[f"{pkg}/{name}"] = target.split(":")[0]
+            out[f"{pkg}/{exe}"] = scripts[f"{pkg}/{exe}"]
+    return out
+
+
+def test_each_vehicle_process_imports_at_most_its_share_of_project_code(graph):
+    """Each process of the vehicle's launch files can import at most :data:`VEHICLE_PROCESS_MAX_LINES` lines of
+    project code outside the drivers and messages; online identification imports no fit core and no report."""
+    modules = _modules(PACKAGES)
+    named = class_path_edges(modules)
+    full = {m: deps | named.get(m, set()) for m, deps in graph.items()}
+    processes = vehicle_processes()
+    assert {"hindrax_drivers/sensors_node", "hindrax_onboard/ident_record_node",
+            "hindrax_onboard/controller_node"} <= set(processes)  # not vacuous
+    sizes = {}
+    for proc, entry in processes.items():
+        closure = process_closure(full, entry)
+        sizes[proc] = sum(len(modules[m].read_text(encoding="utf-8").splitlines()) for m in closure
+                          if package_of(m) not in ("hindrax_drivers", "hindrax_msgs"))
+        if proc == "hindrax_onboard/ident_record_node":  # the classes named by string are followed
+            assert {"hindrax_onboard.identification.online.node", "hindrax_onboard.control.node",
+                    "hindrax_drivers.recording.recorder_node"} <= closure
+            assert not {"hindrax_fit.fit.fit_core", "hindrax_fit.assessment.report"} & closure
+    print("project lines each vehicle process can import:", sizes)
+    assert sizes["hindrax_onboard/ident_record_node"] > 1000  # the count is not vacuous
+    over = {p: n for p, n in sizes.items() if n > VEHICLE_PROCESS_MAX_LINES}
+    assert not over, f"vehicle processes over {VEHICLE_PROCESS_MAX_LINES} lines of project code: {over}"
+
+
+def package_lines(pkg: str) -> int:
+    """Source lines of ``src/<pkg>`` (``wc -l`` of its ``.py`` files, tests excluded; the issue 75 measure)."""
+    return sum(len(p.read_text(encoding="utf-8").splitlines()) for p in (ROOT / "src" / pkg).rglob("*.py")
+               if "test" not in p.relative_to(ROOT / "src" / pkg).parts)
+
+
+def test_no_package_is_over_its_size():
+    sizes = {pkg: package_lines(pkg) for pkg in PACKAGE_ORDER}
+    print("source lines per package:", sizes)
+    assert all(n > 1000 for n in sizes.values())  # the count is not vacuous
+    over = {p: n for p, n in sizes.items() if n > PACKAGE_CEILINGS.get(p, PACKAGE_MAX_LINES)}
+    assert not over, f"packages over {PACKAGE_MAX_LINES} source lines (PACKAGE_CEILINGS for a pending split): {over}"
 
 
 # ------------------------------------------------------------------------------------------------ defined once
 #: name -> the one module (path under src/) that defines it.
 DEFINED_ONCE = {
     "wrap_angle": "hindrax_drivers/hindrax_drivers/frames.py",
-    "ThrustLag": "hindrax_ident/hindrax_ident/vehicle/thrust_lag.py",
+    "ThrustLag": "hindrax_onboard/hindrax_onboard/vehicle/thrust_lag.py",
     "ThrustCurve": "hindrax_drivers/hindrax_drivers/allocation/thrust_curve.py",
-    "rigid_body_mass_matrix": "hindrax_ident/hindrax_ident/vehicle/rigid_body.py",
-    "skew": "hindrax_ident/hindrax_ident/vehicle/rigid_body.py",
+    "rigid_body_mass_matrix": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
+    "skew": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
 }
 #: Other names the same things had; none may be defined anywhere.
 FORMER_NAMES = ("wrap", "_wrap", "_wrap_angle", "angle_wrap", "LaggedThrust", "_lagged", "lag_factor", "_skew")

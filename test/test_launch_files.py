@@ -22,7 +22,7 @@ import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("hindrax_drivers", "hindrax_ident")
+PACKAGES = ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools")
 
 
 def setup_kwargs(pkg: str) -> dict:
@@ -45,8 +45,9 @@ def packages():
     out = {}
     for pkg in PACKAGES:
         kw = setup_kwargs(pkg)
-        scripts = {s.split("=")[0].strip() for s in kw["entry_points"]["console_scripts"]}
-        for s in kw["entry_points"]["console_scripts"]:
+        console_scripts = kw.get("entry_points", {}).get("console_scripts", [])
+        scripts = {s.split("=")[0].strip() for s in console_scripts}
+        for s in console_scripts:
             module = s.split("=")[1].split(":")[0].strip()
             assert (REPO / "src" / pkg / (module.replace(".", "/") + ".py")).is_file(), s
         installed = {}
@@ -185,23 +186,23 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                             {"record": "true", "output_dir": "/ws/runs"})
     assert ("hindrax_drivers", "recorder_node") in recorded
-    pool = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages)
-    # the pool test records in the identification's process (hindrax_ident.composition), never twice
-    assert ("hindrax_drivers", "recorder_node") not in pool and ("hindrax_ident", "ident_record_node") in pool
+    pool = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages)
+    # the pool test records in the identification's process (hindrax_onboard.composition), never twice
+    assert ("hindrax_drivers", "recorder_node") not in pool and ("hindrax_onboard", "ident_record_node") in pool
     assert IDENT_GROUPS["ident_record_node"] == ("identification", "controller", "recorder")
-    unrecorded = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"record": "false"})
-    assert ("hindrax_ident", "ident_control_node") in unrecorded
+    unrecorded = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages, {"record": "false"})
+    assert ("hindrax_onboard", "ident_control_node") in unrecorded
     assert not {exe for _pkg, exe in unrecorded} & {"recorder_node", "ident_record_node"}
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
-    live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
+    live = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
-    # the pool test runs the identification node and the controller in one process (hindrax_ident.composition);
+    # the pool test runs the identification node and the controller in one process (hindrax_onboard.composition);
     # the controller is optional (off by default) in the vehicle, alone there
     assert IDENT_GROUPS["ident_control_node"] == ("identification", "controller")
-    assert ("hindrax_ident", "controller_node") not in vehicle
+    assert ("hindrax_onboard", "controller_node") not in vehicle
     held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                         {"controller": "true", "model_file": "/ws/runs/x/identification.yaml"})
-    assert ("hindrax_ident", "controller_node") in held
+    assert ("hindrax_onboard", "controller_node") in held
 
 
 def test_checker_rejects_a_missing_executable_and_a_missing_parameter_file(packages, tmp_path):
@@ -259,7 +260,7 @@ TESTED_BY_INSTALL_TEST = {
 
 
 #: README lines run by other tests: the installed `hindrax health` against the launch layout (test/test_pool_day.py;
-#: its verdicts in src/hindrax_ident/test/test_cli_health.py) and the symlink build (test/test_ros_install.py)
+#: its verdicts in src/hindrax_tools/test/test_cli_health.py) and the symlink build (test/test_ros_install.py)
 TESTED_ELSEWHERE = ("hindrax health", "make ros-install COLCON_ARGS=--symlink-install")
 
 
@@ -275,8 +276,8 @@ def test_every_readme_pi_command_is_a_tested_one():
 READER_CASES = [
     ("hindrax_drivers/launch/vehicle.launch.xml", {}),
     ("hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/var/lib/hindrax/runs"}),
-    ("hindrax_ident/launch/pool_test.launch.xml", {}),
-    ("hindrax_ident/launch/pool_test.launch.xml", {"output_dir": "/tmp/runs", "foxglove": "true"}),
+    ("hindrax_onboard/launch/pool_test.launch.xml", {}),
+    ("hindrax_onboard/launch/pool_test.launch.xml", {"output_dir": "/tmp/runs", "foxglove": "true"}),
 ]
 
 
@@ -312,7 +313,7 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
                 f"{path.name}: {el.get('name')} does not respawn after a delay"
     read = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/x"},
                        find_share=lambda pkg: REPO / "src" / pkg)
-    pool = read_launch(REPO / "src/hindrax_ident/launch/pool_test.launch.xml", {"output_dir": "/x"},
+    pool = read_launch(REPO / "src/hindrax_onboard/launch/pool_test.launch.xml", {"output_dir": "/x"},
                        find_share=lambda pkg: REPO / "src" / pkg)
     for recorder in (next(p for p in read if p.executable == "recorder_node"),
                      next(p for p in pool if p.executable == "ident_record_node")):
@@ -325,7 +326,7 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
 def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):
     """docs/deployment.md, the "Running on the Pi" steps: each `ros2 launch PKG FILE [name:=value]` names an installed
     launch file and arguments it declares; each `hindrax <command>` is a registered command."""
-    from hindrax_ident.tools.cli import COMMANDS
+    from hindrax_tools.cli import COMMANDS
 
     text = (REPO / "docs" / "deployment.md").read_text()
     launches = re.findall(r"ros2 launch (\w+) ([\w.]+\.launch\.xml)((?: \w+:=[^\s`]*)*)", text)
@@ -348,7 +349,7 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
     from hindrax_drivers.launch_xml import read_launch
     from hindrax_drivers.process_runner import ProcessRunner
 
-    read = read_launch(REPO / "src/hindrax_ident/launch/pool_test.launch.xml", {},
+    read = read_launch(REPO / "src/hindrax_onboard/launch/pool_test.launch.xml", {},
                        find_share=lambda pkg: REPO / "src" / pkg)
     prefixed = {p.executable: p.launch_prefix for p in read if p.launch_prefix}
     assert prefixed == {e: ("nice", "-n", "-5") for e in ("sensors_node", "actuation_node", "supervisor_node",

@@ -4,7 +4,7 @@ A disarm cause's next step ("then hindrax reset, hindrax arm"), a refusal ("clea
 ("check with hindrax health") that names a command the CLI does not have leaves the operator with nothing to type:
 the topside said "then hindrax reset" while there was no ``hindrax reset``. Every string literal of the two packages'
 sources (docstrings aside) is read with :mod:`ast`; each ``hindrax <word> [<word>]`` in it must be a command of
-:data:`hindrax_ident.tools.cli.COMMANDS`, a group followed by one of its commands, or a group's name as the prefix of
+:data:`hindrax_tools.cli.COMMANDS`, a group followed by one of its commands, or a group's name as the prefix of
 an error line (``hindrax sros2: ...``).
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 from hindrax_drivers.supervisor.disarm_cause import _NEXT_STEPS, _DEFAULT_STEP, _TRIP_STEP
-from hindrax_ident.tools.cli import COMMANDS
+from hindrax_tools.cli import COMMANDS
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 #: "hindrax <word>" phrases that name no command: a device's boot banner, a diagnostic hardware id
@@ -62,7 +62,8 @@ def test_every_disarm_cause_names_commands_that_exist():
 
 def test_every_message_of_the_sources_names_commands_that_exist():
     bad = [f"{path.relative_to(SRC)}: {phrase}"
-           for package in ("hindrax_drivers/hindrax_drivers", "hindrax_ident/hindrax_ident")
+           for package in ("hindrax_drivers/hindrax_drivers", "hindrax_onboard/hindrax_onboard",
+                           "hindrax_fit/hindrax_fit", "hindrax_sim/hindrax_sim", "hindrax_tools/hindrax_tools")
            for path in sorted((SRC / package).rglob("*.py"))
            for text in _messages(path) for phrase in unknown_commands(text)]
     assert bad == []

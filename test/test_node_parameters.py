@@ -174,7 +174,7 @@ def test_without_overrides_the_node_takes_the_shipped_vehicle_file_and_still_onl
 
 def test_node_specific_parameters_are_described_too():
     from hindrax_drivers.recording.recorder_node import RecorderNode
-    from hindrax_ident.sim.node import SimulatorNode
+    from hindrax_sim.node import SimulatorNode
 
     rclpy_own = {"use_sim_time", "start_type_description_service"}  # declared by rclpy itself
     with running(lambda c: SimulatorNode(context=c, parameter_overrides=ALL),
@@ -196,7 +196,7 @@ def test_bringup_passes_its_safety_timeouts_as_read_only_parameters_ros2_param_g
     from rcl_interfaces.srv import GetParameters
 
     from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_ident.bringup import build_graph
+    from hindrax_sim.graph.bringup import build_graph
 
     shipped = load_config(default_config_path()).esc
     assert shipped.heartbeat_timeout_s == shipped.guard_heartbeat_timeout_s == 0.2

@@ -1,7 +1,7 @@
 """One input path for every node (issue 47 item 1): the path the vehicle takes is the path the tests take.
 
 Every node takes its topic inputs as subscription callbacks on its own executor, whatever the clock. This test reads
-every module of ``hindrax_drivers`` and ``hindrax_ident`` with :mod:`ast` (nothing is imported) and fails when a
+every module of the project's Python packages with :mod:`ast` (nothing is imported) and fails when a
 second input path comes back:
 
 - a message taken outside an executor: a call of ``take_message`` (the subscription handle's call that a polled
@@ -27,7 +27,8 @@ import pytest
 pytestmark = pytest.mark.xdist_group("one_input_path")
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = (ROOT / "src" / "hindrax_drivers" / "hindrax_drivers", ROOT / "src" / "hindrax_ident" / "hindrax_ident")
+PACKAGES = tuple(ROOT / "src" / p / p for p in ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim",
+                                                "hindrax_tools"))
 
 #: Modules that read the ``use_sim_time`` parameter, with what they choose by it (never how an input arrives).
 CLOCK_READERS = {
@@ -155,4 +156,4 @@ def test_the_checks_see_what_they_look_for():
     assert _defines_an_executor(ast.parse(executor))
     assert not _defines_an_executor(ast.parse("from mylib import S\nclass E(S):\n    pass\n"))
     assert not _defines_an_executor(ast.parse("from rclpy.node import Node\nclass E(Node):\n    pass\n"))
-    assert _defines_an_executor(_modules()["hindrax_ident/ordered_executor.py"])
+    assert _defines_an_executor(_modules()["hindrax_sim/graph/ordered_executor.py"])

@@ -2,7 +2,7 @@
 
 The vehicle's emulated layout with the shipped vehicle file's wiring (/OE, no watchdog feed) under a stand-in for
 the bare-metal unit's systemd watchdog
-(:class:`hindrax_ident.tools.benchmarks.safety.SystemdWatchdogStandIn`:
+(:class:`hindrax_tools.benchmarks.safety.SystemdWatchdogStandIn`:
 ``WatchdogSec`` 0.2 s, SIGKILL), armed at 1700 us; the ESC and the guard are SIGSTOPped while the supervisor runs.
 Before, the supervisor's own WATCHDOG=1 kept the unit and 1700 us stayed on the wire; now the guard alone pings, and
 only while every safety heartbeat is fresh: the unit is killed, the guard's line freed, /OE goes high.
@@ -15,7 +15,7 @@ import signal
 import pytest
 
 from hindrax_drivers.testing import ConditionTimeout
-from hindrax_ident.tools.benchmarks.safety import _UnitLayout, partial_freeze_stop_s, running_layout
+from hindrax_tools.benchmarks.safety import _UnitLayout, partial_freeze_stop_s, running_layout
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros]
 

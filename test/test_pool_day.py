@@ -1,6 +1,6 @@
 """A pool day of the installed launch layout on emulated devices (docs/deployment.md §9).
 
-The vehicle runs ``ros2 launch hindrax_ident pool_test.launch.xml``; ``launch`` is not installable here, so the
+The vehicle runs ``ros2 launch hindrax_onboard pool_test.launch.xml``; ``launch`` is not installable here, so the
 process list is read from the *installed* launch file (hindrax_drivers/launch_xml.py; test/test_launch_files.py
 checks that it is the list the file declares) and started, executable by executable from the colcon install
 (test/conftest.py), by the project's runner (hindrax_drivers/process_runner.py: launch_ros's command line, respawn
@@ -38,7 +38,7 @@ from hindrax_drivers.emulated_devices import EmulatedDevices
 from hindrax_drivers.launch_xml import read_launch
 from hindrax_drivers.process_runner import ProcessRunner
 from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
+from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(1200)]
@@ -143,7 +143,7 @@ def test_pool_day(colcon_install, tmp_path):
     runs = tmp_path / "runs"
     args = {"output_dir": str(runs)}
     with EmulatedDevices(cfg, tmp_path / "devices", serve_i2c=False) as dev:
-        with Day(install, dev, "hindrax_ident/pool_test.launch.xml", args) as day:
+        with Day(install, dev, "hindrax_onboard/pool_test.launch.xml", args) as day:
             assert set(day.process_of) >= {"dvl75", "ping1d", "ms5837", "icm20948", "esc", "recorder",
                                                        "supervisor", "identification"}
             # 1. the I2C bus is absent: the serial drivers publish, the I2C sensor drivers run and say so
@@ -186,7 +186,7 @@ def test_pool_day(colcon_install, tmp_path):
             assert {d: day.state(d).starts for d in ("dvl75", "ping1d")} == starts  # no restart for a replug
             # 5. the operator's check: ready to dive
             health = subprocess.run(
-                ["hindrax", "health", "--launch", "hindrax_ident/pool_test.launch.xml", f"output_dir:={runs}",
+                ["hindrax", "health", "--launch", "hindrax_onboard/pool_test.launch.xml", f"output_dir:={runs}",
                  "--timeout", "30"], env=install.env, capture_output=True, text=True, timeout=120)
             assert health.returncode == 0 and "READY to dive" in health.stdout, health.stdout + health.stderr
         # SIGINT ends every node cleanly and the recorder finishes its bag
@@ -197,7 +197,7 @@ def test_pool_day(colcon_install, tmp_path):
         # 6. the next launch, same output_dir: a new bag, nothing stopped by the earlier ones; the Ping adapter
         #    is not plugged in at the start this time, and is picked up when it is
         dev.unplug("ping1d")
-        with Day(install, dev, "hindrax_ident/pool_test.launch.xml", args) as day2:
+        with Day(install, dev, "hindrax_onboard/pool_test.launch.xml", args) as day2:
             day2.wait(lambda: any("cannot open" in s[2] for s in day2.seen("hindrax/ping1d", min_level=2)),
                       "ping1d reports its adapter absent at the start")
             t_in = time.monotonic()
@@ -282,7 +282,7 @@ CAMPAIGN_S = 900.0  # wall-time deadline of the campaign (about 190 s of pool ti
 
 def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     """Every line of the README's pool day, on the machine it names, against the installed pool_test launch on the
-    live virtual pool (hindrax_ident/sim/live_pool.py: the simulator behind the five emulated devices, in a process
+    live virtual pool (hindrax_sim/live_pool.py: the simulator behind the five emulated devices, in a process
     of its own, on the wall clock): the vehicle on this worker's domain, the topside on another (LOCALHOST here,
     SUBNET at the pool), the topside's settings from docker/topside.env.example's three variables. ``ros2 launch``,
     ``ros2 topic echo`` and ``ros2 service call`` (no ros2 CLI here) are done by the project's runner and rclpy;
@@ -302,9 +302,9 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
 
     from diagnostic_msgs.msg import DiagnosticStatus
     from hindrax_drivers.testing import child_env
-    from hindrax_ident.graph_campaign import parse_prompt
-    from hindrax_ident.sim.live_pool import LivePool
-    from hindrax_ident.sim.truth import load_truth
+    from hindrax_sim.graph.graph_campaign import parse_prompt
+    from hindrax_sim.live_pool import LivePool
+    from hindrax_sim.truth import load_truth
     from hindrax_msgs.msg import ThrusterPwm
 
     install = colcon_install
@@ -352,9 +352,9 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
 
         def launch(line: str) -> Day:
             words = line.split()
-            assert words[:4] == ["ros2", "launch", "hindrax_ident", "pool_test.launch.xml"], line
+            assert words[:4] == ["ros2", "launch", "hindrax_onboard", "pool_test.launch.xml"], line
             args = dict(w.split(":=", 1) for w in words[4:])
-            d = Day(install, pool, "hindrax_ident/pool_test.launch.xml", {"config": str(vehicle_file), **args},
+            d = Day(install, pool, "hindrax_onboard/pool_test.launch.xml", {"config": str(vehicle_file), **args},
                     env={**install.env, **keys})
             d.__enter__()
             d.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
@@ -423,7 +423,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
                     t_arm = time.monotonic()
                     day.wait(lambda: any(a for t, a in armed if t >= t_arm), "thrusters/pulse_width armed")
                     # a health check on the vehicle while armed: a new participant, no disarm
-                    r = hindrax(vehicle_env, f"hindrax health --launch hindrax_ident/pool_test.launch.xml "
+                    r = hindrax(vehicle_env, f"hindrax health --launch hindrax_onboard/pool_test.launch.xml "
                                              f"output_dir:={runs} --timeout 60")
                     assert r.returncode == 0, r.stdout + r.stderr
                 elif line.startswith("hindrax ident start"):

@@ -78,7 +78,7 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             assert shells["topside"]["ROS_DOMAIN_ID"] == str(topside) and shells["topside"]["HINDRAX_VEHICLE"]
             assert any(s.startswith("# topside shell (topside domain") for s in seen), seen
             vehicle_env, topside_env = ({**install.env, **shells[m]} for m in ("vehicle", "topside"))
-            health = subprocess.run(["hindrax", "health", "--launch", "hindrax_ident/pool_test.launch.xml",
+            health = subprocess.run(["hindrax", "health", "--launch", "hindrax_onboard/pool_test.launch.xml",
                                      f"output_dir:={tmp_path / 'runs'}", "--timeout", str(WAIT_S)], env=vehicle_env,
                                     capture_output=True, text=True, timeout=WAIT_S + 60)
             assert health.returncode == 0 and "READY to dive" in health.stdout, health.stdout + health.stderr

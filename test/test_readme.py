@@ -40,7 +40,7 @@ def test_every_hindrax_command_in_the_readme_exists():
     """Each ``hindrax <command>`` the README names is a subcommand of the installed CLI."""
     names = set(re.findall(r"`hindrax ([a-z][a-z0-9-]+)", README))
     assert len(names) >= 10
-    helptext = subprocess.run([python_executable(), "-m", "hindrax_ident.tools.cli", "--help"],
+    helptext = subprocess.run([python_executable(), "-m", "hindrax_tools.cli", "--help"],
                               env=child_env(),
                               capture_output=True, text=True, timeout=60).stdout
     missing = sorted(n for n in names if not re.search(rf"\b{re.escape(n)}\b", helptext))

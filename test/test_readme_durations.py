@@ -1,5 +1,5 @@
 """The README's times of the long commands are the ones docs/results.md holds, which each command writes itself
-(section "durations", hindrax_ident/results_doc.py): a README that says "about 1.5 minutes" beside a measured 6 fails.
+(section "durations", hindrax_tools/results_doc.py): a README that says "about 1.5 minutes" beside a measured 6 fails.
 """
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_ident.results_doc import duration_rows
+from hindrax_tools.results_doc import duration_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -3,7 +3,7 @@ creates any node or publisher of its own (vehicle_graph.refuse_before_start, the
 publisher).
 
 The vehicle's emulated layout (ESC, supervisor and output guard each in its own process, the PCA9685 and its /OE line
-served by this process: :mod:`hindrax_ident.tools.benchmarks.safety`), armed at 1700 us; then each
+served by this process: :mod:`hindrax_tools.benchmarks.safety`), armed at 1700 us; then each
 refused tool is started
 on the vehicle's domain and must exit 1 naming the vehicle while thrust stays on. Before, ``bag play
 --safety-topics`` and ``bringup --sim`` created their heartbeat publishers first and the ESC disarmed 0.9-1.5 s
@@ -22,8 +22,8 @@ from rclpy.serialization import serialize_message
 
 from hindrax_drivers.recording.writer import BagWriter
 from hindrax_drivers.testing import wait_until
-from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
-from hindrax_ident.tools.benchmarks.safety import running_layout
+from hindrax_tools.benchmarks.participant_churn import hardware_priority
+from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros]
 

@@ -2,13 +2,15 @@
 installed executables run from the install space with the installed vehicle file.
 
 Built once per session in a copy of the repository's ros_ws + src (test/conftest.py; about 50 s on 2 idle cores).
-Checks: every node's console script is installed in lib/<package>, `hindrax` is on PATH after sourcing the install
-and finds the installed vehicle file without --config, the launch files, the Foxglove layout and the virtual pool's
-truth files are in share/ (so the installed simulator_node runs), installed allocation_node answers a wrench and
+Checks: the vehicle's build installs hindrax_msgs, hindrax_drivers and hindrax_onboard only (no fit, simulator or
+tools: those are the topside's, here the venv's editable installs), every node's console script is installed in
+lib/<package>, `hindrax` (the venv's) is on PATH after sourcing the install and finds the installed vehicle file
+without --config, the launch files, the Foxglove layout and the virtual pool's truth files are in share/ (so the
+venv's simulator_node runs on them), installed allocation_node answers a wrench and
 installed static_tf_node publishes /tf_static (both started with `--ros-args --params-file <installed
 hindrax.yaml>`), a driver whose device is absent keeps running and reports the error on /diagnostics;
-`colcon build --symlink-install` leaves `hindrax` on PATH too, and colcon at the repository root sees the three
-packages and none of the third_party stand-ins.
+a topside `colcon build --symlink-install` of the tools puts its `hindrax` wrapper on PATH, and colcon at the
+repository root sees the six packages and none of the third_party stand-ins.
 """
 from __future__ import annotations
 
@@ -49,7 +51,9 @@ pytestmark = pytest.mark.timeout(1200)
 DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
                 "recorder_node", "player_node", "static_tf_node", "supervisor_node", "output_guard_node",
                 "sensors_node", "actuation_node"]  # composed processes (vehicle.launch)
-IDENT_NODES = ["identification_node", "simulator_node", "hindrax", "ident_control_node", "ident_record_node"]
+ONBOARD_NODES = ["identification_node", "controller_node", "ident_control_node", "ident_record_node"]
+#: what the vehicle's build must not install (topside packages)
+TOPSIDE = ("hindrax_fit", "hindrax_sim", "hindrax_tools")
 
 
 @pytest.fixture(scope="module")
@@ -62,13 +66,16 @@ def test_every_node_and_hindrax_are_installed(install):
     inst, env = install
     for node in DRIVER_NODES:
         assert os.access(inst / "lib" / "hindrax_drivers" / node, os.X_OK), node
-    for node in IDENT_NODES:
-        assert os.access(inst / "lib" / "hindrax_ident" / node, os.X_OK), node
-    installed = sorted(p.name for pkg in ("hindrax_drivers", "hindrax_ident") for p in (inst / "lib" / pkg).iterdir())
+    for node in ONBOARD_NODES:
+        assert os.access(inst / "lib" / "hindrax_onboard" / node, os.X_OK), node
+    installed = sorted(p.name for pkg in ("hindrax_drivers", "hindrax_onboard") for p in (inst / "lib" / pkg).iterdir())
     print("installed executables:", " ".join(installed))
-    # the installed package is the one imported, not the repository's
-    r = subprocess.run(["python3", "-c", "import hindrax_drivers, hindrax_ident; print(hindrax_drivers.__file__); "
-                        "print(hindrax_ident.__file__)"], env=env, capture_output=True, text=True, timeout=60)
+    # the vehicle's build: no fit, simulator or tools code, no hindrax wrapper
+    assert not [p for p in inst.rglob("*") if any(t in p.name for t in TOPSIDE)], "topside code in the install"
+    assert not (inst / "bin" / "hindrax").exists()
+    # the installed packages are the ones imported, not the repository's
+    r = subprocess.run(["python3", "-c", "import hindrax_drivers, hindrax_onboard; print(hindrax_drivers.__file__); "
+                        "print(hindrax_onboard.__file__)"], env=env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and all(line.startswith(str(inst)) for line in r.stdout.split()), r.stdout + r.stderr
 
 
@@ -79,7 +86,7 @@ def test_share_holds_vehicle_file_launch_files_and_layout(install):
     assert installed_cfg.read_text() == (REPO / "ros_ws" / "config" / "hindrax.yaml").read_text()
     launches = sorted(p.name for p in share.glob("*/launch/*.launch.xml"))
     assert launches == sorted(p.name for p in REPO.glob("src/*/launch/*.launch.xml")) and launches
-    assert list((share / "hindrax_ident" / "foxglove").glob("*.json"))
+    assert list((share / "hindrax_onboard" / "foxglove").glob("*.json"))
     for launch in share.glob("*/launch/*.launch.xml"):
         for node in ET.parse(launch).getroot().iter("node"):
             pkg, exe = node.get("pkg"), node.get("exec")
@@ -90,7 +97,7 @@ def test_share_holds_vehicle_file_launch_files_and_layout(install):
 def test_installed_hindrax_is_on_path_and_finds_the_installed_vehicle_file(install, tmp_path):
     inst, env = install
     which = shutil.which("hindrax", path=env["PATH"])
-    assert which == str(inst / "bin" / "hindrax")
+    assert which == str(VENV / "bin" / "hindrax")  # the topside's command (hindrax_tools), not the vehicle's build
     r = subprocess.run(["hindrax", "config", "check"], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0, r.stdout + r.stderr
@@ -196,14 +203,13 @@ def test_truth_files_are_installed_and_the_installed_simulator_runs(install, tmp
     # a vehicle file mounted elsewhere (the image's HINDRAX_CONFIG): the simulator still finds the installed truth
     mounted = tmp_path / "mounted.yaml"
     shutil.copy2(inst / "share" / "hindrax_drivers" / "config" / "hindrax.yaml", mounted)
-    r = subprocess.run(["python3", "-c", "from hindrax_ident.sim.truth import truth_dir, default_truth_path; "
+    r = subprocess.run(["python3", "-c", "from hindrax_sim.truth import truth_dir, default_truth_path; "
                         "print(truth_dir()); print(default_truth_path().is_file())"],
                        env=dict(env, HINDRAX_CONFIG=str(mounted)), cwd=tmp_path, capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0 and r.stdout.split() == [str(installed_truth), "True"], r.stdout + r.stderr
     with graph() as (ctx, node, spin):
-        sim = _start(inst, dict(env, ROS_DOMAIN_ID=str(ctx.get_domain_id())),
-                     inst / "lib" / "hindrax_ident" / "simulator_node")
+        sim = _start(inst, dict(env, ROS_DOMAIN_ID=str(ctx.get_domain_id())), VENV / "bin" / "simulator_node")
         try:
             clocks = []
             node.create_subscription(Clock, "/clock", clocks.append, 10)
@@ -215,10 +221,12 @@ def test_truth_files_are_installed_and_the_installed_simulator_runs(install, tmp
 
 
 def test_symlink_install_keeps_hindrax_on_path(colcon_tools, tmp_path):
-    # hindrax_msgs (the slow CMake package, not concerned by --symlink-install) comes from the venv, where make
-    # setup installed it; the two ament_python packages are built with colcon build --symlink-install
+    # a topside colcon build of everything up to the tools (the last --packages-up-to wins); hindrax_msgs (the slow
+    # CMake package, not concerned by --symlink-install) comes from the venv, where make setup installed it; the
+    # ament_python packages are built with colcon build --symlink-install
     colcon_tools.copy_workspace(tmp_path)
-    r = colcon_tools.make_ros_install(tmp_path, "--symlink-install --packages-ignore hindrax_msgs")
+    r = colcon_tools.make_ros_install(tmp_path, "--symlink-install --packages-up-to hindrax_tools "
+                                                "--packages-ignore hindrax_msgs")
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     prefix = tmp_path / "ros_ws" / "install"
     assert (prefix / "bin" / "hindrax").is_symlink()  # a symlink install: the wrapper must not resolve past it
@@ -229,10 +237,11 @@ def test_symlink_install_keeps_hindrax_on_path(colcon_tools, tmp_path):
     assert r.returncode == 0 and ": OK" in r.stdout.splitlines()[0], r.stdout + r.stderr
 
 
-def test_colcon_at_the_repository_root_sees_the_three_packages_and_no_stand_in():
+def test_colcon_at_the_repository_root_sees_the_six_packages_and_no_stand_in():
     # third_party/tf2_msgs would overlay ROS's tf2_msgs with a stand-in lacking what tf2_ros needs
     r = subprocess.run([str(VENV / "bin" / "colcon"), "--log-base", "/dev/null", "list", "--names-only"], cwd=REPO,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert sorted(r.stdout.split()) == ["hindrax_drivers", "hindrax_ident", "hindrax_msgs"], r.stdout
+    assert sorted(r.stdout.split()) == ["hindrax_drivers", "hindrax_fit", "hindrax_msgs", "hindrax_onboard",
+                                        "hindrax_sim", "hindrax_tools"], r.stdout
     assert (REPO / "third_party" / "COLCON_IGNORE").is_file()

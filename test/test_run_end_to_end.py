@@ -24,7 +24,7 @@ import pytest
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.testing import own_domain_env
-from hindrax_ident.identification.assessment.results import read_identification
+from hindrax_fit.assessment.results import read_identification
 
 pytestmark = pytest.mark.ros
 
@@ -37,7 +37,7 @@ EXIT_NOISE = re.compile(r"\w+Warning: |never awaited|Exception ignored|Traceback
 def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     cfg = load_config(default_config_path())
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "hindrax_ident.tools.cli", "run", "--dofs",
+    proc = subprocess.run([sys.executable, "-m", "hindrax_tools.cli", "run", "--dofs",
                            "surge,heave", "--levels", "2",
                            "--seed", "1",
                            "--out", str(out)], env=own_domain_env(), capture_output=True, text=True,
@@ -87,7 +87,7 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     assert min(counts[t] for t in ("/dvl/data", "/wrench", "/thrusters/pulse_width")) > 500, counts
     # the status repeats an unchanged state every STATUS_PERIOD_S (every change goes out at once): at least that
     # often over the run, whose length the 10 Hz DVL gives
-    from hindrax_ident.identification.online.core import STATUS_PERIOD_S
+    from hindrax_onboard.identification.online.core import STATUS_PERIOD_S
     assert counts["/identification/status"] >= 0.9 * (counts["/dvl/data"] / 10.0) / STATUS_PERIOD_S, counts
     assert last_written is not None and not last_written.armed
     assert list(last_written.pulse_width_us) == pytest.approx([1500.0] * len(cfg.thrusters.thrusters), abs=1.3)

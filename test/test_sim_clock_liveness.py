@@ -1,7 +1,7 @@
 """A liveness judgement follows the clock of the graph it protects (docs/architecture.md §8, heartbeats).
 
 The vehicle's three safety processes (ESC, supervisor, output guard:
-:mod:`hindrax_ident.tools.benchmarks.safety`'s
+:mod:`hindrax_tools.benchmarks.safety`'s
 emulated layout, each a process of its own) run on simulated time (``use_sim_time``), with this process publishing
 ``/clock``. A simulation that runs slower than real time (a starved simulator on a loaded machine) while the ESC's
 process is stopped (SIGSTOP) for 1.5 s of wall time: on the graph's clock its heartbeat was never late, so the
@@ -21,8 +21,8 @@ from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.liveness import heartbeat_qos
 from hindrax_drivers.testing import wait_until
-from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
-from hindrax_ident.tools.benchmarks.safety import _Layout, running_layout
+from hindrax_tools.benchmarks.participant_churn import hardware_priority
+from hindrax_tools.benchmarks.safety import _Layout, running_layout
 from hindrax_msgs.msg import Heartbeat
 
 pytestmark = pytest.mark.vehicle_launch

@@ -21,10 +21,10 @@ Groups (:data:`GROUPS`):
     thrust allocation and ESC output: the allocation's commands reach the ESC's subscription
     callback inside the process, as from any other publisher. The ESC node is built last and so
     closed first on exit: it writes neutral before anything else shuts down.
-``ident_control_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
-    the identification node and the controller, both non-safety (:mod:`hindrax_ident.composition`
+``ident_control_node`` (hindrax_onboard, :data:`IDENT_GROUPS`)
+    the identification node and the controller, both non-safety (:mod:`hindrax_onboard.composition`
     builds them; this package names them only).
-``ident_record_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
+``ident_record_node`` (hindrax_onboard, :data:`IDENT_GROUPS`)
     the same two and the recorder: the pool test's layout with recording on.
 
 ``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
@@ -54,8 +54,8 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "actuation_node": ("thrust_allocation", "esc"),
 }
 
-#: hindrax_ident's composed processes: console script -> its nodes (the classes: hindrax_ident.composition; this
-#: package imports nothing of hindrax_ident, it only names the nodes for the launch-file readers)
+#: hindrax_onboard's composed processes: console script -> its nodes (the classes: hindrax_onboard.composition; this
+#: package imports nothing of hindrax_onboard, it only names the nodes for the launch-file readers)
 IDENT_GROUPS: dict[str, tuple[str, ...]] = {
     "ident_control_node": ("identification", "controller"),
     "ident_record_node": ("identification", "controller", "recorder"),
@@ -66,7 +66,7 @@ def node_names(package: str, executable: str, name: str | None = None) -> tuple[
     """The ROS node names a launch file's ``<node pkg exec name>`` process runs: a group's nodes (their own names),
     else ``name``, else the executable. Used where a process list from a launch file is compared with the nodes
     in the graph (``hindrax health``, the pool-day test)."""
-    groups = {"hindrax_drivers": GROUPS, "hindrax_ident": IDENT_GROUPS}.get(package, {})
+    groups = {"hindrax_drivers": GROUPS, "hindrax_onboard": IDENT_GROUPS}.get(package, {})
     if executable in groups:
         return groups[executable]
     return (name or executable,)

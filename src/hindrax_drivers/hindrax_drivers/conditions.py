@@ -1,5 +1,5 @@
 """Waiting on a condition with a wall-clock deadline, and an isolated rclpy context: for production code that
-drives a graph step by step (``hindrax run``'s campaign, :meth:`hindrax_ident.bringup.Graph.start_and_arm`) as well
+drives a graph step by step (``hindrax run``'s campaign, :meth:`hindrax_sim.graph.bringup.Graph.start_and_arm`) as well
 as for the tests and benchmarks (:mod:`hindrax_drivers.testing` re-exports these).
 
 A wait polls a condition (e.g. one executor spin per check), never sleeps a fixed time the caller relies on.

@@ -54,7 +54,7 @@ class DriverEndpoints(abc.ABC):
     """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch
     node name -> serial port path) and :attr:`socket_path` (the emulated I2C bus's socket). A
     context manager that calls :meth:`close`. Shared by :class:`EmulatedDevices` and the live
-    pool's client (:class:`hindrax_ident.sim.live_pool.LivePool`)."""
+    pool's client (:class:`hindrax_sim.live_pool.LivePool`)."""
 
     ports: dict[str, str]
     socket_path: str

@@ -124,7 +124,7 @@ def test_no_configuration_lookup_by_string_outside_config():
     """Modules read the typed sections (cfg.esc.output_latency_s), never cfg.flat["esc.output_latency_s"],
     cfg.get("esc.output_latency_s") or cfg.section("esc")[...]: a misspelt key must fail at import/type check."""
     offenders = []
-    for pkg in ("hindrax_drivers", "hindrax_ident"):
+    for pkg in ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools"):
         root = ROOT / "src" / pkg
         for path in sorted((root / pkg).rglob("*.py")):
             rel = f"{pkg}/{path.relative_to(root / pkg).as_posix()}"

@@ -125,7 +125,7 @@ def test_the_profile_is_udpv4_on_loopback_only_without_builtin_transports():
     assert [t.text for t in participant.iter(f"{NS}transport_id")] == [descriptors[0].findtext(f"{NS}transport_id")]
 
 
-@pytest.mark.parametrize("launch", ["hindrax_drivers/vehicle.launch.xml", "hindrax_ident/pool_test.launch.xml"])
+@pytest.mark.parametrize("launch", ["hindrax_drivers/vehicle.launch.xml", "hindrax_onboard/pool_test.launch.xml"])
 def test_every_launched_process_gets_the_profile(launch):
     package, name = launch.split("/")
     procs = read_launch(share(package) / "launch" / name, {}, find_share=share)

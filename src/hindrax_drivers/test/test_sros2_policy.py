@@ -19,7 +19,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.gateway.interface import INTERFACE
 from hindrax_drivers.sros2_policy import INTERNAL_ACTIONS, INTERNAL_SERVICES, INTERNAL_TOPICS, NODE_SERVICES, \
     NODE_TOPICS, TOOLS_ENCLAVE, gateway_internal_enclave, launch_enclaves, topside_enclaves
-from hindrax_ident.tools.commands.sros2 import write_policies
+from hindrax_tools.commands.sros2 import write_policies
 
 SCHEMAS = Path(__file__).resolve().parents[3] / "third_party" / "sros2"
 XML_XSD_URL = "http://www.w3.org/2001/03/xml.xsd"
@@ -103,7 +103,7 @@ def test_every_vehicle_process_has_an_enclave_with_the_internal_graph(policies):
 
     processes = read_launch(ament_share("hindrax_drivers") / "launch" / "vehicle.launch.xml",
                             {"record": "true", "controller": "true"})
-    processes += read_launch(ament_share("hindrax_ident") / "launch" / "pool_test.launch.xml", {})
+    processes += read_launch(ament_share("hindrax_onboard") / "launch" / "pool_test.launch.xml", {})
     hindrax = [p for p in processes if p.package.startswith("hindrax")]
     enclaves = launch_enclaves(hindrax)  # raises for a process without --enclave
     tree = policies["internal"]
@@ -121,7 +121,7 @@ def test_the_internal_lists_cover_every_name_the_vehicle_nodes_use(tmp_path):
     """The nodes of the stack (the in-process graph, recorder and controller included) use no topic or service the
     internal policy does not grant, and the gateway relays only internal names it grants."""
     from hindrax_drivers.testing import ros_context
-    from hindrax_ident.bringup import build_graph
+    from hindrax_sim.graph.bringup import build_graph
 
     with ros_context() as ctx:
         graph = build_graph(default_config_path(), sim=True, context=ctx, record=True, record_dir=str(tmp_path / "b"),
@@ -146,7 +146,7 @@ def test_the_internal_lists_cover_every_name_the_vehicle_nodes_use(tmp_path):
 
 
 def test_keystore_without_sros2_says_where_it_comes_from(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "hindrax_ident.tools.cli", "sros2", "keystore",
+    r = subprocess.run([sys.executable, "-m", "hindrax_tools.cli", "sros2", "keystore",
                         str(tmp_path / "ks")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 1

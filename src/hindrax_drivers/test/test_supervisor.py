@@ -234,7 +234,7 @@ def graph():
                  state=dict(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set()))
 
         def spin_idle():
-            """Run callbacks until none is ready (as hindrax_ident.bringup.Graph.spin_until_idle)."""
+            """Run callbacks until none is ready (as hindrax_sim.graph.bringup.Graph.spin_until_idle)."""
             from rclpy.executors import ShutdownException, TimeoutException
 
             for _ in range(10_000):

@@ -2,7 +2,7 @@
 
 Shared by the driver node (:class:`~hindrax_drivers.icm20948.node.Icm20948Node` rotates every sample into
 base_link FLU) and by the identification code, which takes the driver's FLU vectors back to sensor axes
-(:func:`hindrax_ident.vehicle.signals.samples_from_imu`).
+(:func:`hindrax_onboard.vehicle.signals.samples_from_imu`).
 """
 from __future__ import annotations
 

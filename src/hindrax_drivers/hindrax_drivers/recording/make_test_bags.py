@@ -6,8 +6,8 @@ Usage: ``python -m hindrax_drivers.recording.make_test_bags [--out DIR]`` (defau
 The synthetic streams (:data:`STREAMS`, :func:`synthetic_messages`, :func:`write_bag`: a vehicle at 1 m depth
 surging sinusoidally at the stack's nominal rates) give the recorder benchmark and the writer tests a known,
 fixed load. The bag recorded from the virtual pool through the real drivers (``sim_drivers_3s``) needs the
-simulator, which lives in hindrax_ident (dependencies flow hindrax_msgs <- hindrax_drivers <- hindrax_ident):
-it is written by :mod:`hindrax_ident.record_bag`.
+simulator, which lives in hindrax_sim (dependencies flow hindrax_msgs <- hindrax_drivers <- ... <- hindrax_sim):
+it is written by :mod:`hindrax_sim.graph.record_bag`.
 """
 from __future__ import annotations
 

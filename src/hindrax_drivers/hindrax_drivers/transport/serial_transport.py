@@ -10,7 +10,7 @@ pyserial URL), 8N1 (both devices use 115200 8N1, docs/devices.md §1.1 and §2.1
 exponential backoff; ``on_connect()`` after every open lets the driver resend its start-up commands.
 Callback exceptions are caught and counted: they never kill the reader thread. The raw tap lets a
 node record the traffic (docs/architecture.md §7); :meth:`SerialTransport.pump` reads in the
-caller's thread instead (a simulator's lock-step: :mod:`hindrax_ident.sim.hardware`).
+caller's thread instead (a simulator's lock-step: :mod:`hindrax_sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
 error and has no reconnect, state, or tap.

@@ -1,4 +1,4 @@
-"""``control.*``: the depth/altitude, heading and velocity holds (hindrax_ident control, docs/control.md §2-§3;
+"""``control.*``: the depth/altitude, heading and velocity holds (hindrax_onboard control, docs/control.md §2-§3;
 all optional).
 """
 from __future__ import annotations

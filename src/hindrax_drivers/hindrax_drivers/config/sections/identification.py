@@ -37,7 +37,7 @@ SCHEMA, OPTIONAL = section("identification", {
                               "fraction of the prior value (0 = diffuse start at zero), default 1",
                               0.0, 100.0),
     "excitation": text("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
-                       "stay in the pool box (hindrax_ident identification/online/excitation.py)",
+                       "stay in the pool box (hindrax_onboard identification/online/excitation.py)",
                        ("ladder", "multisine", "prbs", "chirp")),
     "excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s",
                                   5.0, 1800.0),

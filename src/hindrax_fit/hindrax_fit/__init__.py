@@ -1,0 +1,1 @@
+"""Topside identification from bags (docs/architecture.md §2): :mod:`.fit` < :mod:`.bag_input` < :mod:`.assessment`."""

@@ -1,1 +1,0 @@
-"""Hindrax identification, simulation, control and the ``hindrax`` command line (docs/architecture.md §2)."""
