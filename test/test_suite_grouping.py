@@ -8,6 +8,7 @@ side by side starved each other's real-time processes (a fresh clone of 5d4005e:
 """
 from __future__ import annotations
 
+import configparser
 import re
 import subprocess
 import sys
@@ -22,8 +23,9 @@ NOT_THE_VEHICLE = {"test_process_runner.py", "test_gateway.py", "test_launch_fil
 
 
 def _test_modules() -> list[Path]:
-    ini = (ROOT / "pytest.ini").read_text()
-    paths = re.search(r"^testpaths = (.*)$", ini, re.M).group(1).split()
+    ini = configparser.ConfigParser()
+    ini.read(ROOT / "pytest.ini")
+    paths = ini["pytest"]["testpaths"].split()
     return sorted(p for d in paths for p in (ROOT / d).rglob("test_*.py"))
 
 
