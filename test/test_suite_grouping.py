@@ -18,8 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 #: what in a test module's source starts real-time vehicle processes or the live pool
 STARTS_REAL_TIME = re.compile(r"running_layout\(|LivePool\(|ProcessRunner\(|\"rehearse\"")
 #: modules whose process runner starts no real-time process: its own unit tests (plain Python children), the
-#: gateway's tests (the gateway alone, no priority) and the launch-file checks (command lines only, nothing started)
-NOT_THE_VEHICLE = {"test_process_runner.py", "test_gateway.py", "test_launch_files.py"}
+#: gateway's tests (the gateway alone, no priority), the launch-file checks (command lines only, nothing started)
+#: and the rehearsal's refusals (a bad argument or a busy domain: refused before it starts anything)
+NOT_THE_VEHICLE = {"test_process_runner.py", "test_gateway.py", "test_launch_files.py", "test_cli_input_errors.py",
+                   "test_second_graph.py"}
 
 
 def _test_modules() -> list[Path]:
