@@ -4,7 +4,7 @@ Each test reads the figure from the text and from its source of truth (package m
 a default argument), so a doc that drifts from the code fails here (issue 28 item 7):
 
 * the rclpy, Fast DDS and Python versions of docs/architecture.md §11 and of every docstring;
-* frames: ``hindrax_drivers/frames.py`` is the only module that spells the FLU/FRD and ENU/NED matrices out
+* frames: ``hindrax_drivers/base/frames.py`` is the only module that spells the FLU/FRD and ENU/NED matrices out
   (docs/architecture.md §2);
 * the blocking I2C waits that docs/architecture.md §10 lists: which drivers sleep, for how long;
 * the number of repeats of the failure table (docs/architecture.md §8.1) and of the safety benchmark.
@@ -69,13 +69,13 @@ _FRAME_MATRICES = (
 
 
 def test_frames_py_is_the_only_module_that_spells_the_frame_matrices_out():
-    assert "the only place | `hindrax_drivers/frames.py`" in ARCH
+    assert "the only place | `hindrax_drivers/base/frames.py`" in ARCH
     frames = DRIVERS / "frames.py"
     assert all(p.search(re.sub(r"\s", "", frames.read_text())) for p in _FRAME_MATRICES)  # the check can see them
     code = [p for p in (ROOT / "src").rglob("*.py") if "test" not in p.relative_to(ROOT).parts and p != frames]
     offenders = [p.relative_to(ROOT).as_posix() for p in code
                  if any(pat.search(re.sub(r"\s", "", p.read_text())) for pat in _FRAME_MATRICES)]
-    assert not offenders, f"convert frames through hindrax_drivers/frames.py: {offenders}"
+    assert not offenders, f"convert frames through hindrax_drivers/base/frames.py: {offenders}"
 
 
 def test_the_blocking_i2c_waits_are_those_section_10_lists():

@@ -15,7 +15,7 @@ Rules checked:
   modules and by the entry points that start nodes (:data:`ENTRY_POINTS`); pure functions that offline tools
   need live in pure modules that the nodes import too.
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
-  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``;
+  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.process.conditions``;
 - the packages in one order, msgs <- drivers <- onboard <- fit <- sim <- tools (:data:`PACKAGE_ORDER`): no module
   imports a higher package, each package.xml's ``exec_depend`` names exactly the project packages its modules
   import, and the vehicle's build (msgs, drivers, onboard: :data:`VEHICLE_PACKAGES`) runs no topside code;
@@ -222,7 +222,7 @@ def production_imports_of_testing(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_production_code_does_not_import_the_test_helpers(graph):
-    assert TESTING in graph and "hindrax_drivers.conditions" in graph[TESTING]  # the rule is not vacuous
+    assert TESTING in graph and "hindrax_drivers.process.conditions" in graph[TESTING]  # the rule is not vacuous
     assert production_imports_of_testing(graph) == []
 
 
@@ -263,7 +263,7 @@ def upward_package_imports(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_the_package_checker_sees_an_upward_import():
-    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_drivers.frames"},
+    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_drivers.base.frames"},
              "hindrax_fit.fit.fit_core": {"hindrax_onboard.vehicle.state"}}
     assert upward_package_imports(graph) == ["hindrax_onboard.control.law -> hindrax_fit.fit.fit_core"]
 
@@ -352,11 +352,11 @@ def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
 
 def test_the_layer_checker_sees_an_upward_import():
     graph = {"hindrax_onboard.vehicle.x": {"hindrax_sim", "hindrax_sim.model"},
-             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.frames"},
-             "hindrax_drivers.frames": set()}
+             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.base.frames"},
+             "hindrax_drivers.base.frames": set()}
     assert upward_imports(graph) == {("hindrax_onboard.vehicle.x", "hindrax_sim.model")}
     assert [layer_of(m) for m in (
-        "hindrax_drivers.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
+        "hindrax_drivers.base.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
         "hindrax_onboard.identification.model.dof_model", "hindrax_onboard.identification.online.node",
         "hindrax_onboard.composition", "hindrax_fit.fit.fit_core", "hindrax_fit.bag_input.reader",
         "hindrax_fit.assessment.report", "hindrax_sim.campaign", "hindrax_sim.graph.bringup",
@@ -467,7 +467,7 @@ PACKAGE_CEILINGS = {"hindrax_drivers": 26_400}
 
 def class_path_edges(modules: dict[str, Path]) -> dict[str, set[str]]:
     """{module: modules it names as ``"package.module:Class"`` strings} (the composed processes import their nodes'
-    classes by name at run time, :mod:`hindrax_drivers.composition`)."""
+    classes by name at run time, :mod:`hindrax_drivers.layout.composition`)."""
     import re
 
     out: dict[str, set[str]] = {}
@@ -553,9 +553,9 @@ def test_no_package_is_over_its_size():
 # ------------------------------------------------------------------------------------------------ defined once
 #: name -> the one module (path under src/) that defines it.
 DEFINED_ONCE = {
-    "wrap_angle": "hindrax_drivers/hindrax_drivers/frames.py",
+    "wrap_angle": "hindrax_drivers/hindrax_drivers/base/frames.py",
     "ThrustLag": "hindrax_onboard/hindrax_onboard/vehicle/thrust_lag.py",
-    "ThrustCurve": "hindrax_drivers/hindrax_drivers/allocation/thrust_curve.py",
+    "ThrustCurve": "hindrax_drivers/hindrax_drivers/base/thrust_curve.py",
     "rigid_body_mass_matrix": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
     "skew": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
 }
@@ -620,7 +620,7 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
 CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config.sections", "hindrax_drivers.config.loader",
                   "hindrax_drivers.config.typed_sections", "hindrax_drivers.config.node_parameters")
 #: Device drivers and safety nodes' packages: the configuration imports none of them, not even through another
-#: module; the hardware limits it checks live in ``hindrax_drivers.hardware_limits``, below the driver too.
+#: module; the hardware limits it checks live in ``hindrax_drivers.base.hardware_limits``, below the driver too.
 DRIVER_PACKAGES = tuple(f"hindrax_drivers.{p}" for p in (
     "pca9685", "dvl75", "icm20948", "ms5837", "ping1d", "transport", "guard", "supervisor", "gateway"))
 
@@ -641,13 +641,13 @@ def driver_imports_of_config(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_the_config_rule_sees_a_driver_import():
-    graph = {"hindrax_drivers.config": {"hindrax_drivers.hardware_limits", "hindrax_drivers.frames"},
-             "hindrax_drivers.frames": {"hindrax_drivers.pca9685.protocol"}}
+    graph = {"hindrax_drivers.config": {"hindrax_drivers.base.hardware_limits", "hindrax_drivers.base.frames"},
+             "hindrax_drivers.base.frames": {"hindrax_drivers.pca9685.protocol"}}
     assert driver_imports_of_config(graph) == ["hindrax_drivers.config -> hindrax_drivers.pca9685.protocol"]
 
 
 def test_the_configuration_imports_no_driver(graph):
     assert all(m in graph for m in CONFIG_MODULES)
-    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.config.sections.esc"]
-    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
+    assert "hindrax_drivers.base.hardware_limits" in graph["hindrax_drivers.config.sections.esc"]
+    assert "hindrax_drivers.base.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
     assert driver_imports_of_config(graph) == []

@@ -1,5 +1,5 @@
-"""Signed operator commands (hindrax_drivers.operator_signing): MAVLink-2-style HMAC-SHA256 with a 32-byte key, a
-48-bit timestamp rising per link, a link id. Unsigned, wrong-key, replayed and re-targeted requests are refused with
+"""Signed operator commands (hindrax_drivers.gateway.operator_signing): MAVLink-2-style HMAC-SHA256 with a 32-byte key,
+a 48-bit timestamp rising per link, a link id. Unsigned, wrong-key, replayed and re-targeted requests are refused with
 one line and counted; the key file is created with mode 0600 and refused when others can read it."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from hashlib import sha256
 
 import pytest
 
-from hindrax_drivers.operator_signing import (KEY_BYTES, NEW_LINK_WINDOW, OperatorKeyError, Signature, Signer,
-                                              Verifier, create_key, key_path, load_key, mac, signed_payload)
+from hindrax_drivers.gateway.operator_signing import (KEY_BYTES, NEW_LINK_WINDOW, OperatorKeyError, Signature, Signer,
+                                                      Verifier, create_key, key_path, load_key, mac, signed_payload)
 
 KEY = bytes(range(32))
 OTHER = bytes(range(1, 33))

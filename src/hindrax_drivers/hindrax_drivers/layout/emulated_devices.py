@@ -26,17 +26,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .config import VehicleConfig
-from .devices import DEVICES, I2C, SERIAL
-from .dvl75.emulator import Dvl75Emulator, DvlTruth
-from .icm20948.emulator import Icm20948Emulator
-from .ms5837.emulator import Ms5837Emulator
-from .pca9685.emulator import Pca9685Emulator
-from .ping1d.emulator import Ping1dEmulator, Ping1dTruth
-from .scheduling import HARDWARE_STAND_IN_PRIORITY
-from .transport.emulated_i2c import EmulatedI2CBus
-from .transport.pty_device import PtyDevice
-from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer
+from ..config import VehicleConfig
+from ..base.devices import DEVICES, I2C, SERIAL
+from ..dvl75.emulator import Dvl75Emulator, DvlTruth
+from ..icm20948.emulator import Icm20948Emulator
+from ..ms5837.emulator import Ms5837Emulator
+from ..pca9685.emulator import Pca9685Emulator
+from ..ping1d.emulator import Ping1dEmulator, Ping1dTruth
+from ..process.scheduling import HARDWARE_STAND_IN_PRIORITY
+from ..transport.emulated_i2c import EmulatedI2CBus
+from ..transport.pty_device import PtyDevice
+from ..transport.socket_i2c import SOCKET_ENV, I2CSocketServer
 
 __all__ = ["EmulatedDevices", "DriverEndpoints", "SERIAL_DEVICES", "I2C_DEVICES"]
 
@@ -92,9 +92,9 @@ class EmulatedDevices(DriverEndpoints):
 
     config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
     (default: a new temporary directory). Use as a context manager or call :meth:`close`. The threads that serve the
-    devices run ``SCHED_FIFO`` :data:`~hindrax_drivers.scheduling.HARDWARE_STAND_IN_PRIORITY`, above the vehicle's
-    processes, and the rest of the process keeps its scheduling (refused without ``CAP_SYS_NICE``: they keep it too).
-    """
+    devices run ``SCHED_FIFO`` :data:`~hindrax_drivers.process.scheduling.HARDWARE_STAND_IN_PRIORITY`, above the
+    vehicle's processes, and the rest of the process keeps its scheduling (refused without ``CAP_SYS_NICE``: they keep
+    it too)."""
 
     def __init__(self, config: VehicleConfig, directory: str | os.PathLike | None = None,
                  serve_i2c: bool = True, poll_period_s: float = 0.01) -> None:

@@ -124,7 +124,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
     from rclpy.action import ActionClient
 
-    from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
+    from hindrax_drivers.node_support.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
     from ..progress_line import ProgressLine

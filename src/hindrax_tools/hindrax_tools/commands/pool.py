@@ -3,9 +3,9 @@
 One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_sim.live_pool`: the simulator
 behind the five emulated devices, in a process of its own, on the wall clock) and the *installed*
 ``hindrax_onboard/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
-process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.process_runner.ProcessRunner`), the drivers pointed at
-the pool's serial ports and I2C socket. The vehicle file is the installed one with its oscillator marked measured
-(``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
+process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.layout.process_runner.ProcessRunner`), the drivers
+pointed at the pool's serial ports and I2C socket. The vehicle file is the installed one with its oscillator marked
+measured (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
 
 Domains, as the README names them: the **internal domain** is this shell's ``ROS_DOMAIN_ID`` (the vehicle's
 processes; default 0), the **topside domain** is ``--topside-domain`` (default: the internal one + 1), where the
@@ -69,9 +69,9 @@ def run(args: argparse.Namespace) -> int:
     import yaml
 
     from hindrax_drivers.config import ConfigError, load_config
-    from hindrax_drivers.launch_xml import LaunchFileError, ament_share, read_launch
-    from hindrax_drivers.operator_signing import KEYS_DIR_ENV, create_key
-    from hindrax_drivers.process_runner import ProcessRunner
+    from hindrax_drivers.layout.launch_xml import LaunchFileError, ament_share, read_launch
+    from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, create_key
+    from hindrax_drivers.layout.process_runner import ProcessRunner
 
     from hindrax_sim.live_pool import LivePool
 
