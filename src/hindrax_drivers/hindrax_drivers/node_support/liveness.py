@@ -51,7 +51,7 @@ from rclpy.validate_full_topic_name import validate_full_topic_name
 from hindrax_msgs.msg import Heartbeat
 
 from ..cdr.lean_cdr import heartbeat_cdr, read_heartbeat
-from ..pca9685.core import UNNAMED_NODE
+from ..process.dds_transport import UNNAMED_NODE
 
 __all__ = ["AliveAge", "BACKSTOP_S", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
            "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "PublisherNames", "SETTLE_S", "TickGaps",
