@@ -70,7 +70,7 @@ _FRAME_MATRICES = (
 
 def test_frames_py_is_the_only_module_that_spells_the_frame_matrices_out():
     assert "the only place | `hindrax_drivers/base/frames.py`" in ARCH
-    frames = DRIVERS / "frames.py"
+    frames = DRIVERS / "base" / "frames.py"
     assert all(p.search(re.sub(r"\s", "", frames.read_text())) for p in _FRAME_MATRICES)  # the check can see them
     code = [p for p in (ROOT / "src").rglob("*.py") if "test" not in p.relative_to(ROOT).parts and p != frames]
     offenders = [p.relative_to(ROOT).as_posix() for p in code
@@ -89,7 +89,7 @@ def test_the_blocking_i2c_waits_are_those_section_10_lists():
     assert f"{worst} ms over {retries} retries" in section
     # the drivers said never to block build their transports without backoff and sleep nowhere (with their base)
     for device in ("icm20948", "ms5837"):
-        text = (DRIVERS / device / "node.py").read_text() + (DRIVERS / "i2c_node.py").read_text()
+        text = (DRIVERS / device / "node.py").read_text() + (DRIVERS / "node_support" / "i2c_node.py").read_text()
         calls = re.findall(r"I2CDevice\([^)]*\)", text)
         assert calls and all("backoff_s=0.0" in c for c in calls), (device, calls)
         assert not re.search(r"\.sleep\(|write_sequence\(", text), device
