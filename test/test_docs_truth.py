@@ -103,3 +103,45 @@ def test_failure_table_quotes_the_repeats_of_the_safety_benchmark():
     assert f"median / max of {safety.PROCESS_REPEATS} repeats for the" in section
     assert f"of {safety.REPEATS} repeats for\nthe rows measured in one process" in section
     assert safety.QUICK_REPEATS < min(safety.REPEATS, safety.PROCESS_REPEATS)
+
+
+def _import_structure():
+    """test/test_import_structure.py as a module (its LAYERS and PACKAGE_ORDER are the code's truth)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("import_structure", ROOT / "test" / "test_import_structure.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _doc_layers(section: str) -> list[tuple[str, int]]:
+    """(module prefix, layer) of each row of §2's "layer  room" block, in its order."""
+    block = section[section.index("layer  room"):]
+    block = block[:block.index("```")]
+    rows = re.findall(r"^\s*(\d+)\s+(hindrax_[\w/.]+)", block, re.M)
+    return [(path.removesuffix("/").removesuffix(".py").replace("/", "."), int(n)) for n, path in rows]
+
+
+def test_section_2_lists_the_rooms_in_the_layer_order_the_code_keeps():
+    """docs/architecture.md §2's rooms in layers are test_import_structure.LAYERS (a package root that only holds its
+    public surface shares its lowest room's layer and is not a row), and every room of the packages above the drivers
+    (each subpackage) is named in §2, and every ``hindrax_<package>/...`` path §2 names exists."""
+    structure = _import_structure()
+    section = _section(ARCH, "## 2. Packages and layers")
+    surfaces = {p for p, lay in structure.LAYERS if any(q.startswith(p + ".") and m == lay
+                                                        for q, m in structure.LAYERS)}
+    assert _doc_layers(section) == [(p, lay) for p, lay in structure.LAYERS if p not in surfaces]
+    assert len(_doc_layers(section)) >= 12  # the parse is not vacuous
+    for pkg in structure.PACKAGE_ORDER[1:]:
+        assert f"src/{pkg}/" in section, f"§2 does not list the package {pkg}"
+        top = ROOT / "src" / pkg / pkg
+        rooms = [p.parent for p in top.glob("*/__init__.py")] + [p.parent for p in top.glob("*/*/__init__.py")
+                                                                   if p.parent.parent.name == "identification"]
+        for room in rooms:
+            name = room.relative_to(top.parent).as_posix() + "/"
+            assert name in section, f"§2 does not name the room {name}"
+    named = set(re.findall(r"`(hindrax_\w+/[\w/.]+?)[`.]?(?:`|\s|\))", section))
+    missing = sorted(n for n in named if not (ROOT / "src" / n.split("/")[0] / n).exists()
+                     and not (ROOT / "src" / n).exists())
+    assert named and not missing, f"§2 names paths that do not exist: {missing}"

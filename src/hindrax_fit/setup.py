@@ -1,4 +1,4 @@
-"""ament_python package hindrax_fit (topside; editable pip install in the dev venv). Dependencies: package.xml."""
+"""ament_python package hindrax_fit (topside; editable pip install in the dev venv). Metadata: package.xml."""
 from setuptools import find_packages, setup
 
 PACKAGE = "hindrax_fit"
@@ -11,9 +11,4 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
     ],
-    zip_safe=True,
-    maintainer="Hindrax onboard team",
-    maintainer_email="dev@hindrax.invalid",
-    description="Hindrax ROV topside identification: bag input, offline fit, verdicts, identification.yaml, reports",
-    license="Apache-2.0",
 )

@@ -1,4 +1,4 @@
-"""ament_python package hindrax_sim (topside; editable pip install in the dev venv). Dependencies: package.xml."""
+"""ament_python package hindrax_sim (topside; editable pip install in the dev venv). Metadata: package.xml."""
 from setuptools import find_packages, setup
 
 PACKAGE = "hindrax_sim"
@@ -11,10 +11,5 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
     ],
-    zip_safe=True,
-    maintainer="Hindrax onboard team",
-    maintainer_email="dev@hindrax.invalid",
-    description="Hindrax ROV virtual pool: 6-DOF simulator, emulated hardware, the graph in one process, campaign runs",
-    license="Apache-2.0",
     entry_points={"console_scripts": ["simulator_node = hindrax_sim.node:main"]},
 )

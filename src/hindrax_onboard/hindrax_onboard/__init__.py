@@ -1,1 +1,1 @@
-"""Hindrax identification, simulation, control and the ``hindrax`` command line (docs/architecture.md §2)."""
+"""What runs on the vehicle above the drivers: estimation, vehicle, control, identification (docs/architecture.md)."""

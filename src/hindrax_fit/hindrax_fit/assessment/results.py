@@ -54,14 +54,14 @@ from hindrax_onboard.estimation.drag_coefficient import (characteristic_length_f
                                             reynolds_range)
 from hindrax_onboard.estimation.least_squares import EstimationError
 from ..fit.calibration import calibration_section, decay_inertia, joint_estimate
-from hindrax_onboard.identification.model.dof_model import parameter_units, rigid_inertia
+from hindrax_onboard.identification.model.dof_model import parameter_units, rigid_inertia, rls_published_std
 from ..fit.fit_core import NO_MODEL_VERDICT
 from hindrax_onboard.identification.model.posterior import (finite_or_none as _f, prior_entries, prior_posterior,
                              prior_std_rel_of, theta_priors)
 from hindrax_onboard.vehicle.uncertainty import declared_rel
 from hindrax_onboard.vehicle.vehicle_match import vehicle_parameters
 from .verdicts import (FitEvidence, apply_reference_verdicts, apply_verdicts, assess, core_evidence, model_selection,
-                       rls_published_std, thrust_curve_check, with_added_mass)
+                       thrust_curve_check, with_added_mass)
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "build_document", "assessment",
            "reference_sections", "training_lines", "drag_coefficient_entry", "write_identification",
@@ -122,7 +122,7 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
 
 
 def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
-    """{name: [value, std or None]} of the online RLS, the std as published (:func:`~.verdicts.rls_published_std`:
+    """{name: [value, std or None]} of the online RLS, the std as published (:func:`rls_published_std`:
     None = not converged / not trusted)."""
     names = [n for n in r.names if n in r.online]
     vals = [float(r.online[n][0]) for n in names]

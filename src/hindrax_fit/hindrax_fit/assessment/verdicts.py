@@ -70,11 +70,10 @@ import numpy as np
 from hindrax_drivers.config import ROTATIONAL_DOFS, VehicleConfig
 
 from hindrax_onboard.vehicle.uncertainty import declared_rel
-from hindrax_onboard.identification.model.dof_model import (RLS_STD_DOFS, core_index, rls_published_std,
-                                                            thrust_covariance, thrust_weights)
+from hindrax_onboard.identification.model.dof_model import core_index, thrust_covariance, thrust_weights
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
-__all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
+__all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts",
            "WHITENESS_MAX", "INDEPENDENCE_Z", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "FitEvidence", "core_signals", "core_evidence", "model_selection",
            "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess",

@@ -121,7 +121,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     from hindrax_sim.campaign import Campaign
     from hindrax_fit.fit.campaign_fit import identify_all_with_errors
     from hindrax_onboard.identification.model.dof_model import truth_parameters
-    from hindrax_fit.assessment.verdicts import apply_verdicts, rls_published_std
+    from hindrax_fit.assessment.verdicts import apply_verdicts
+    from hindrax_onboard.identification.model.dof_model import rls_published_std
     from hindrax_sim.simulator import Simulator
     from hindrax_sim.truth import load_truth
 

@@ -194,7 +194,7 @@ class OnlineDofEstimator:
         return True
 
     def published_std(self) -> np.ndarray:
-        """The std to publish: :func:`~.verdicts.rls_published_std` of :meth:`converged_std`
+        """The std to publish: :func:`~..model.dof_model.rls_published_std` of :meth:`converged_std`
         (NaN: not published)."""
         return rls_published_std(self.dof, self.names, self.rls.theta, self.converged_std(), self.cfg)
 

@@ -58,7 +58,7 @@ Publishes
     ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local,
     depth 1) when a calibration step ends (ballast, line pull surge / sway, inclining roll / pitch,
     tilt_decay roll / pitch): every step result since the node started, one DiagnosticStatus each,
-    KeyValue pairs named with their units (:mod:`..bag_input.calibration_topic`); the recorder
+    KeyValue pairs named with their units (:mod:`..model.calibration_topic`); the recorder
     stores it with the campaign and ``hindrax ident bag`` applies it.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
@@ -125,7 +125,7 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
 
     ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`
-    (:func:`~..assessment.verdicts.rls_published_std`), -1 where that is NaN ("not converged or
+    (:func:`~..model.dof_model.rls_published_std`), -1 where that is NaN ("not converged or
     not trusted": the message's float64 std has no NaN convention). ``covariance`` stays the raw
     RLS one.
     """
