@@ -231,11 +231,11 @@ def test_esc_starts_without_its_bus(colcon_install, tmp_path):
             dev.start_i2c()
             day.wait(lambda: day.seen("hindrax/esc_pca9685", t_bus, level=0), "ESC OK once the bus is there")
             assert day.state("esc").starts == 1
-            widths = [dev.pca9685.pulse_width_us(ch) for ch in channels]
+            widths = [dev.emulators["pca9685"].pulse_width_us(ch) for ch in channels]
             # the installed file's oscillator is not measured: no pulse on any thruster, and the reference pulse
             # (the configured neutral, to one PCA9685 count: 1.24 us at 200 Hz, docs/devices.md §5.1) on channel 15
             assert len(widths) == 8 and widths == [0.0] * 8, widths
-            assert abs(dev.pca9685.pulse_width_us(15) - neutral_us) < 1.3
+            assert abs(dev.emulators["pca9685"].pulse_width_us(15) - neutral_us) < 1.3
 
 
 # ------------------------------------------------------------------------------------- the README's pool day

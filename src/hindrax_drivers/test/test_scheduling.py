@@ -158,8 +158,8 @@ def test_emulated_devices_serve_from_real_time_threads_only(tmp_path):
                 except ConditionTimeout:
                     raise AssertionError(f"(policy, priority) by thread: {policies()}") from None
             else:
-                wait_until(lambda: dev.dvl.scheduling_refused and dev.ping.scheduling_refused, 5, None, "refusals")
-                assert "refused" in dev.dvl.scheduling_refused
+                wait_until(lambda: all(pty.scheduling_refused for pty in dev.serial.values()), 5, None, "refusals")
+                assert all("refused" in pty.scheduling_refused for pty in dev.serial.values())
             assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the test's own thread: untouched
         finally:
             client.close()

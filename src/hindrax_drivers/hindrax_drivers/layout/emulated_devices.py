@@ -26,13 +26,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..base.devices import DEVICES, I2C, SERIAL, load, settings
 from ..config import VehicleConfig
-from ..base.devices import DEVICES, I2C, SERIAL
-from ..dvl75.emulator import Dvl75Emulator, DvlTruth
-from ..icm20948.emulator import Icm20948Emulator
-from ..ms5837.emulator import Ms5837Emulator
-from ..pca9685.emulator import Pca9685Emulator
-from ..ping1d.emulator import Ping1dEmulator, Ping1dTruth
+from ..dvl75.emulator import DvlTruth
+from ..ping1d.emulator import Ping1dTruth
 from ..process.scheduling import HARDWARE_STAND_IN_PRIORITY
 from ..transport.emulated_i2c import EmulatedI2CBus
 from ..transport.pty_device import PtyDevice
@@ -90,6 +87,10 @@ def _wobble(t_s: float, period_s: float, amplitude: float) -> float:
 class EmulatedDevices(DriverEndpoints):
     """The five emulated devices (module docstring), serving as soon as constructed unless ``serve_i2c`` is False.
 
+    Each device of :data:`~hindrax_drivers.base.devices.DEVICES` is built by its table factory on the truth method
+    ``_<name>_truth`` (an output has none): :attr:`emulators` by device name, the serial ones behind the
+    pseudo-terminals of :attr:`serial` (by launch node name), the I2C ones on :attr:`bus` at their configured addresses.
+
     config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
     (default: a new temporary directory). Use as a context manager or call :meth:`close`. The threads that serve the
     devices run ``SCHED_FIFO`` :data:`~hindrax_drivers.process.scheduling.HARDWARE_STAND_IN_PRIORITY`, above the
@@ -102,18 +103,13 @@ class EmulatedDevices(DriverEndpoints):
         self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-devices-"))
         self.directory.mkdir(parents=True, exist_ok=True)
         self.socket_path = str(self.directory / "i2c.sock")
-        self.dvl = PtyDevice(Dvl75Emulator(self._dvl_truth, rate_hz=10.0), poll_period_s=poll_period_s,
-                             link_name="hindrax-dvl", realtime_priority=HARDWARE_STAND_IN_PRIORITY)
-        self.ping = PtyDevice(Ping1dEmulator(self._ping_truth), poll_period_s=poll_period_s,
-                              link_name="hindrax-ping", realtime_priority=HARDWARE_STAND_IN_PRIORITY)
-        self._serial = {"dvl75": self.dvl, "ping1d": self.ping}
-        esc = config.esc
-        self.pca9685 = Pca9685Emulator(oscillator_hz=float(esc.oscillator_hz))
-        self.bus = EmulatedI2CBus({
-            int(config.sensors.ms5837.i2c_address): Ms5837Emulator(self._pressure_truth),
-            int(config.sensors.icm20948.i2c_address): Icm20948Emulator(self._imu_truth),
-            int(esc.i2c_address): self.pca9685,
-        })
+        self.emulators = {d.name: load(d.emulator)(config, getattr(self, f"_{d.name}_truth", None), time.monotonic)
+                          for d in DEVICES}
+        self.serial = {d.node: PtyDevice(self.emulators[d.name], poll_period_s=poll_period_s, link_name=d.name,
+                                         realtime_priority=HARDWARE_STAND_IN_PRIORITY)
+                       for d in DEVICES if d.transport == SERIAL}
+        self.bus = EmulatedI2CBus({int(settings(config, d).i2c_address): self.emulators[d.name]
+                                   for d in DEVICES if d.transport == I2C})
         self._server: I2CSocketServer | None = None
         self._lock = threading.Lock()
         if serve_i2c:
@@ -123,16 +119,16 @@ class EmulatedDevices(DriverEndpoints):
     @property
     def ports(self) -> dict[str, str]:
         """Node name -> serial port path (stable across :meth:`unplug` / :meth:`replug`)."""
-        return {name: dev.path for name, dev in self._serial.items()}
+        return {name: dev.path for name, dev in self.serial.items()}
 
     # -- a pool day ---------------------------------------------------------------------------------
     def unplug(self, name: str) -> None:
         """The USB-serial adapter of ``name`` (``dvl75`` or ``ping1d``) is pulled out."""
-        self._serial[name].disconnect()
+        self.serial[name].disconnect()
 
     def replug(self, name: str) -> None:
         """... and plugged in again (a new tty behind the same path)."""
-        self._serial[name].reconnect()
+        self.serial[name].reconnect()
 
     def start_i2c(self) -> None:
         """The I2C bus is there (idempotent)."""
@@ -153,7 +149,7 @@ class EmulatedDevices(DriverEndpoints):
     def close(self) -> None:
         """Stop serving everything and remove the pseudo-terminals."""
         self.stop_i2c()
-        for dev in self._serial.values():
+        for dev in self.serial.values():
             dev.close()
 
     # -- truth: a vehicle holding station -------------------------------------------------------------
@@ -163,16 +159,16 @@ class EmulatedDevices(DriverEndpoints):
     def _altitude_m(self) -> float:
         return _ALTITUDE_M + _wobble(self._t(), 5.0, _WOBBLE_M)
 
-    def _dvl_truth(self, _t: float) -> DvlTruth:
+    def _dvl75_truth(self, _t: float) -> DvlTruth:
         return DvlTruth(velocity_frd_m_s=(_wobble(self._t(), 7.0, 0.01), 0.0, 0.0), altitude_m=self._altitude_m())
 
-    def _ping_truth(self, _t: float) -> Ping1dTruth:
+    def _ping1d_truth(self, _t: float) -> Ping1dTruth:
         return Ping1dTruth(altitude_m=self._altitude_m())
 
-    def _pressure_truth(self, _t: float) -> tuple[float, float]:
+    def _ms5837_truth(self, _t: float) -> tuple[float, float]:
         depth_m = _DEPTH_M + _wobble(self._t(), 4.0, _WOBBLE_M)
         return (_SURFACE_PA + _RHO_KG_M3 * _G_M_S2 * depth_m, 20.0)
 
-    def _imu_truth(self, _t: float):
+    def _icm20948_truth(self, _t: float):
         w = _wobble(self._t(), 3.0, 0.05)
         return ((w, 0.0, _G_M_S2), (0.0, 0.0, 0.01 * w), _EARTH_FIELD_T, 20.0)
