@@ -29,8 +29,7 @@ from .config import default_config_path, load_config
 from .node_support.liveness import HEARTBEAT_NODES, HeartbeatPublisher, heartbeat_qos
 
 __all__ = ["AllocationStandIn", "ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", "child_process",
-           "interrupt",
-           "config_parameters", "python_executable", "ros_context", "wait_until"]
+           "interrupt", "config_parameters", "python_executable", "ros_context", "wait_until"]
 
 
 def child_env(**extra: str) -> dict[str, str]:

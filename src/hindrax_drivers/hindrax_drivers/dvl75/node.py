@@ -42,10 +42,9 @@ Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time``
 
 - ``dvl/data`` and ``dvl/twist`` carry the DVL's own time of validity: ``$DVPDL`` field ``tu``
   (microseconds since DVL boot, docs/devices.md §1.3.1) minus ``dtu/2`` (the velocity is the mean over the
-  interval ``dtu`` that ends at ``tu``), mapped to ROS time by
-  :class:`hindrax_drivers.base.device_clock.DeviceClockSync`: offset = minimum over the last 10 s of (receive ROS time -
-  ``tu``), i.e. ``tu`` plus the smallest transport latency seen, re-estimated after a DVL reboot (``tu`` backwards) or a
-  ROS time jump.
+  interval ``dtu`` that ends at ``tu``), mapped to ROS time by :class:`~.device_clock.DeviceClockSync`:
+  offset = minimum over the last 10 s of (receive ROS time - ``tu``), i.e. ``tu`` plus the smallest
+  transport latency seen, re-estimated after a DVL reboot (``tu`` backwards) or a ROS time jump.
 - ``dvl/altitude`` and messages built from ``$DVEXT`` alone use the receive time: ``$DVEXT`` carries no
   device time (its field 14 is an EKF step length, docs/devices.md §1.3.2).
 """

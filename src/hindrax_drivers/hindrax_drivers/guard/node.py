@@ -2,10 +2,9 @@
 
 The decision is :class:`~hindrax_drivers.guard.core.GuardCore` (ESC output state silent or unknown, supervisor
 heartbeat silent or tripped, either heartbeat not its sender's -> silence, latched until the ESC reports disarmed at
-neutral). Each heartbeat comes through a :class:`~hindrax_drivers.node_support.liveness.HeartbeatWatch` (its identity
-check: at every tick the topic's live count and its publishers' node names, asked of the graph when DDS reports a
-change, at every beat its ``boot_id`` and ``seq``; a rejected beat does not count as the peer being heard). How it
-silences:
+neutral). Each heartbeat comes through a :class:`~.liveness.HeartbeatWatch` (its identity check:
+at every tick the topic's live count and its publishers' node names, asked of the graph when DDS reports a change,
+at every beat its ``boot_id`` and ``seq``; a rejected beat does not count as the peer being heard). How it silences:
 
 * ``esc.output_enable_gpio`` set (chip and line): the PCA9685 /OE line through libgpiod
   (:class:`~hindrax_drivers.transport.gpio.GpiodLine`), driven HIGH (outputs off, no pulses: the Basic ESC

@@ -87,9 +87,8 @@ def _wobble(t_s: float, period_s: float, amplitude: float) -> float:
 class EmulatedDevices(DriverEndpoints):
     """The five emulated devices (module docstring), serving as soon as constructed unless ``serve_i2c`` is False.
 
-    Each device of :data:`~hindrax_drivers.base.devices.DEVICES` is built by its table factory on the truth method
-    ``_<name>_truth`` (an output has none): :attr:`emulators` by device name, the serial ones behind the
-    pseudo-terminals of :attr:`serial` (by launch node name), the I2C ones on :attr:`bus` at their configured addresses.
+    Each device of :data:`~.devices.DEVICES` comes from its table's factory on the truth ``_<name>_truth``:
+    :attr:`emulators` by device name; the serial ones behind :attr:`serial` (node -> pty), the I2C ones on :attr:`bus`.
 
     config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
     (default: a new temporary directory). Use as a context manager or call :meth:`close`. The threads that serve the
@@ -99,7 +98,6 @@ class EmulatedDevices(DriverEndpoints):
 
     def __init__(self, config: VehicleConfig, directory: str | os.PathLike | None = None,
                  serve_i2c: bool = True, poll_period_s: float = 0.01) -> None:
-        self._t0 = time.monotonic()
         self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-devices-"))
         self.directory.mkdir(parents=True, exist_ok=True)
         self.socket_path = str(self.directory / "i2c.sock")
@@ -152,23 +150,18 @@ class EmulatedDevices(DriverEndpoints):
         for dev in self.serial.values():
             dev.close()
 
-    # -- truth: a vehicle holding station -------------------------------------------------------------
-    def _t(self) -> float:
-        return time.monotonic() - self._t0
+    # -- truth: a vehicle holding station, at the emulators' clock t_s (time.monotonic), s -----------------------
+    def _dvl75_truth(self, t_s: float) -> DvlTruth:
+        return DvlTruth(velocity_frd_m_s=(_wobble(t_s, 7.0, 0.01), 0.0, 0.0),
+                        altitude_m=self._ping1d_truth(t_s).altitude_m)
 
-    def _altitude_m(self) -> float:
-        return _ALTITUDE_M + _wobble(self._t(), 5.0, _WOBBLE_M)
+    def _ping1d_truth(self, t_s: float) -> Ping1dTruth:
+        return Ping1dTruth(altitude_m=_ALTITUDE_M + _wobble(t_s, 5.0, _WOBBLE_M))
 
-    def _dvl75_truth(self, _t: float) -> DvlTruth:
-        return DvlTruth(velocity_frd_m_s=(_wobble(self._t(), 7.0, 0.01), 0.0, 0.0), altitude_m=self._altitude_m())
-
-    def _ping1d_truth(self, _t: float) -> Ping1dTruth:
-        return Ping1dTruth(altitude_m=self._altitude_m())
-
-    def _ms5837_truth(self, _t: float) -> tuple[float, float]:
-        depth_m = _DEPTH_M + _wobble(self._t(), 4.0, _WOBBLE_M)
+    def _ms5837_truth(self, t_s: float) -> tuple[float, float]:
+        depth_m = _DEPTH_M + _wobble(t_s, 4.0, _WOBBLE_M)
         return (_SURFACE_PA + _RHO_KG_M3 * _G_M_S2 * depth_m, 20.0)
 
-    def _icm20948_truth(self, _t: float):
-        w = _wobble(self._t(), 3.0, 0.05)
+    def _icm20948_truth(self, t_s: float):
+        w = _wobble(t_s, 3.0, 0.05)
         return ((w, 0.0, _G_M_S2), (0.0, 0.0, 0.01 * w), _EARTH_FIELD_T, 20.0)

@@ -1,7 +1,6 @@
 """MS5837 pressure-sensor node (TE MS5837-30BA / -02BA on I2C at 0x76; docs/devices.md §3): the I2C cycle and the
 messages; what a reading means (PROM and ADC checks, stamps, depth, variances, plausibility, zero depth) is
-:mod:`hindrax_drivers.ms5837.core`, the start-up's retry and the ERROR ``stuck``
-:mod:`hindrax_drivers.node_support.i2c_node`.
+:mod:`hindrax_drivers.ms5837.core`, the start-up's retry and the ERROR ``stuck`` :mod:`~.i2c_node`.
 
 Start-up: reset command 0x1E, 10 ms, the 8 PROM words. Cycle, every 1 / ``sensors.ms5837.rate_hz`` s from ROS timers
 (no sleep in any callback): convert D1, wait the OSR's conversion time + :data:`CONVERSION_MARGIN_S`, ADC read; the

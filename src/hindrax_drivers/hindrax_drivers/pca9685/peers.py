@@ -3,10 +3,9 @@ verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and
 (:func:`.core.command_source_fault`).
 
 :class:`EscPeers` subscribes to ``supervisor/heartbeat`` and ``guard/heartbeat`` through
-:class:`~hindrax_drivers.node_support.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another
-node name is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
-(:class:`~hindrax_drivers.node_support.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict
-rules are
+:class:`~.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another node name
+is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
+(:class:`~.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
 :func:`.core.heartbeat_verdict`'s. Node parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s``
 (default ``esc.heartbeat_timeout_s``).
 """

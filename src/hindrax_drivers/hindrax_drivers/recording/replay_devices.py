@@ -2,10 +2,9 @@
 
 docs/architecture.md §6-7: "the same emulators can be driven from a recorded bag (raw device data replayed through the
 drivers)". A bag recorded by the stack holds every byte and register transaction of every driver
-(``hindrax_msgs/RawDeviceData`` on ``raw/<device>``, see
-:class:`~hindrax_drivers.node_support.node_common.RawDataPublisher`). This module serves them again to *fresh,
-unmodified* driver nodes through the same transports the simulator uses, so the real parsing code runs on the recorded
-stream:
+(``hindrax_msgs/RawDeviceData`` on ``raw/<device>``, see :class:`~.node_common.RawDataPublisher`).
+This module serves them again to *fresh, unmodified* driver nodes through the same transports the simulator
+uses, so the real parsing code runs on the recorded stream:
 
 - :class:`SerialReplayDevice` (a :class:`~hindrax_drivers.transport.pty_device.ByteStreamEmulator`, served on a
   pty by :class:`~hindrax_drivers.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in

@@ -2,8 +2,7 @@
 machine without the hardware (docs/deployment.md §9).
 
 A driver started as its own process (the vehicle's launch layout: ``ros2 launch``, or the project's
-:class:`~hindrax_drivers.layout.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus
-with
+:class:`~.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus with
 :func:`~hindrax_drivers.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket,
 that function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an
 :class:`I2CSocketServer` in another process serves an

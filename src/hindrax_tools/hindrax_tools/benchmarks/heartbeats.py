@@ -12,10 +12,9 @@ each beat is read by two receivers (docs/architecture.md §8), so a beat's cost 
 * ``heartbeat_cycle_cpu_us_{status,heartbeat}`` and ``heartbeat_cycle_cpu_ratio``: process CPU time (every thread:
   DDS included) per beat built, published, delivered to a subscription in a second participant through rclpy's
   EventsExecutor and read, median of 5 alternating blocks of beats. Before: the DiagnosticStatus subscription of
-  rclpy objects; after: the raw subscription the receivers use
-  (:class:`hindrax_drivers.node_support.liveness.HeartbeatWatch`).
-* ``heartbeat_graph_queries_per_s``: graph queries of one :class:`~hindrax_drivers.node_support.liveness.HeartbeatWatch`
-  checked at 25 Hz with its peer publishing (before: one query per check, 25 a second; the ESC and the guard check four
+  rclpy objects; after: the raw subscription the receivers use (:class:`~.liveness.HeartbeatWatch`).
+* ``heartbeat_graph_queries_per_s``: graph queries of one :class:`~.liveness.HeartbeatWatch` checked
+  at 25 Hz with its peer publishing (before: one query per check, 25 a second; the ESC and the guard check four
   watches and the command topic, 115 queries a second), and ``heartbeat_graph_query_cpu_us`` what one costs.
 """
 from __future__ import annotations

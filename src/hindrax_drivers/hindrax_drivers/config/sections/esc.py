@@ -72,8 +72,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     feed (docs/watchdog.md) with its line, rate and the circuit's timeout, and at least three rising edges per
     timeout, so that one late guard tick does not stop the outputs; the ESC's and the guard's heartbeat timeouts
     long enough for two supervisor heartbeats (one per supervisor check). The oscillator's range (23-27 MHz,
-    :data:`~hindrax_drivers.base.hardware_limits.PCA9685_OSCILLATOR_MIN_HZ`) is the key's own range in
-    :data:`SCHEMA`."""
+    :data:`~.hardware_limits.PCA9685_OSCILLATOR_MIN_HZ`) is the key's own range in :data:`SCHEMA`."""
     issues: list[ConfigIssue] = []
     if "esc.pwm_frequency_hz" in c and "esc.oscillator_hz" in c:
         try:
