@@ -1,5 +1,4 @@
-"""ament_python package hindrax_onboard, what runs on the vehicle above the drivers (colcon on the Pi; editable pip
-install in the dev venv). Metadata and dependencies: package.xml (and requirements.txt), not repeated here."""
+"""ament_python package hindrax_onboard (the vehicle; colcon on the Pi, pip -e in the venv). Metadata: package.xml."""
 from glob import glob
 
 from setuptools import find_packages, setup

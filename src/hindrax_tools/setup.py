@@ -1,5 +1,4 @@
-"""ament_python package hindrax_tools: ``hindrax`` and the benchmarks (topside; editable pip install in the dev venv).
-Metadata: package.xml. Colcon also installs ``bin/hindrax``, on PATH once ``install/setup.bash`` is sourced."""
+"""ament_python package hindrax_tools (topside). Metadata: package.xml. Colcon also installs bin/hindrax (on PATH)."""
 import sys
 
 from setuptools import find_packages, setup

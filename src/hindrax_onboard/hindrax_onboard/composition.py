@@ -15,12 +15,11 @@ wrench source. The recorder's bag writer keeps its own thread, and its keep-last
 """
 from __future__ import annotations
 
-import sys
 from typing import Sequence
 
 from hindrax_drivers.layout.composition import IDENT_GROUPS, NODE_CLASSES as DRIVER_CLASSES, run_group
 
-__all__ = ["GROUPS", "NODE_CLASSES", "ident_control_main", "ident_record_main"]
+__all__ = ["NODE_CLASSES", "ident_control_main", "ident_record_main"]
 
 #: node -> "module:class" of the nodes this package composes
 NODE_CLASSES: dict[str, str] = {
@@ -28,21 +27,15 @@ NODE_CLASSES: dict[str, str] = {
     "controller": "hindrax_onboard.control.node:ControllerNode",
     "recorder": DRIVER_CLASSES["recorder"],
 }
-#: console script -> its nodes, in construction order
-GROUPS = IDENT_GROUPS
 
 
 def ident_control_main(args: Sequence[str] | None = None) -> int:
     """Console script ``ident_control_node``: the identification node and the controller in one process (module
     docstring). Returns the exit status (1 on an invalid configuration, one line on stderr)."""
-    return run_group(GROUPS["ident_control_node"], args, NODE_CLASSES)
+    return run_group(IDENT_GROUPS["ident_control_node"], args, NODE_CLASSES)
 
 
 def ident_record_main(args: Sequence[str] | None = None) -> int:
     """Console script ``ident_record_node``: the identification node, the controller and the recorder in one process
     (module docstring). Returns the exit status (1 on an invalid configuration, one line on stderr)."""
-    return run_group(GROUPS["ident_record_node"], args, NODE_CLASSES)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(ident_control_main())
+    return run_group(IDENT_GROUPS["ident_record_node"], args, NODE_CLASSES)

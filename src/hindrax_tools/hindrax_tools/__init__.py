@@ -1,5 +1,4 @@
-"""The tools: what engineers run beside the vehicle, not what it runs (the top package, nothing imports it).
-
-The ``hindrax`` command line (:mod:`.cli`, one module per subcommand in :mod:`.commands`) and the ``make bench``
+"""The tools: what engineers run beside the vehicle, not what it runs (the top package, nothing imports it): the
+``hindrax`` command line (:mod:`.cli`, one module per subcommand in :mod:`.commands`) and the ``make bench``
 benchmarks (:mod:`.bench`, :mod:`.benchmarks`); progress lines and the results document.
 """

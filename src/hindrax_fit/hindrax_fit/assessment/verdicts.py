@@ -66,6 +66,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from scipy import stats
 
 from hindrax_drivers.config import ROTATIONAL_DOFS, VehicleConfig
 
@@ -168,8 +169,6 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
     (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
     """
-    from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
     names = list(ev.names)
     theta = np.asarray(ev.theta, dtype=float)
     cov_fit = np.asarray(ev.cov, dtype=float)

@@ -23,6 +23,7 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
+from scipy import optimize
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS
@@ -439,8 +440,6 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     group_means: {group: {value, std}}, net_buoyancy_n (with a per-hold vertical calibration), prior_std_rel,
     method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
     """
-    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
     prior_std_rel = prior_std_rel_of(cfg, prior_std_rel)
     model = scale_model(calibration, cfg)
     ns = len(model.names) if model else 0

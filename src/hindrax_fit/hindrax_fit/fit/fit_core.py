@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
+from scipy import optimize, signal as _signal, stats
 
 from hindrax_drivers.config import DOFS
 
@@ -568,8 +569,6 @@ class FitOutcome:
 def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.ndarray:
     """Bounded equation-error least squares of the model on the smoothed velocity ``sd.v_s`` and acceleration ``a``
     (m, L) at the ticks, within the bounds of ``layout`` (scipy ``lsq_linear``): the physical start of the fit."""
-    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
     kinds = _kinds(layout)
     v = sd.v_s
     pos, q = v > 0, np.abs(v) * v
@@ -605,8 +604,6 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     costs a large finite value; the Jacobian in one vectorised simulation. ``free_v0``: fit each
     segment's initial velocity too (default: for a measured position), else start each from its
     smoothed measurement."""
-    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
     lower, upper = np.array([(lb, ub) for _n, _k, lb, ub in layout], dtype=float).T
     th0 = np.clip(np.asarray(theta0, dtype=float), lower, upper)
     th0[0] = max(th0[0], 1e-3 * max(abs(float(theta0[0])), 1.0), 1e-6)
@@ -826,8 +823,6 @@ def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGM
     bandwidth, below which :data:`BANDWIDTH_POWER` of the detrended velocity's power lies (Welch
     periodogram of each chunk, pooled): there a delay trades against the dynamics' own phase lag
     (at most 90 degrees). Never below two grid steps (the sample rate's resolution)."""
-    from scipy import signal as _signal
-
     h = rec.h
     limits = [(float(max_delay_s), f"option max_delay_s {max_delay_s:g} s"),
               (DELAY_SEGMENT_FRACTION * segment_s,
@@ -1271,8 +1266,6 @@ class DofResult:
 
     @property
     def t_quantile(self) -> float:
-        from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
         return float(stats.t.ppf(0.975, self.covariance.t_dof))
 
 
@@ -1314,8 +1307,6 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
            inertia: np.ndarray | None) -> DofResult:
     """The result: :func:`training_rules` (``inertia`` (6,) as the chosen model's) and the intervals
     (:func:`cluster_covariance`) of the chosen candidate."""
-    from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
     training = training_rules(rec, chosen, timing, opts, inertia)
     cov = cluster_covariance(chosen.fit, chosen.train, opts.min_clusters)
     if rec.measured == "position":

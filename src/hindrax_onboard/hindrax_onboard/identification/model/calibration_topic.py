@@ -19,15 +19,15 @@ one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the f
     ``..._std_n`` (mean thrust-model force on the axis without and with the known force, N, FRD), and
     ``forward_force_without_n``, ``forward_force_with_n``, ``reverse_force_without_n``, ``reverse_force_with_n``: the
     parts of those holding forces made by thrusters turning forward and in reverse (N, FRD; their sum is the holding
-    force), from which the per-direction scales are estimated (:func:`~..fit.calibration.scale_model`). A message of an
-    older node without the four parts still reads: its scale then measures the mean of the two directions.
+    force), from which the per-direction scales are estimated (:func:`~hindrax_fit.fit.calibration.scale_model`).
+    A message of an older node without the four parts still reads: its scale then measures the two directions' mean.
 ``inclining/roll``, ``inclining/pitch``
     ``step`` inclining, ``dof``, ``stiffness_n_m_per_rad`` and ``stiffness_n_m_per_rad_std`` (restoring C),
     ``known_moment_n_m``, ``thruster_moment_without_n_m``, ``thruster_moment_with_n_m`` (N m), ``tilt_without_rad``,
     ``tilt_with_rad`` and their ``..._std_rad`` (rad).
 ``tilt_decay/roll``, ``tilt_decay/pitch``
     ``step`` tilt_decay, ``dof``, ``release_time_s`` and ``end_time_s``: the recorded decay's window in ROS time (s,
-    the header stamps' time base); the inertia follows offline from the gyro (:func:`~..fit.calibration.decay_inertia`).
+    header stamps' time base); the gyro gives the inertia offline (:func:`~hindrax_fit.fit.calibration.decay_inertia`).
 
 Pure apart from the message import in :func:`calibration_array`; :func:`results_from_array` duck-types the
 message (rclpy or bag-decoded objects).

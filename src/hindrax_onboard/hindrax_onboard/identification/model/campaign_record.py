@@ -2,7 +2,7 @@
 
 The executive (:class:`~..online.executive.Executive`) fills one while it runs; the bag reader
 (:func:`~.from_bag.record_from_bag`) rebuilds one from a recorded campaign; the campaign reader of the fit
-(:mod:`..fit.campaign_fit`) reads either into the fit core's per-DOF records.
+(:mod:`hindrax_fit.fit.campaign_fit`) reads either into the fit core's per-DOF records.
 """
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ class CampaignRecord:
     inclining: dict = field(default_factory=dict)
     #: commanded thrust of every thruster held over each tick, (n, m) N (thrust model, along each thruster's
     #: direction; positive = forward rotation): the per-direction thrust scales are applied to it
-    #: (:func:`~..fit.calibration.apply_thrust_calibration`); (0, 0) when not recorded
+    #: (:func:`~hindrax_fit.fit.calibration.apply_thrust_calibration`); (0, 0) when not recorded
     thrust_cmd_n: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def dof_slice(self, dof: str) -> slice:

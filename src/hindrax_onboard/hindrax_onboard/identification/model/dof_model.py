@@ -1,4 +1,4 @@
-"""The per-DOF model: parameters, units, regressors, the offline result and its comparisons.
+"""The per-DOF model: parameters, units, regressors, the offline result, the thrust covariance, the RLS std shown.
 
 Model per DOF (docs/architecture.md §5; [Hindrax-Drag] eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
@@ -13,8 +13,8 @@ coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the a
 * roll: s = cos(theta) sin(phi); pitch: s = sin(theta); k_r = z_g W - z_b B (Fossen g(eta),
   docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
 
-The reported offline estimate is the fit core's (:mod:`.fit_core`) on the campaign reader's
-records (:mod:`.campaign_fit`); :class:`DofIdentification` holds it beside the comparisons: the
+The reported offline estimate is the fit core's (:mod:`hindrax_fit.fit.fit_core`) on the campaign reader's
+records (:mod:`hindrax_fit.fit.campaign_fit`); :class:`DofIdentification` holds it beside the comparisons: the
 online RLS on :func:`regressor_matrix` (:class:`~..online.estimators.OnlineDofEstimator`, a live
 indicator), the equation-error batch LS ([Hindrax-Drag] eqs. 6-8; its inertia biased low by the
 smoothing of the fast thrust transients) and the steady-state method (:func:`steady_state_fit`,

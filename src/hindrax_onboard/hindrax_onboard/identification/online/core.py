@@ -112,7 +112,7 @@ class Event:
     None; message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus,
     operator prompt: the action feedback), ``estimates`` (the executive whose online estimates to
     publish), ``calibration`` (every step result since start, list of
-    :func:`~..bag_input.calibration_topic.statuses` items), ``abort`` (the reason for
+    :func:`~..model.calibration_topic.statuses` items), ``abort`` (the reason for
     ``supervisor/abort``), ``log`` (level info / warn / error, text), ``warn_throttled`` (text),
     ``end`` (the :class:`GoalRun` that ended: deliver its result)."""
 
@@ -435,7 +435,7 @@ class IdentificationCore:
                           out: list[Event]) -> None:
         """The running status at ROS time ``t`` (s): at once when phase, DOF, level or message changed, else at
         most every :data:`STATUS_PERIOD_S` (the status is a step signal: a bag's zero-order hold of it,
-        :mod:`..bag_input.from_bag`, sees every change at its time)."""
+        :mod:`hindrax_fit.bag_input.from_bag`, sees every change at its time)."""
         key = (phase, message) if st is None else (phase, message, st.dof, st.level_index, st.level_command)
         last_t, last_key = self._last_status
         if key == last_key and t - last_t < STATUS_PERIOD_S - 1e-9:

@@ -1,13 +1,13 @@
 """The online estimator of one DOF: Kalman filter on its sensor + RLS with forgetting, the campaign's live indicator.
 
 RLS with forgetting (``identification.forgetting_factor``) on the regressor row of the per-DOF model
-(:mod:`..fit.dof_model`), with calibrated covariance and the persistence-of-excitation measure of
+(:mod:`..model.dof_model`), with calibrated covariance and the persistence-of-excitation measure of
 :class:`~hindrax_onboard.estimation.rls.RecursiveLeastSquares`; directional forgetting, the excitation gate,
 physical-sign bounds, the change detector and the start at the empirical priors as :func:`online_rls` sets them
 from ``identification.rls_*``. The causal filter lags the fast transients and the forgetting window
 (1 / (1 - lambda) = 500 ticks, 20 s at the 25 Hz tick) is short, so the online values are a live indicator (a few
 per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly conditioned online), not the
-reported estimate (that is the fit core's, :mod:`..fit.fit_core`).
+reported estimate (that is the fit core's, :mod:`hindrax_fit.fit.fit_core`).
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def rls_prior(cfg: VehicleConfig, dof: str, prior_std_rel: float) -> tuple[np.nd
 
     inertia = rigid + prior added mass, std ``prior_std_rel`` x the added mass (the rigid part is known);
     quadratic and linear damping (heave: the same prior for both directions) std ``prior_std_rel`` x the value
-    ([NTNU-Thesis] App. A.1/A.2 via :func:`~..fit.posterior.prior_entries`; a solid prism of the configured
+    ([NTNU-Thesis] App. A.1/A.2 via :func:`~..model.posterior.prior_entries`; a solid prism of the configured
     box); bias: the expected one (0; heave (rho V - m) g) with :data:`RLS_PRIOR_BIAS_STD`; restoring: the
     configured z_g W - z_b B with ``prior_std_rel`` x its value. None when ``prior_std_rel`` is 0 or the geometry
     gives no prior."""

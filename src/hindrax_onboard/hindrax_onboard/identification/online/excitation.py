@@ -2,9 +2,9 @@
 
 Pure numpy / scipy, no ROS. The campaign executive (:mod:`.executive`, ``identification.excitation``) can replace
 the ladder of constant levels of a DOF by one run of one of these signals; the DOF is then identified from the
-recorded force and motion by the output-error fit (:mod:`..fit.fit_core`, through
-:func:`~..fit.campaign_fit.identify_dof`), which works on any force history. Signals are forces (N) for surge, sway,
-heave and moments (N m) for roll, pitch, yaw, body FRD, on the axis of the DOF under test; time ``t`` (s) from
+recorded force and motion by the output-error fit (:mod:`hindrax_fit.fit.fit_core`, through
+:func:`~hindrax_fit.fit.campaign_fit.identify_dof`), which works on any force history. Signals are forces (N) for surge,
+sway, heave and moments (N m) for roll, pitch, yaw, body FRD, on the axis of the DOF under test; time ``t`` (s) from
 the start of the run.
 
 * :class:`Multisine` - a sum of cosines on the lines k / P (P the period) from ``f_min`` to ``f_max`` with equal

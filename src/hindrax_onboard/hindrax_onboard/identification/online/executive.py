@@ -26,7 +26,7 @@ through the first-order lag ``thrusters.time_constant_s`` over the elapsed time 
 tick), times the thrust allocation matrix ([Hindrax-Drag] eq. 9), body FRD; the positive (forward) and negative
 (reverse) thrust are also lagged apart, so that a calibration step knows which rotation direction held a force,
 and the commanded thruster forces go into the record (``thrust_cmd_n``) for the per-direction thrust scales
-(:func:`~..fit.calibration.apply_thrust_calibration`).
+(:func:`~hindrax_fit.fit.calibration.apply_thrust_calibration`).
 
 Plan (:meth:`Executive.plan`, docs/identification.md §4 and §6): dive; the requested reference steps in a fixed order
 (``inclining`` roll, pitch; ``tilt_decay`` roll, pitch; ``ballast``; ``float``; ``line_pull`` +x, +y;
@@ -485,7 +485,7 @@ class Executive:
     def record(self, *, truth_position_ned_m: np.ndarray | None = None, truth_euler_rad: np.ndarray | None = None,
                wall_time_s: float = math.nan, seed: int = 0,
                final_pulse_width_us: np.ndarray | None = None) -> CampaignRecord:
-        """The :class:`~..bag_input.campaign_record.CampaignRecord` so far (the truth arrays, when the plant has them,
+        """The :class:`~..model.campaign_record.CampaignRecord` so far (the truth arrays, when the plant has them,
         are NaN otherwise)."""
         ctx = self.ctx
         r = ctx.rec

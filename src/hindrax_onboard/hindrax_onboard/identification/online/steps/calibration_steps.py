@@ -5,7 +5,7 @@ Thrust steps (:class:`KnownForceStep`): hold, average the holding force X1 (thru
 operator applies a known force E along that axis; hold again, X2; the operator removes it. At rest the thrust
 balances the known force, so s (X1 - X2) = E for a true thrust s times the curve's. Each hold also records the
 parts of its holding force made by thrusters turning forward (positive thrust) and in reverse (negative thrust),
-P and N (X = P + N), so that :func:`~..calibration.joint_estimate` can use every hold as the measurement
+P and N (X = P + N), so that :func:`~hindrax_fit.fit.calibration.joint_estimate` can use every hold as the measurement
 ``s_forward P + s_reverse N + E = R`` of the two rotation directions' scales (docs/identification.md §6.2):
 
 * :class:`Ballast` (the known sinker, weight in water w, ``+z``): the vertical thrusters go from pushing down (the
@@ -57,7 +57,7 @@ def _positive(name: str, value: float) -> float:
 
 class KnownForceStep(Step):
     """A thrust scale from a known force (module docstring). Subclasses set the calibration key (one of
-    :data:`~..calibration.KNOWN_FORCE_AXES`: group, axis and sense of the known force), the prompts and whether the
+    :data:`KNOWN_FORCE_AXES`: group, axis and sense of the known force), the prompts and whether the
     holds keep station (line pulls) or only depth (ballast, float).
 
     force_n: magnitude of the known force (> 0, N); settle_s / window_s: each hold's settling and averaging time (s).
@@ -257,7 +257,7 @@ class TiltDecay(Step):
     target: the thrust curve need not be right; at most 0.8 of the smaller authority), hold it, then release (zero
     moment on that DOF, the others held) and record :data:`TILT_DECAY_RECORD_S` s; the window goes to
     :attr:`~.context.StepContext.decays`. Rigid + added inertia follow offline from the gyro rate and the inclining
-    stiffness (:func:`~..calibration.decay_inertia`)."""
+    stiffness (:func:`~hindrax_fit.fit.calibration.decay_inertia`)."""
 
     def __init__(self, dof: str) -> None:
         if dof not in ("roll", "pitch"):
