@@ -27,7 +27,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import load_config
-from hindrax_drivers.operator_signing import create_key
+from hindrax_drivers.gateway.operator_signing import create_key
 from hindrax_drivers.testing import child_process, interrupt, ros_context, wait_until
 from hindrax_tools.benchmarks.safety import running_layout
 

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.launch_xml import read_launch
+from hindrax_drivers.layout.launch_xml import read_launch
 
 REPO = Path(__file__).resolve().parents[1]
 DOCKER = REPO / "docker"

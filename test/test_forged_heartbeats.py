@@ -37,7 +37,7 @@ node = Node(name)
 if mode == "plain":
     qos = 10
 else:
-    from hindrax_drivers.liveness import heartbeat_qos
+    from hindrax_drivers.node_support.liveness import heartbeat_qos
     qos = heartbeat_qos()
 topics = ("supervisor/heartbeat", "esc/heartbeat")
 pubs = {t: node.create_publisher(Heartbeat, t, qos) for t in topics}

@@ -15,14 +15,16 @@ Rules checked:
   modules and by the entry points that start nodes (:data:`ENTRY_POINTS`); pure functions that offline tools
   need live in pure modules that the nodes import too.
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
-  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``;
+  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.process.conditions``;
 - the packages in one order, msgs <- drivers <- onboard <- fit <- sim <- tools (:data:`PACKAGE_ORDER`): no module
   imports a higher package, each package.xml's ``exec_depend`` names exactly the project packages its modules
   import, and the vehicle's build (msgs, drivers, onboard: :data:`VEHICLE_PACKAGES`) runs no topside code;
-- rooms in layers (:data:`LAYERS`), one strict order across the packages: drivers < estimation < vehicle <
-  control < the shared per-DOF model < online identification < the composed processes < fit < bag input <
-  assessment < the virtual pool < the graph in one process < tools; no module imports a module of a higher layer,
-  without exceptions, and no module is loose at a package's root but its public surface (:data:`ROOT_MODULES`);
+- rooms in layers (:data:`LAYERS`), one strict order across the packages: the drivers' seven (pure helpers <
+  configuration < transports < node support < devices < allocation, safety, gateway and recording < launch layouts)
+  < estimation < vehicle < control < the shared per-DOF model < online identification < the composed processes
+  < fit < bag input < assessment < the virtual pool < the graph in one process < tools; no module imports a module
+  of a higher layer, without exceptions, and no module is loose at a package's root but its public surface
+  (:data:`ROOT_MODULES`); every room of the drivers has a layer of its own;
 - only the bag input room reads bags (:data:`BAG_READER`) and, outside the fit package, only the pipeline's faces
   are used (:data:`PIPELINE_FACES`);
 - each process of the vehicle's launch files can import at most :data:`VEHICLE_PROCESS_MAX_LINES` lines of project
@@ -222,7 +224,7 @@ def production_imports_of_testing(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_production_code_does_not_import_the_test_helpers(graph):
-    assert TESTING in graph and "hindrax_drivers.conditions" in graph[TESTING]  # the rule is not vacuous
+    assert TESTING in graph and "hindrax_drivers.process.conditions" in graph[TESTING]  # the rule is not vacuous
     assert production_imports_of_testing(graph) == []
 
 
@@ -263,7 +265,7 @@ def upward_package_imports(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_the_package_checker_sees_an_upward_import():
-    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_drivers.frames"},
+    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_drivers.base.frames"},
              "hindrax_fit.fit.fit_core": {"hindrax_onboard.vehicle.state"}}
     assert upward_package_imports(graph) == ["hindrax_onboard.control.law -> hindrax_fit.fit.fit_core"]
 
@@ -308,26 +310,46 @@ def test_the_vehicle_build_holds_no_topside_module():
 #: share below both; the simulator above the fit (it runs the campaign and fits it); the graph in one process above
 #: every node it composes; the tools on top.
 LAYERS = (
-    ("hindrax_drivers", 0),
-    ("hindrax_onboard", 1),
-    ("hindrax_onboard.estimation", 1),
-    ("hindrax_onboard.vehicle", 2),
-    ("hindrax_onboard.control", 3),
-    ("hindrax_onboard.identification", 4),
-    ("hindrax_onboard.identification.model", 4),
-    ("hindrax_onboard.identification.online", 5),
-    ("hindrax_onboard.composition", 6),  # the composed processes of the pool test launch
-    ("hindrax_fit", 7),
-    ("hindrax_fit.fit", 7),
-    ("hindrax_fit.bag_input", 8),  # the fit core defines the per-DOF record (Chunk) the bag reader returns
-    ("hindrax_fit.assessment", 9),  # verdicts, identification.yaml, reports: reads, fits and writes
-    ("hindrax_sim", 10),  # the virtual pool: its modules are the package's root room
-    ("hindrax_sim.graph", 11),  # the graph in one process, its executor, the runs on it
-    ("hindrax_tools", 12),  # the command line, its commands, the benchmarks, progress and results doc
+    ("hindrax_drivers", 0),  # its public surface: the package alone
+    ("hindrax_drivers.base", 0),  # frames, PWM limits, thrust curve, device clocks, the device table: pure
+    ("hindrax_drivers.process", 0),  # the process's life, scheduling, systemd, DDS transport, waits
+    ("hindrax_drivers.cdr", 0),  # CDR without rclpy objects, message definitions
+    ("hindrax_drivers.config", 1),
+    ("hindrax_drivers.transport", 2),
+    ("hindrax_drivers.node_support", 3),  # base node, diagnostics, heartbeats, I2C and serial node bases
+    ("hindrax_drivers.dvl75", 4),  # the devices: protocol, emulator, node
+    ("hindrax_drivers.ping1d", 4),
+    ("hindrax_drivers.ms5837", 4),
+    ("hindrax_drivers.icm20948", 4),
+    ("hindrax_drivers.pca9685", 4),
+    ("hindrax_drivers.tf", 4),
+    ("hindrax_drivers.allocation", 5),  # over the ESC's protocol
+    ("hindrax_drivers.guard", 5),
+    ("hindrax_drivers.supervisor", 5),
+    ("hindrax_drivers.gateway", 5),  # over the allocation's bounds
+    ("hindrax_drivers.recording", 5),  # replays the devices' emulators
+    ("hindrax_drivers.layout", 6),  # launch layouts: composed processes, launch files, emulated devices, health
+    ("hindrax_drivers.testing", 6),  # the helpers of tests and benchmarks (their public surface)
+    ("hindrax_onboard", 7),
+    ("hindrax_onboard.estimation", 7),
+    ("hindrax_onboard.vehicle", 8),
+    ("hindrax_onboard.control", 9),
+    ("hindrax_onboard.identification", 10),
+    ("hindrax_onboard.identification.model", 10),
+    ("hindrax_onboard.identification.online", 11),
+    ("hindrax_onboard.composition", 12),  # the composed processes of the pool test launch
+    ("hindrax_fit", 13),
+    ("hindrax_fit.fit", 13),
+    ("hindrax_fit.bag_input", 14),  # the fit core defines the per-DOF record (Chunk) the bag reader returns
+    ("hindrax_fit.assessment", 15),  # verdicts, identification.yaml, reports: reads, fits and writes
+    ("hindrax_sim", 16),  # the virtual pool: its modules are the package's root room
+    ("hindrax_sim.graph", 17),  # the graph in one process, its executor, the runs on it
+    ("hindrax_tools", 18),  # the command line, its commands, the benchmarks, progress and results doc
 )
-#: Modules that may sit at a package's root beside its public surface (``__init__``): the sim's root room, the tools'
-#: command line and its helpers, the composed processes.
-ROOT_MODULES = {"hindrax_onboard": {"composition"}, "hindrax_fit": set(), "hindrax_tools": {
+#: Modules that may sit at a package's root beside its public surface (``__init__``): the drivers' helpers for tests
+#: and benchmarks, the sim's root room, the tools' command line and its helpers, the composed processes.
+ROOT_MODULES = {"hindrax_drivers": {"testing"}, "hindrax_onboard": {"composition"}, "hindrax_fit": set(),
+                "hindrax_tools": {
     "cli", "bench", "progress_run", "results_doc", "output_dirs"}}
 
 
@@ -352,15 +374,18 @@ def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
 
 def test_the_layer_checker_sees_an_upward_import():
     graph = {"hindrax_onboard.vehicle.x": {"hindrax_sim", "hindrax_sim.model"},
-             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.frames"},
-             "hindrax_drivers.frames": set()}
+             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.base.frames"},
+             "hindrax_drivers.base.frames": set()}
     assert upward_imports(graph) == {("hindrax_onboard.vehicle.x", "hindrax_sim.model")}
     assert [layer_of(m) for m in (
-        "hindrax_drivers.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
+        "hindrax_drivers.base.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
         "hindrax_onboard.identification.model.dof_model", "hindrax_onboard.identification.online.node",
         "hindrax_onboard.composition", "hindrax_fit.fit.fit_core", "hindrax_fit.bag_input.reader",
         "hindrax_fit.assessment.report", "hindrax_sim.campaign", "hindrax_sim.graph.bringup",
-        "hindrax_tools.commands.run")] == [0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
+        "hindrax_tools.commands.run")] == [0, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18]
+    assert [layer_of(f"hindrax_drivers.{m}") for m in (
+        "base.frames", "config.loader", "transport.i2c", "node_support.liveness", "pca9685.core", "allocation.node",
+        "layout.composition", "testing")] == [0, 1, 2, 3, 4, 5, 6, 6]
     with pytest.raises(ValueError):
         layer_of("hindrax_other.x")
 
@@ -376,7 +401,8 @@ def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
 
 
 def loose_modules(graph: dict[str, set[str]]) -> list[str]:
-    """Modules at the root of onboard, fit or tools that are neither the package nor in :data:`ROOT_MODULES`."""
+    """Modules at the root of drivers, onboard, fit or tools that are neither the package nor in
+    :data:`ROOT_MODULES`."""
     return sorted(m for m in graph if m.count(".") == 1 and package_of(m) in ROOT_MODULES
                   and m.split(".")[1] not in ROOT_MODULES[package_of(m)]
                   and not any(k.startswith(m + ".") for k in graph))  # a subpackage is a room
@@ -389,6 +415,10 @@ def test_every_module_is_in_a_room(graph):
     assert loose_modules(graph) == []
     assert {m for m in graph if m.count(".") == 1 and package_of(m) in ROOT_MODULES} >= {
         f"{p}.{m}" for p, ms in ROOT_MODULES.items() for m in ms}  # no stale allowance
+    # every room of the drivers has its own layer (none falls to the package's, the lowest)
+    rooms = {m.split(".")[1] for m in graph if package_of(m) == "hindrax_drivers" and m.count(".") >= 1}
+    named = {p.split(".")[1] for p, _ in LAYERS if package_of(p) == "hindrax_drivers" and "." in p}
+    assert rooms == named, f"hindrax_drivers rooms without a layer: {sorted(rooms - named)}, stale: {named - rooms}"
 
 
 # ------------------------------------------------------------------------------------------------ the fit's faces
@@ -467,7 +497,7 @@ PACKAGE_CEILINGS = {"hindrax_drivers": 26_700}  # + the replay-proof signing, ou
 
 def class_path_edges(modules: dict[str, Path]) -> dict[str, set[str]]:
     """{module: modules it names as ``"package.module:Class"`` strings} (the composed processes import their nodes'
-    classes by name at run time, :mod:`hindrax_drivers.composition`)."""
+    classes by name at run time, :mod:`hindrax_drivers.layout.composition`)."""
     import re
 
     out: dict[str, set[str]] = {}
@@ -553,9 +583,9 @@ def test_no_package_is_over_its_size():
 # ------------------------------------------------------------------------------------------------ defined once
 #: name -> the one module (path under src/) that defines it.
 DEFINED_ONCE = {
-    "wrap_angle": "hindrax_drivers/hindrax_drivers/frames.py",
+    "wrap_angle": "hindrax_drivers/hindrax_drivers/base/frames.py",
     "ThrustLag": "hindrax_onboard/hindrax_onboard/vehicle/thrust_lag.py",
-    "ThrustCurve": "hindrax_drivers/hindrax_drivers/allocation/thrust_curve.py",
+    "ThrustCurve": "hindrax_drivers/hindrax_drivers/base/thrust_curve.py",
     "rigid_body_mass_matrix": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
     "skew": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
 }
@@ -569,7 +599,7 @@ FORMULAS = {
                        r"remainder\([^\n]*,\s*2(\.0)?\s*\*\s*(math|np)\.pi", ("frames.py",)),
     "the thrust lag": (r"exp\(\s*-[^\n]*?/\s*(self\.)?(time_constant|lag|tau)", ("vehicle/thrust_lag.py",)),
     # the thrusters' section builds one only to validate the configured coefficients (its one-line refusal)
-    "a thrust curve": (r"\bThrustCurve\(", ("allocation/thrust_curve.py", "allocation/from_config.py",
+    "a thrust curve": (r"\bThrustCurve\(", ("base/thrust_curve.py", "allocation/from_config.py",
                                             "config/sections/thrusters.py")),
 }
 
@@ -620,7 +650,7 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
 CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config.sections", "hindrax_drivers.config.loader",
                   "hindrax_drivers.config.typed_sections", "hindrax_drivers.config.node_parameters")
 #: Device drivers and safety nodes' packages: the configuration imports none of them, not even through another
-#: module; the hardware limits it checks live in ``hindrax_drivers.hardware_limits``, below the driver too.
+#: module; the hardware limits it checks live in ``hindrax_drivers.base.hardware_limits``, below the driver too.
 DRIVER_PACKAGES = tuple(f"hindrax_drivers.{p}" for p in (
     "pca9685", "dvl75", "icm20948", "ms5837", "ping1d", "transport", "guard", "supervisor", "gateway"))
 
@@ -641,13 +671,13 @@ def driver_imports_of_config(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_the_config_rule_sees_a_driver_import():
-    graph = {"hindrax_drivers.config": {"hindrax_drivers.hardware_limits", "hindrax_drivers.frames"},
-             "hindrax_drivers.frames": {"hindrax_drivers.pca9685.protocol"}}
+    graph = {"hindrax_drivers.config": {"hindrax_drivers.base.hardware_limits", "hindrax_drivers.base.frames"},
+             "hindrax_drivers.base.frames": {"hindrax_drivers.pca9685.protocol"}}
     assert driver_imports_of_config(graph) == ["hindrax_drivers.config -> hindrax_drivers.pca9685.protocol"]
 
 
 def test_the_configuration_imports_no_driver(graph):
     assert all(m in graph for m in CONFIG_MODULES)
-    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.config.sections.esc"]
-    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
+    assert "hindrax_drivers.base.hardware_limits" in graph["hindrax_drivers.config.sections.esc"]
+    assert "hindrax_drivers.base.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
     assert driver_imports_of_config(graph) == []

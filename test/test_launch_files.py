@@ -138,7 +138,7 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
             assert el.get("scoped", "true") == "true", f"{path.name}: an unscoped <group>"
             if enabled:
                 elements[:0] = list(el)
-        elif el.tag == "set_env":  # the DDS transport (hindrax_drivers.dds_transport): its files must exist
+        elif el.tag == "set_env":  # the DDS transport (hindrax_drivers.process.dds_transport): its files must exist
             value = substitute(el.get("value"), args, packages)
             if el.get("name") == "FASTRTPS_DEFAULT_PROFILES_FILE":
                 assert Path(value).is_file(), f"{path.name}: DDS profile {value} does not exist"
@@ -166,11 +166,11 @@ def test_launch_file_executables_and_parameter_files_resolve(path, packages):
 
 
 def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
-    from hindrax_drivers.composition import GROUPS, IDENT_GROUPS
+    from hindrax_drivers.layout.composition import GROUPS, IDENT_GROUPS
 
     root = REPO / "src"
     vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
-    # every node runs once, alone (its own executable) or in a composed process (hindrax_drivers.composition)
+    # every node runs once, alone (its own executable) or in a composed process (hindrax_drivers.layout.composition)
     alone = {"allocation_node": "thrust_allocation"}  # executables named otherwise than their node
     nodes = [n for pkg, exe in vehicle if pkg == "hindrax_drivers"
              for n in GROUPS.get(exe, (alone.get(exe, exe.removesuffix("_node")),))]
@@ -283,9 +283,9 @@ READER_CASES = [
 
 @pytest.mark.parametrize("rel,given", READER_CASES, ids=lambda c: str(c))
 def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packages):
-    """The pool-day test runs the process list of hindrax_drivers.launch_xml through the project's runner; it must
-    be the one the launch file declares, read here by this module's own parser (check_launch)."""
-    from hindrax_drivers.launch_xml import read_launch
+    """The pool-day test runs the process list of hindrax_drivers.layout.launch_xml through the project's runner; it
+    must be the one the launch file declares, read here by this module's own parser (check_launch)."""
+    from hindrax_drivers.layout.launch_xml import read_launch
 
     path = REPO / "src" / rel
     declared = check_launch(path, packages, given)
@@ -305,7 +305,7 @@ def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packag
 
 
 def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_its_root(packages):
-    from hindrax_drivers.launch_xml import read_launch
+    from hindrax_drivers.layout.launch_xml import read_launch
 
     for path in launch_files():
         for el in ET.parse(path).getroot().iter("node"):
@@ -343,11 +343,11 @@ def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real
 def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_it(packages, tmp_path):
     """docs/deployment.md §1: the ESC (actuation_node), the supervisor, the output guard and the sensor drivers
     (whose rates the supervisor checks) ask for real-time scheduling (HINDRAX_REALTIME_PRIORITY, the guard highest,
-    the sensors lowest; hindrax_drivers/scheduling.py) and run at nice -5 through launch-prefix where it is refused,
-    nothing else does either, and the project's runner (pool-day test, bench) puts the prefix first and the
+    the sensors lowest; hindrax_drivers/process/scheduling.py) and run at nice -5 through launch-prefix where it is
+    refused, nothing else does either, and the project's runner (pool-day test, bench) puts the prefix first and the
     variable in the environment as launch_ros does; the bare-metal unit and the compose file allow both."""
-    from hindrax_drivers.launch_xml import read_launch
-    from hindrax_drivers.process_runner import ProcessRunner
+    from hindrax_drivers.layout.launch_xml import read_launch
+    from hindrax_drivers.layout.process_runner import ProcessRunner
 
     read = read_launch(REPO / "src/hindrax_onboard/launch/pool_test.launch.xml", {},
                        find_share=lambda pkg: REPO / "src" / pkg)
@@ -362,7 +362,7 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
         assert argv[:len(p.launch_prefix) + 2] == [*p.launch_prefix, "/opt/x/" + p.executable, "--ros-args"]
     assert "LimitNICE=-5" in (REPO / "docker/hindrax-bare-metal.service").read_text()
     assert "nice: 25" in (REPO / "docker/compose.yaml").read_text()
-    from hindrax_drivers.scheduling import PRIORITY_ENV, PRIORITY_RANGE, requested_priority
+    from hindrax_drivers.process.scheduling import PRIORITY_ENV, PRIORITY_RANGE, requested_priority
     priority = {p.executable: requested_priority(dict(p.env)) for p in read}
     assert {e for e, v in priority.items() if v} == set(prefixed), priority
     assert priority["output_guard_node"] > priority["supervisor_node"] > priority["actuation_node"] \
@@ -385,7 +385,7 @@ def test_the_vehicle_launches_keep_the_vehicle_files_safety_timeouts(rel, given)
     the ESC, the guard and the supervisor take esc.heartbeat_timeout_s, esc.guard_heartbeat_timeout_s,
     esc.watchdog_timeout_s and supervisor.rate_window_s from the vehicle file (0.2 s, not bringup's 2 s)."""
     from hindrax_drivers.config import flatten
-    from hindrax_drivers.launch_xml import read_launch
+    from hindrax_drivers.layout.launch_xml import read_launch
 
     processes = read_launch(REPO / "src" / rel, given, find_share=lambda pkg: REPO / "src" / pkg)
     seen: set[str] = set()

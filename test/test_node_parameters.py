@@ -21,7 +21,7 @@ from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.config import OPTIONAL_PREFIXES, SCHEMA
 from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.config.node_parameters import select_schema_keys
-from hindrax_drivers.esc_state import esc_state_values
+from hindrax_drivers.node_support.esc_state import esc_state_values
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_drivers.tf.static_tf import TF_KEYS
@@ -151,7 +151,8 @@ def test_read_only_and_invalid_changes_are_refused_with_a_reason_and_valid_ones_
 
 def test_a_writable_vehicle_key_cannot_be_declared_without_the_arm_lock():
     """Every key a node applies while running is read-only while armed: declaring one without a ``locked`` check (the
-    ESC's :class:`~hindrax_drivers.esc_state.ArmedWatch`) is a programming error, caught before any parameter exists."""
+    ESC's :class:`~hindrax_drivers.node_support.esc_state.ArmedWatch`) is a programming error, caught before any
+    parameter exists."""
     from hindrax_drivers.config.node_parameters import declare_vehicle_parameters
 
     with ros_context() as ctx:

@@ -89,8 +89,8 @@ def _defines_an_executor(tree: ast.Module) -> bool:
 
 #: (module, function) that take a message outside an executor, each with why it is not a second input path.
 TAKERS = {
-    ("hindrax_drivers/liveness.py", "fresh"): "before a stale verdict only, the beats already waiting on the same "
-    "subscription, through the same identity check and handler (a starved receiver's tick can run before the "
+    ("hindrax_drivers/node_support/liveness.py", "fresh"): "before a stale verdict only, the beats already waiting on "
+    "the same subscription, through the same identity check and handler (a starved receiver's tick can run before the "
     "callbacks of beats that arrived meanwhile), aged from their send stamps (docs/architecture.md §8)",
 }
 

@@ -1,12 +1,12 @@
 """A pool day of the installed launch layout on emulated devices (docs/deployment.md §9).
 
 The vehicle runs ``ros2 launch hindrax_onboard pool_test.launch.xml``; ``launch`` is not installable here, so the
-process list is read from the *installed* launch file (hindrax_drivers/launch_xml.py; test/test_launch_files.py
+process list is read from the *installed* launch file (hindrax_drivers/layout/launch_xml.py; test/test_launch_files.py
 checks that it is the list the file declares) and started, executable by executable from the colcon install
-(test/conftest.py), by the project's runner (hindrax_drivers/process_runner.py: launch_ros's command line, respawn
-after the file's delay, SIGINT on stop). The devices are emulated (hindrax_drivers/emulated_devices.py): DVL-75 and
-Ping1D on pseudo-terminals behind stable paths, the I2C devices on an emulated bus every I2C driver process reaches
-through a socket.
+(test/conftest.py), by the project's runner (hindrax_drivers/layout/process_runner.py: launch_ros's command line,
+respawn after the file's delay, SIGINT on stop). The devices are emulated (hindrax_drivers/layout/emulated_devices.py):
+DVL-75 and Ping1D on pseudo-terminals behind stable paths, the I2C devices on an emulated bus every I2C driver process
+reaches through a socket.
 
 ``test_pool_day``: the I2C bus is absent at the start (the MS5837 and ICM-20948 drivers keep running and report it,
 then pick the bus up); a driver and the recorder are killed mid-run and respawned (the DVL topic comes back, the
@@ -34,9 +34,9 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, Imu, Range
 
 from hindrax_drivers.config import load_config
-from hindrax_drivers.emulated_devices import EmulatedDevices
-from hindrax_drivers.launch_xml import read_launch
-from hindrax_drivers.process_runner import ProcessRunner
+from hindrax_drivers.layout.emulated_devices import EmulatedDevices
+from hindrax_drivers.layout.launch_xml import read_launch
+from hindrax_drivers.layout.process_runner import ProcessRunner
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
@@ -56,7 +56,8 @@ class Day:
         procs = read_launch(install.share(launch_file.split("/")[0]) / "launch" / launch_file.split("/")[1],
                             arguments, find_share=install.share)
         self.processes = [p for p in procs if only is None or set(p.node_names) & set(only)]
-        # node -> the label of the process that runs it (a composed process runs several: hindrax_drivers.composition)
+        # node -> the label of the process that runs it (a composed process runs several:
+        # hindrax_drivers.layout.composition)
         self.process_of = {n: p.label for p in self.processes for n in p.node_names}
         self.runner = ProcessRunner(
             self.processes, command=lambda p: [str(install.executable(p.package, p.executable))],
@@ -230,11 +231,11 @@ def test_esc_starts_without_its_bus(colcon_install, tmp_path):
             dev.start_i2c()
             day.wait(lambda: day.seen("hindrax/esc_pca9685", t_bus, level=0), "ESC OK once the bus is there")
             assert day.state("esc").starts == 1
-            widths = [dev.pca9685.pulse_width_us(ch) for ch in channels]
+            widths = [dev.emulators["pca9685"].pulse_width_us(ch) for ch in channels]
             # the installed file's oscillator is not measured: no pulse on any thruster, and the reference pulse
             # (the configured neutral, to one PCA9685 count: 1.24 us at 200 Hz, docs/devices.md §5.1) on channel 15
             assert len(widths) == 8 and widths == [0.0] * 8, widths
-            assert abs(dev.pca9685.pulse_width_us(15) - neutral_us) < 1.3
+            assert abs(dev.emulators["pca9685"].pulse_width_us(15) - neutral_us) < 1.3
 
 
 # ------------------------------------------------------------------------------------- the README's pool day
@@ -520,7 +521,7 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     between ESC heartbeats, as this probe sees them, go into the failure message."""
     from geometry_msgs.msg import WrenchStamped
 
-    from hindrax_drivers.liveness import heartbeat_qos
+    from hindrax_drivers.node_support.liveness import heartbeat_qos
     from hindrax_msgs.msg import Heartbeat, ThrusterPwm
     from hindrax_msgs.srv import SetArmed
 

@@ -60,7 +60,7 @@ procs = {
                                 env=env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTRTPS_DEFAULT_PROFILES_FILE="")),
 }
 
-from hindrax_drivers.proc_sockets import child_pids as children, udp_sockets
+from hindrax_drivers.process.proc_sockets import child_pids as children, udp_sockets
 
 def udp(pid):
     return sorted({a for a, _ in udp_sockets(pid)})

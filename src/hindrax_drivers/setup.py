@@ -38,11 +38,11 @@ NODES = {
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
 NODES = {name: mod for name, mod in NODES.items()
          if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
-#: composed processes (hindrax_drivers.composition: several nodes, one process):
+#: composed processes (hindrax_drivers.layout.composition: several nodes, one process):
 #: console script -> module:function
 GROUPS = {
-    "sensors_node": "hindrax_drivers.composition:sensors_main",
-    "actuation_node": "hindrax_drivers.composition:actuation_main",
+    "sensors_node": "hindrax_drivers.layout.composition:sensors_main",
+    "actuation_node": "hindrax_drivers.layout.composition:actuation_main",
     # not a node: the systemd units' ExecStopPost= (docker/hindrax*.service), no ROS
     "outputs_off": "hindrax_drivers.guard.outputs_off:main",
 }

@@ -1,5 +1,5 @@
 """Helpers for tests and benchmarks: waiting on conditions, isolated rclpy contexts (both from
-:mod:`hindrax_drivers.conditions`, which production code uses), child processes, configuration parameters.
+:mod:`hindrax_drivers.process.conditions`, which production code uses), child processes, configuration parameters.
 
 Tests wait on conditions with a deadline, never on fixed sleeps (README, "Tests"). Every helper here
 keeps ROS 2 traffic on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and in the ROS_DOMAIN_ID the
@@ -23,19 +23,18 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from hindrax_msgs.msg import ThrusterPwm
 
-from .dds_transport import loopback_transport
-from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
+from .process.dds_transport import loopback_transport
+from .process.conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 from .config import default_config_path, load_config
-from .liveness import HEARTBEAT_NODES, HeartbeatPublisher, heartbeat_qos
+from .node_support.liveness import HEARTBEAT_NODES, HeartbeatPublisher, heartbeat_qos
 
 __all__ = ["AllocationStandIn", "ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", "child_process",
-           "interrupt",
-           "config_parameters", "python_executable", "ros_context", "wait_until"]
+           "interrupt", "config_parameters", "python_executable", "ros_context", "wait_until"]
 
 
 def child_env(**extra: str) -> dict[str, str]:
     """Environment for a child Python process of this venv: loopback discovery over the vehicle's loopback UDP
-    transport (:func:`~hindrax_drivers.dds_transport.loopback_transport`), same domain, extras."""
+    transport (:func:`~hindrax_drivers.process.dds_transport.loopback_transport`), same domain, extras."""
     env = dict(os.environ)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     loopback_transport(env)
@@ -111,13 +110,13 @@ class SafetyHeartbeats:
 
     Publishes OK ``supervisor/heartbeat`` and ``guard/heartbeat`` at 20 Hz from a timer on ``node`` (steady clock),
     each from a node of its own with the real publisher's name (``supervisor``, ``output_guard``:
-    :data:`~hindrax_drivers.liveness.HEARTBEAT_NODES`, created in ``node``'s context the first time that heartbeat is
-    published) and with ``boot_id``/``seq`` (:class:`~hindrax_drivers.liveness.HeartbeatPublisher`), as the
-    receivers' identity check requires. Set :attr:`supervisor` / :attr:`guard` to ``None`` (silent), ``""`` (OK) or
-    a reason (ERROR) to emulate a dead, healthy or tripped peer. The peer nodes are destroyed with ``node``
-    (:meth:`destroy`, run by ``node.destroy_node()``): left alive, they would hold their context's participant and
-    count as a second live publisher for the next test in the same process.
-    """
+    :data:`~hindrax_drivers.node_support.liveness.HEARTBEAT_NODES`, created in ``node``'s context the first time that
+    heartbeat is published) and with ``boot_id``/``seq``
+    (:class:`~hindrax_drivers.node_support.liveness.HeartbeatPublisher`), as the receivers' identity check requires. Set
+    :attr:`supervisor` / :attr:`guard` to ``None`` (silent), ``""`` (OK) or a reason (ERROR) to emulate a dead, healthy
+    or tripped peer. The peer nodes are destroyed with ``node`` (:meth:`destroy`, run by ``node.destroy_node()``): left
+    alive, they would hold their context's participant and count as a second live publisher for the next test in the
+    same process."""
 
     def __init__(self, node, supervisor: str | None = "", guard: str | None = "", rate_hz: float = 20.0) -> None:
         self._node = node

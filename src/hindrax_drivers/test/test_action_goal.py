@@ -14,7 +14,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.task import Future
 from rclpy.time import Time
 
-from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender, send_goal_response_type
+from hindrax_drivers.node_support.action_goal import GoalNotAnswered, GoalSender, send_goal_response_type
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.action import RunIdentification
 

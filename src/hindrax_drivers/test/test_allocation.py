@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from hindrax_drivers.allocation.allocator import AXIS_NAMES, InvalidWrenchError, ThrustAllocator
 from hindrax_drivers.allocation.from_config import allocation_matrix_from_config
 from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
-from hindrax_drivers.allocation.thrust_curve import ThrustCurve, hindrax_default_curve, point_reflection
+from hindrax_drivers.base.thrust_curve import ThrustCurve, hindrax_default_curve, point_reflection
 
 COS55 = math.cos(math.radians(55.0))
 SIN55 = math.sin(math.radians(55.0))

@@ -13,7 +13,7 @@ from rclpy.parameter import Parameter
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.esc_state import esc_state_values
+from hindrax_drivers.node_support.esc_state import esc_state_values
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 

@@ -1,4 +1,4 @@
-"""Composed processes (hindrax_drivers.composition): each group's nodes exist and keep their own names in one
+"""Composed processes (hindrax_drivers.layout.composition): each group's nodes exist and keep their own names in one
 process (the installed group executable), a group ends cleanly on SIGINT, and a bad node list is refused."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import rclpy
 
-from hindrax_drivers.composition import GROUPS, NODE_CLASSES, main, node_factories
+from hindrax_drivers.layout.composition import GROUPS, NODE_CLASSES, main, node_factories
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, ros_context, wait_until
 

@@ -1,4 +1,4 @@
-"""The vehicle's DDS transport (hindrax_drivers.dds_transport): UDPv4 on 127.0.0.1 only, no shared memory.
+"""The vehicle's DDS transport (hindrax_drivers.process.dds_transport): UDPv4 on 127.0.0.1 only, no shared memory.
 
 Why the vehicle processes run with ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT, not LOCALHOST: under LOCALHOST
 rmw_fastrtps puts its own shared-memory + UDP transports on every participant (Fast-DDS issue 6535's stall). The
@@ -20,12 +20,13 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.dds_transport import (ANNOUNCE_PERIOD_S, DISCOVERY_BOUND_S, PROFILE_ENV, PROFILE_FILE, RANGE_ENV,
-                                          TOPSIDE_PROFILE_FILE, loopback_transport, profile_path, wait_discovered)
-from hindrax_drivers.emulated_devices import EmulatedDevices
-from hindrax_drivers.launch_xml import read_launch
-from hindrax_drivers.process_runner import ProcessRunner
-from hindrax_drivers.proc_sockets import child_pids, reachable_from_network, udp_sockets
+from hindrax_drivers.process.dds_transport import (ANNOUNCE_PERIOD_S, DISCOVERY_BOUND_S, PROFILE_ENV, PROFILE_FILE,
+                                                   RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path,
+                                                   wait_discovered)
+from hindrax_drivers.layout.emulated_devices import EmulatedDevices
+from hindrax_drivers.layout.launch_xml import read_launch
+from hindrax_drivers.layout.process_runner import ProcessRunner
+from hindrax_drivers.process.proc_sockets import child_pids, reachable_from_network, udp_sockets
 from hindrax_drivers.testing import child_env, ros_context, wait_until
 
 REPO = Path(__file__).resolve().parents[3]

@@ -5,7 +5,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
-from hindrax_drivers.node_common import declare_frame_ids
+from hindrax_drivers.node_support.node_common import declare_frame_ids
 from hindrax_drivers.testing import ros_context
 
 pytestmark = pytest.mark.ros

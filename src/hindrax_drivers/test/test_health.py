@@ -1,11 +1,11 @@
-"""The verdict of ``hindrax health`` (hindrax_drivers/health.py): every launched node present, its status OK, the
+"""The verdict of ``hindrax health`` (hindrax_drivers/layout/health.py): every launched node present, its status OK, the
 supervisor OK; everything else listed."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from hindrax_drivers.health import Seen, assess, expectation
-from hindrax_drivers.launch_xml import read_launch
+from hindrax_drivers.layout.health import Seen, assess, expectation
+from hindrax_drivers.layout.launch_xml import read_launch
 
 REPO = Path(__file__).resolve().parents[3]
 #: the vehicle's nodes in launch order (static TF shares the sensor drivers' process, last; the allocation the

@@ -1,5 +1,5 @@
 """A heartbeat carries its sender's per-start value and a sequence, and a receiver accepts one
-publisher with the expected node name (hindrax_drivers.liveness.HeartbeatIdentity, HeartbeatPublisher). On
+publisher with the expected node name (hindrax_drivers.node_support.liveness.HeartbeatIdentity, HeartbeatPublisher). On
 simulated time the wall-clock liveliness lease does not silence a peer; its age on the graph's clock does
 (AliveAge with a graph clock; the processes: test/test_sim_clock_liveness.py)."""
 from __future__ import annotations
@@ -9,8 +9,9 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
-from hindrax_drivers.lean_cdr import Beat
-from hindrax_drivers.liveness import AliveAge, HeartbeatIdentity, HeartbeatPublisher, heartbeat_ok, simulated_now_s
+from hindrax_drivers.cdr.lean_cdr import Beat
+from hindrax_drivers.node_support.liveness import (AliveAge, HeartbeatIdentity, HeartbeatPublisher, heartbeat_ok,
+                                                   simulated_now_s)
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.msg import Heartbeat
 
@@ -252,7 +253,7 @@ def test_publisher_node_names_is_what_rclpy_s_endpoint_query_names():
     """The safety ticks' lean graph query (no TopicEndpointInfo per endpoint) names the same publishers as rclpy's
     ``get_publishers_info_by_topic``, for a relative, an absolute and a remapped topic, a namespaced receiver
     included, and follows a publisher leaving."""
-    from hindrax_drivers.liveness import publisher_node_names
+    from hindrax_drivers.node_support.liveness import publisher_node_names
 
     with ros_context() as ctx:
         a = rclpy.create_node("supervisor", context=ctx)
@@ -282,7 +283,7 @@ def test_the_graph_is_asked_on_dds_events_not_at_every_check():
     """PublisherNames asks the graph after a DDS event on the subscription (a publisher matched, or one of an
     incompatible QoS: rclpy's default QoS offers an infinite lease), for SETTLE_S after it, and at least every
     BACKSTOP_S; between, a check reuses the last answer. Every new publisher is named within the settle window."""
-    from hindrax_drivers.liveness import BACKSTOP_S, SETTLE_S, PublisherNames, heartbeat_qos
+    from hindrax_drivers.node_support.liveness import BACKSTOP_S, SETTLE_S, PublisherNames, heartbeat_qos
 
     t = {"now": 100.0}
     with ros_context() as ctx, ros_context() as other:
@@ -322,7 +323,7 @@ def test_the_graph_is_asked_on_dds_events_not_at_every_check():
 def test_tick_gaps_report_the_longest_gap_and_where_the_cpu_went():
     """TickGaps keeps the longest gap between two ticks with the ticking thread's and the process's CPU time in it,
     reports it in ms and starts again."""
-    from hindrax_drivers.liveness import TickGaps
+    from hindrax_drivers.node_support.liveness import TickGaps
 
     c = {"wall": 10.0, "thread": 1.0, "process": 2.0}
     gaps = TickGaps(lambda: c["wall"], lambda: c["thread"], lambda: c["process"])

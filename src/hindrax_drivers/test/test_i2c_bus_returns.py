@@ -12,7 +12,7 @@ from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import FluidPressure, Imu
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.emulated_devices import EmulatedDevices
+from hindrax_drivers.layout.emulated_devices import EmulatedDevices
 from hindrax_drivers.icm20948.node import Icm20948Node
 from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until

@@ -6,27 +6,19 @@ temperature 1/333.87 degC; the magnetometer truth is given in the accel/gyro fra
 it in the AK09916's own axes (Y and Z inverted, docs/devices.md §4.7), so equality checks the axis flip.
 """
 import math
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.executors import SingleThreadedExecutor
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.parameter import Parameter
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
-from hindrax_drivers.config import default_config_path
 from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.icm20948.core import STILL_STD_FACTOR, GyroBias
 from hindrax_drivers.icm20948.node import Icm20948Node
-from hindrax_drivers.node_common import unbatch_raw
-from hindrax_drivers.testing import child_env, child_process, config_parameters, interrupt, ros_context, wait_until
+from hindrax_drivers.node_support.node_common import unbatch_raw
+from hindrax_drivers.testing import config_parameters, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
 
@@ -56,6 +48,8 @@ def live_truth(t):
 
 
 class Rig:
+    """Emulator on the bus, node and probe subscriptions (the ``rig`` fixture, conftest.py, adds the executor)."""
+
     def __init__(self, ctx, truth=constant_truth, overrides=None, emulator_cls=Icm20948Emulator, clock=None,
                  sim_time=False, attach=True):
         kwargs = {"clock": clock} if clock is not None else {}
@@ -68,29 +62,18 @@ class Rig:
         params = config_parameters(settings)
         if sim_time:
             params.append(Parameter("use_sim_time", value=True))
-        self.node = Icm20948Node(bus=self.bus, context=ctx, parameter_overrides=params)
-        self.probe = rclpy.create_node("probe", context=ctx)
-        self.ex = SingleThreadedExecutor(context=ctx)
-        self.ex.add_node(self.node)
-        self.ex.add_node(self.probe)
-        self.imu, self.mag, self.temperature, self.raw, self.diag = [], [], [], [], []
-        self.probe.create_subscription(Imu, "imu/data_raw", self.imu.append, 200)
-        self.probe.create_subscription(MagneticField, "imu/mag", self.mag.append, 200)
-        self.probe.create_subscription(Temperature, "imu/temperature", self.temperature.append, 200)
+        self.start(ctx, Icm20948Node(bus=self.bus, context=ctx, parameter_overrides=params))
+        self.imu = self.collect(Imu, "imu/data_raw", 200)
+        self.mag = self.collect(MagneticField, "imu/mag", 200)
+        self.temperature = self.collect(Temperature, "imu/temperature", 200)
+        self.raw = []
         self.probe.create_subscription(RawDeviceData, "raw/icm20948", lambda m: self.raw.extend(unbatch_raw(m)),
                                        1000)  # a poll's transactions arrive in one message
-        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diag.append, 10)
 
     def attach(self, settings=None):
         self.bus.add_device(ADDRESS, self.emu)
         if (settings or self.settings).get("sensors.icm20948.magnetometer_mode") == "bypass":
             self.bus.add_device(p.AK09916_ADDRESS, self.emu.aux_port)
-
-    def spin(self):
-        self.ex.spin_once(timeout_sec=0.01)
-
-    def wait(self, predicate, timeout=10.0, message="condition"):
-        return wait_until(predicate, timeout, self.spin, message)
 
     def wait_imu(self, n, timeout=10.0):
         start = len(self.imu)
@@ -99,24 +82,6 @@ class Rig:
 
     def diag_values(self):
         return {kv.key: kv.value for kv in self.node.diag.status(self.node._diag_extra()).values}
-
-    def close(self):
-        self.ex.shutdown()
-        self.probe.destroy_node()
-        self.node.destroy_node()
-
-
-@pytest.fixture
-def rig():
-    rigs = []
-    with ros_context() as ctx:
-        def make(*args, **kwargs):
-            r = Rig(ctx, *args, **kwargs)
-            rigs.append(r)
-            return r
-        yield make
-        for r in rigs:
-            r.close()
 
 
 def stamp_ns(m):
@@ -429,42 +394,17 @@ def test_gyro_bias_estimator_thresholds():
 def test_use_sim_time_stamps_follow_the_clock(rig):
     sim = {"t": 500.0}
     r = rig(clock=lambda: sim["t"], sim_time=True)
-    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
-
-    def tick():  # a simulator publishing /clock in 2 ms steps, driving the emulator with the same time
-        sim["t"] += 0.002
-        sec = int(sim["t"])
-        msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = sec, int(round((sim["t"] - sec) * 1e9))
-        clock_pub.publish(msg)
-        r.spin()
-
+    tick = r.clock_ticker(sim)  # /clock in 2 ms steps, driving the emulator with the same time
     wait_until(lambda: len(r.imu) >= 5, 20, tick, "Imu under sim time")
     stamp_s = r.imu[-1].header.stamp.sec + r.imu[-1].header.stamp.nanosec * 1e-9
     assert 500.0 < stamp_s <= sim["t"] + 1e-6
     assert np.allclose(vec(r.imu[-1].linear_acceleration), ACCEL, atol=ACCEL_LSB / 2 + 1e-9)
 
 
-def test_runs_as_a_process_and_reports_a_missing_bus():
+def test_runs_as_a_process_and_reports_a_missing_bus(runs_without_its_bus):
     """``python -m hindrax_drivers.icm20948.node --ros-args --params-file hindrax.yaml`` without the configured
     /dev/i2c-N: the node stays up, reports it in /diagnostics and exits 0 on SIGINT."""
-    repo = Path(__file__).resolve().parents[3]
-    cmd = [sys.executable, "-m", "hindrax_drivers.icm20948.node", "--ros-args", "--params-file",
-           str(default_config_path()), "-p", "sensors.icm20948.i2c_bus:=31"]
-    assert not os.path.exists("/dev/i2c-31")
-    with child_process(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
-        with ros_context() as ctx:
-            probe = rclpy.create_node("probe", context=ctx)
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(probe)
-            got = []
-            probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
-            wait_until(lambda: any("cannot open I2C bus 31" in s.message and s.level == DiagnosticStatus.ERROR
-                                   for a in got for s in a.status), 20, lambda: ex.spin_once(timeout_sec=0.05),
-                       "bus error in diagnostics")
-            ex.shutdown()
-            probe.destroy_node()
-        assert interrupt(proc, 10) == 0
+    runs_without_its_bus("icm20948")
 
 
 def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):

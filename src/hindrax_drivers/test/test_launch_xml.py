@@ -1,4 +1,4 @@
-"""The launch XML reader (hindrax_drivers/launch_xml.py): what ros2 launch would start, or a clear refusal.
+"""The launch XML reader (hindrax_drivers/layout/launch_xml.py): what ros2 launch would start, or a clear refusal.
 
 Expected commands are written out by hand from launch_ros 0.26's Node (``--ros-args``, ``-r __node:=``, one
 ``--params-file`` per ``<param from>`` and per run of ``<param name value>``, then ``-r from:=to``)."""
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_drivers.launch_xml import LaunchFileError, read_launch
+from hindrax_drivers.layout.launch_xml import LaunchFileError, read_launch
 
 
 def write(tmp_path: Path, name: str, text: str) -> Path:

@@ -1,4 +1,4 @@
-"""Lean CDR (hindrax_drivers.lean_cdr): what rosbags encodes, rclpy's own typesupport decodes to the same message,
+"""Lean CDR (hindrax_drivers.cdr.lean_cdr): what rosbags encodes, rclpy's own typesupport decodes to the same message,
 and what rclpy serialises, rosbags decodes to the same fields. rclpy's deserialiser is the reference here, not code
 of this project."""
 import math
@@ -8,7 +8,7 @@ import pytest
 from geometry_msgs.msg import WrenchStamped
 from rclpy.serialization import deserialize_message, serialize_message
 
-from hindrax_drivers.lean_cdr import cdr_decoder, cdr_encoder, lean_class, thruster_pwm_cdr, wrench_stamped_cdr
+from hindrax_drivers.cdr.lean_cdr import cdr_decoder, cdr_encoder, lean_class, thruster_pwm_cdr, wrench_stamped_cdr
 from hindrax_msgs.msg import ThrusterPwm
 
 
@@ -53,7 +53,7 @@ def test_bytes_that_are_not_the_type_raise_and_a_non_message_is_refused():
 def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
     from sensor_msgs.msg import Imu
 
-    from hindrax_drivers.lean_cdr import imu_cdr
+    from hindrax_drivers.cdr.lean_cdr import imu_cdr
 
     acc, gyr = np.array([0.1, -0.2, 9.81]), np.array([1e-3, -2e-3, 0.5])
     acc_cov, gyr_cov = np.diag([1e-4, 2e-4, 3e-4]), np.diag([4e-6, 5e-6, 6e-6])
@@ -69,7 +69,7 @@ def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
 def test_the_esc_state_encoded_by_rosbags_is_the_status_rclpy_would_publish():
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.lean_cdr import diagnostic_status_cdr
+    from hindrax_drivers.cdr.lean_cdr import diagnostic_status_cdr
 
     ref = DiagnosticStatus(level=DiagnosticStatus.ERROR, name="hindrax/esc", message="unknown", hardware_id="esc",
                            values=[KeyValue(key="output_state", value="0"), KeyValue(key="armed", value="false")])
@@ -98,7 +98,7 @@ def test_a_heartbeat_packed_at_fixed_offsets_is_the_message_rclpy_would_publish(
     serialiser: both must agree with rclpy's own, both ways."""
     from hindrax_msgs.msg import Heartbeat
 
-    from hindrax_drivers.lean_cdr import heartbeat_cdr, read_heartbeat
+    from hindrax_drivers.cdr.lean_cdr import heartbeat_cdr, read_heartbeat
 
     ref = Heartbeat(**fields)
     assert deserialize_message(heartbeat_cdr(**fields), Heartbeat) == ref
@@ -111,7 +111,7 @@ def test_bytes_that_are_not_a_heartbeat_read_as_none():
     the receiver rejects it and does not count the peer as heard)."""
     from hindrax_msgs.msg import Heartbeat
 
-    from hindrax_drivers.lean_cdr import read_heartbeat
+    from hindrax_drivers.cdr.lean_cdr import read_heartbeat
 
     good = serialize_message(Heartbeat(boot_id=1, seq=1, message="ok"))
     assert read_heartbeat(good) is not None
@@ -129,8 +129,8 @@ def test_a_heartbeat_says_ok_only_at_level_ok():
 
     from hindrax_msgs.msg import Heartbeat
 
-    from hindrax_drivers.lean_cdr import heartbeat_cdr, read_heartbeat
-    from hindrax_drivers.liveness import heartbeat_ok
+    from hindrax_drivers.cdr.lean_cdr import heartbeat_cdr, read_heartbeat
+    from hindrax_drivers.node_support.liveness import heartbeat_ok
 
     for level, ok in ((Heartbeat.OK, True), (1, False), (Heartbeat.ERROR, False), (3, False), (255, False)):
         data = heartbeat_cdr(1, 1, 0, level, "x")
@@ -143,7 +143,7 @@ def test_a_heartbeat_says_ok_only_at_level_ok():
 def test_prepare_generates_the_code_when_asked_not_at_the_first_message(monkeypatch):
     """rosbags generates a type's code at its first message (80 ms of CPU here for the first ThrusterPwm); a node
     asks for it while it starts (lean_cdr.prepare), so that no tick of its executor pays it."""
-    from hindrax_drivers import lean_cdr
+    from hindrax_drivers.cdr import lean_cdr
 
     store = lean_cdr._typestore()
     asked = []

@@ -5,26 +5,18 @@ configured water density and gravity (docs/devices.md §3.6), within the device 
 of P (30BA: 0.1 mbar = 10 Pa, 02BA: 0.01 mbar = 1 Pa) and of TEMP (0.01 degC) (docs/devices.md §3.4, §3.8).
 """
 import math
-import os
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, Temperature
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.config import default_config_path
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
 from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.testing import child_env, child_process, config_parameters, interrupt, ros_context, wait_until
+from hindrax_drivers.testing import config_parameters, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
 
@@ -38,7 +30,7 @@ TEMP_LSB_C = 0.01
 
 
 class Rig:
-    """Node + emulator + probe subscriptions in one executor."""
+    """Emulator on the bus, node and probe subscriptions (the ``rig`` fixture, conftest.py, adds the executor)."""
 
     def __init__(self, ctx, truth, emu_variant="30BA", overrides=None, bus_fault_rate=0.0, clock=None,
                  sim_time=False, **emu_kwargs):
@@ -48,17 +40,11 @@ class Rig:
         params = config_parameters({"sensors.ms5837.rate_hz": 25.0, **(overrides or {})})
         if sim_time:
             params.append(Parameter("use_sim_time", value=True))
-        self.node = Ms5837Node(bus=self.bus, context=ctx, parameter_overrides=params)
-        self.probe = rclpy.create_node("probe", context=ctx)
-        self.ex = SingleThreadedExecutor(context=ctx)
-        self.ex.add_node(self.node)
-        self.ex.add_node(self.probe)
-        self.pressure, self.temperature, self.depth, self.raw, self.diag = [], [], [], [], []
-        self.probe.create_subscription(FluidPressure, "pressure/fluid_pressure", self.pressure.append, 50)
-        self.probe.create_subscription(Temperature, "pressure/temperature", self.temperature.append, 50)
-        self.probe.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.depth.append, 50)
-        self.probe.create_subscription(RawDeviceData, "raw/ms5837", self.raw.append, 500)
-        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diag.append, 10)
+        self.start(ctx, Ms5837Node(bus=self.bus, context=ctx, parameter_overrides=params))
+        self.pressure = self.collect(FluidPressure, "pressure/fluid_pressure", 50)
+        self.temperature = self.collect(Temperature, "pressure/temperature", 50)
+        self.depth = self.collect(PoseWithCovarianceStamped, "pressure/depth", 50)
+        self.raw = self.collect(RawDeviceData, "raw/ms5837", 500)
         self.zero = self.probe.create_client(Trigger, "pressure/zero_depth")
         self._esc = None  # the ESC's latched esc/output_state, made by esc_state()
 
@@ -67,7 +53,7 @@ class Rig:
         for the node to take it."""
         from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-        from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+        from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
         if self._esc is None:
             self._esc = self.probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
         msg = DiagnosticStatus(values=[KeyValue(key="output_state", value=str(output_state)),
@@ -76,35 +62,11 @@ class Rig:
         self._esc.publish(msg)
         self.wait(lambda: self.node.armed.seen, 10, "ESC state delivered")
 
-    def spin(self):
-        self.ex.spin_once(timeout_sec=0.01)
-
-    def wait(self, predicate, timeout=10.0, message="condition"):
-        return wait_until(predicate, timeout, self.spin, message)
-
     def wait_messages(self, n, timeout=10.0):
         start = len(self.pressure)
         self.wait(lambda: len(self.pressure) >= start + n and len(self.depth) >= start + n
                   and len(self.temperature) >= start + n, timeout, f"{n} pressure messages")
         return self.pressure[start:], self.temperature[start:], self.depth[start:]
-
-    def close(self):
-        self.ex.shutdown()
-        self.probe.destroy_node()
-        self.node.destroy_node()
-
-
-@pytest.fixture
-def rig():
-    rigs = []
-    with ros_context() as ctx:
-        def make(*args, **kwargs):
-            r = Rig(ctx, *args, **kwargs)
-            rigs.append(r)
-            return r
-        yield make
-        for r in rigs:
-            r.close()
 
 
 def expected_depth_m(pressure_pa, surface_pa=SURFACE_PA):
@@ -138,7 +100,7 @@ def test_published_values_equal_truth_within_quantisation(rig, emu_variant, conf
     assert r.emu.zero_reads == 0  # every ADC read came after the conversion time
     assert sleeps == []
     # The wire: D1 (0x48, OSR 4096), ADC read, D2 (0x58), ADC read, in that order (docs/devices.md §3.1).
-    from hindrax_drivers.node_common import raw_transactions  # a cycle's transactions come in one message
+    from hindrax_drivers.node_support.node_common import raw_transactions  # a cycle's transactions come in one message
 
     seq = [(d, reg) for m in r.raw for d, _address, reg, _data in raw_transactions(m)]
     write, read = RawDeviceData.DIRECTION_HOST_TO_DEVICE, RawDeviceData.DIRECTION_DEVICE_TO_HOST
@@ -449,16 +411,7 @@ def test_use_sim_time_stamps_and_timers_follow_the_clock(rig):
     # ended at a small one read early in the emulator's time (seen once in a loaded fresh clone)
     r = rig(lambda t: (115000.0, 14.0), "30BA", clock=_node_clock(holder, sim), sim_time=True)
     holder["node"] = r.node
-    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
-
-    def tick():  # a simulator publishing /clock in 2 ms steps, driving the emulator with the same time
-        sim["t"] += 0.002
-        sec = int(sim["t"])
-        msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = sec, int(round((sim["t"] - sec) * 1e9))
-        clock_pub.publish(msg)
-        r.spin()
-
+    tick = r.clock_ticker(sim)
     wait_until(lambda: len(r.pressure) >= 1, 20, tick, "pressure under sim time")
     # counted from the first reading on: a cycle started before the node's first /clock (its time still 0) may read
     # early once, a start-up race of the test's clock, not a wait measured in wall time
@@ -485,16 +438,7 @@ def test_stamp_is_the_time_of_validity_of_the_pressure(rig):
                        # the synthetic ramp is 10 m/s of depth: beyond the vehicle's physics the gate holds to
                        "sensors.ms5837.max_depth_rate_m_s": 20.0, "sensors.ms5837.max_depth_m": 300.0})
     holder["node"] = r.node
-    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
-
-    def tick():
-        sim["t"] += 0.002
-        sec = int(sim["t"])
-        msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = sec, int(round((sim["t"] - sec) * 1e9))
-        clock_pub.publish(msg)
-        r.spin()
-
+    tick = r.clock_ticker(sim)
     wait_until(lambda: len(r.pressure) >= 4, 20, tick, "pressure under sim time")
     for m in r.pressure[1:]:
         stamp_s = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
@@ -502,23 +446,7 @@ def test_stamp_is_the_time_of_validity_of_the_pressure(rig):
         assert stamp_s - sampled_s == pytest.approx(0.5 * 0.009, abs=0.0002)
 
 
-def test_runs_as_a_process_and_reports_a_missing_bus():
+def test_runs_as_a_process_and_reports_a_missing_bus(runs_without_its_bus):
     """``python -m hindrax_drivers.ms5837.node --ros-args --params-file hindrax.yaml`` on a machine without the
     configured /dev/i2c-N: the node stays up, reports the bus in /diagnostics, and exits 0 on SIGINT."""
-    repo = Path(__file__).resolve().parents[3]
-    cmd = [sys.executable, "-m", "hindrax_drivers.ms5837.node", "--ros-args", "--params-file",
-           str(default_config_path()), "-p", "sensors.ms5837.i2c_bus:=31"]
-    assert not os.path.exists("/dev/i2c-31")
-    with child_process(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
-        with ros_context() as ctx:
-            probe = rclpy.create_node("probe", context=ctx)
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(probe)
-            got = []
-            probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
-            wait_until(lambda: any("cannot open I2C bus 31" in s.message and s.level == DiagnosticStatus.ERROR
-                                   for a in got for s in a.status), 20, lambda: ex.spin_once(timeout_sec=0.05),
-                       "bus error in diagnostics")
-            ex.shutdown()
-            probe.destroy_node()
-        assert interrupt(proc, 10) == 0
+    runs_without_its_bus("ms5837")

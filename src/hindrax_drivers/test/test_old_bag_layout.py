@@ -6,8 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from mcap_ros2.writer import Writer
-
-from hindrax_drivers.recording import msgdefs
+from hindrax_drivers.cdr import msgdefs
 from hindrax_drivers.recording.msgtypes import from_decoded
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.replay_devices import recorded_parsed

@@ -1,4 +1,4 @@
-"""Signed operator commands (hindrax_drivers.operator_signing): MAVLink-2-style HMAC-SHA256 with a 32-byte key, a
+"""Signed operator commands (hindrax_drivers.gateway.operator_signing): MAVLink-2-style HMAC-SHA256 with a 32-byte key, a
 48-bit timestamp near the vehicle's clock, a link id, a persisted replay cache. Unsigned, wrong-key, replayed,
 re-targeted, out-of-range, ahead and stale requests are refused with one line and counted; the key file is created
 with mode 0600 and refused when others can read it. Issue 71: +k*2^48 replays, lock-outs, replays after a restart
@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hindrax_drivers.operator_signing import (AHEAD_LIMIT, KEY_BYTES, STALE_LIMIT, TIMESTAMP_MAX, OperatorKeyError,
+from hindrax_drivers.gateway.operator_signing import (AHEAD_LIMIT, KEY_BYTES, STALE_LIMIT, TIMESTAMP_MAX, OperatorKeyError,
                                               Signature, Signer, Verifier, create_key, key_path, load_key, mac,
                                               replay_path, signed_payload)
 

@@ -1,4 +1,4 @@
-"""The process runner (hindrax_drivers/process_runner.py): launch_ros's command, respawn after the delay on any
+"""The process runner (hindrax_drivers/layout/process_runner.py): launch_ros's command, respawn after the delay on any
 exit, SIGINT -> SIGTERM -> SIGKILL on stop, nothing respawned after stop.
 
 The "executables" are small Python scripts that record their argv and the signals they get."""
@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hindrax_drivers.launch_xml import NodeProcess
-from hindrax_drivers.process_runner import ProcessRunner, installed_command
+from hindrax_drivers.layout.launch_xml import NodeProcess
+from hindrax_drivers.layout.process_runner import ProcessRunner, installed_command
 from hindrax_drivers.testing import wait_until
 
 SCRIPT = r"""

@@ -3,7 +3,8 @@ message with a zero period), unpacked again by raw_transactions and by the repla
 a serial report's chunks concatenated."""
 import pytest
 
-from hindrax_drivers.node_common import RAW_BATCH_REGISTER, RAW_I2C_PERIOD_S, RawDataPublisher, raw_transactions
+from hindrax_drivers.node_support.node_common import (RAW_BATCH_REGISTER, RAW_I2C_PERIOD_S, RawDataPublisher,
+                                                      raw_transactions)
 from hindrax_drivers.recording.replay_devices import i2c_transactions
 from hindrax_msgs.msg import RawDeviceData
 
@@ -141,7 +142,7 @@ def test_truncated_batch_is_an_error():
 
 
 def test_unbatch_raw_gives_one_message_per_transaction():
-    from hindrax_drivers.node_common import unbatch_raw
+    from hindrax_drivers.node_support.node_common import unbatch_raw
 
     node = _Node()
     raw = RawDataPublisher(node, "icm20948")

@@ -16,7 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 
-from hindrax_drivers.conditions import ConditionTimeout
+from hindrax_drivers.process.conditions import ConditionTimeout
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.recover import is_complete, iter_file_records, recover_bag

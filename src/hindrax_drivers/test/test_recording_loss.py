@@ -12,7 +12,7 @@ from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from hindrax_drivers.conditions import ConditionTimeout
+from hindrax_drivers.process.conditions import ConditionTimeout
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.recorder_node import RecorderNode
 from hindrax_drivers.testing import ros_context, wait_until

@@ -16,7 +16,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
-from hindrax_drivers.conditions import ConditionTimeout
+from hindrax_drivers.process.conditions import ConditionTimeout
 from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
 from hindrax_msgs.msg import RawDeviceData

@@ -11,8 +11,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-
-from hindrax_drivers.recording import msgdefs
+from hindrax_drivers.cdr import msgdefs
 from hindrax_drivers.recording.qos import (INFINITE_NS, default_profile, duration_to_dict,
                                            playback_profile, profile_from_rclpy, profiles_from_yaml,
                                            profiles_to_yaml, recorder_policies, subscription_policies)

@@ -13,8 +13,7 @@ from geometry_msgs.msg import WrenchStamped
 from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Imu
-
-from hindrax_drivers.recording import msgdefs
+from hindrax_drivers.cdr import msgdefs
 from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.recording.qos import default_profile, profiles_from_yaml
 from hindrax_drivers.recording.reader import BagReader

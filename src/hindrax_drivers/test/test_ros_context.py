@@ -5,7 +5,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import Empty
 
-from hindrax_drivers.conditions import destroy_nodes_of
+from hindrax_drivers.process.conditions import destroy_nodes_of
 from hindrax_drivers.testing import ros_context, wait_until
 
 TOPIC = "ros_context_test/held"

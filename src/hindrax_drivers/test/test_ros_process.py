@@ -12,8 +12,8 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from hindrax_drivers.config import ConfigError
-from hindrax_drivers import ros_process
-from hindrax_drivers.ros_process import RosProcess, executor_kind, freeze_startup_heap
+from hindrax_drivers.process import ros_process
+from hindrax_drivers.process.ros_process import RosProcess, executor_kind, freeze_startup_heap
 from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
 
 pytestmark = pytest.mark.ros
@@ -192,9 +192,9 @@ from pathlib import Path
 
 from rclpy.node import Node
 
-from hindrax_drivers.conditions import wait_until
-from hindrax_drivers import ros_process
-from hindrax_drivers.node_common import run_node
+from hindrax_drivers.process.conditions import wait_until
+from hindrax_drivers.process import ros_process
+from hindrax_drivers.node_support.node_common import run_node
 
 go, mode = Path(sys.argv[1]), sys.argv[2]
 if mode == "budget":
@@ -362,7 +362,7 @@ def test_a_node_process_shuts_down_on_sigint_without_a_keyboard_interrupt_in_a_c
     ``KeyboardInterrupt`` half way through a timer callback, no context shut down under one by rclpy's handler, and so
     no rclpy FATAL traceback at a launch's Ctrl-C); the default RosProcess of a command still raises it. Then the
     signal probe: SIGINT, the clean-ups run with the context up, exit 0."""
-    import hindrax_drivers.node_common as node_common
+    import hindrax_drivers.node_support.node_common as node_common
 
     quiet, default = RosProcess([], interrupt=False), RosProcess([])
     quiet._on_signal(signal.SIGINT, None)  # a node process: recorded, nothing raised
@@ -450,7 +450,7 @@ EXIT_PROBE = r"""
 from rclpy.node import Node
 from std_msgs.msg import Empty
 
-from hindrax_drivers.node_common import run_node
+from hindrax_drivers.node_support.node_common import run_node
 
 
 class ExitProbe(Node):

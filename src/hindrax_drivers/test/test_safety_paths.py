@@ -23,8 +23,8 @@ from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.guard.core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 from hindrax_drivers.guard.node import OutputGuardNode
-from hindrax_drivers.lean_cdr import Beat
-from hindrax_drivers.liveness import AliveAge, ClockStepMonitor
+from hindrax_drivers.cdr.lean_cdr import Beat
+from hindrax_drivers.node_support.liveness import AliveAge, ClockStepMonitor
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.testing import (AllocationStandIn, SafetyHeartbeats, child_env, child_process, config_parameters,
@@ -243,7 +243,7 @@ def test_f2_without_oe_the_guard_puts_the_chip_to_sleep_over_the_bus(rig):
 def test_f2_a_second_supervisor_heartbeat_publisher_asserts_oe(rig, forger_name):
     """Issue 43 item 2: a second live publisher on supervisor/heartbeat (another name, or the supervisor's own) is a
     forged or replayed heartbeat: /OE is asserted, and released only after the forger is gone and the ESC disarmed."""
-    from hindrax_drivers.liveness import HeartbeatPublisher
+    from hindrax_drivers.node_support.liveness import HeartbeatPublisher
 
     r = rig(guard=True)
     r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "guard released /OE at neutral")

@@ -1,4 +1,4 @@
-"""Real-time scheduling of the safety processes (hindrax_drivers/scheduling.py, docs/deployment.md §1).
+"""Real-time scheduling of the safety processes (hindrax_drivers/process/scheduling.py, docs/deployment.md §1).
 
 Each case runs in a child interpreter: a process made real-time here would be the test runner itself. The child
 reports the policy and priority of its threads as the kernel gives them (``os.sched_getscheduler`` /
@@ -15,12 +15,12 @@ import sys
 
 import pytest
 
-from hindrax_drivers.scheduling import PRIORITY_ENV, requested_priority
+from hindrax_drivers.process.scheduling import PRIORITY_ENV, requested_priority
 from hindrax_drivers.testing import child_env, may_set_fifo
 
 CHILD = r"""
 import json, os, threading
-from hindrax_drivers.scheduling import apply_realtime_priority, describe
+from hindrax_drivers.process.scheduling import apply_realtime_priority, describe
 result = apply_realtime_priority()
 started = threading.Event(); done = threading.Event()
 def later():
@@ -129,9 +129,9 @@ def test_emulated_devices_serve_from_real_time_threads_only(tmp_path):
     import threading
 
     from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_drivers.emulated_devices import EmulatedDevices
-    from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY
-    from hindrax_drivers.conditions import ConditionTimeout
+    from hindrax_drivers.layout.emulated_devices import EmulatedDevices
+    from hindrax_drivers.process.scheduling import HARDWARE_STAND_IN_PRIORITY
+    from hindrax_drivers.process.conditions import ConditionTimeout
     from hindrax_drivers.testing import wait_until
     from hindrax_drivers.transport.socket_i2c import SocketI2CBus
 
@@ -158,8 +158,8 @@ def test_emulated_devices_serve_from_real_time_threads_only(tmp_path):
                 except ConditionTimeout:
                     raise AssertionError(f"(policy, priority) by thread: {policies()}") from None
             else:
-                wait_until(lambda: dev.dvl.scheduling_refused and dev.ping.scheduling_refused, 5, None, "refusals")
-                assert "refused" in dev.dvl.scheduling_refused
+                wait_until(lambda: all(pty.scheduling_refused for pty in dev.serial.values()), 5, None, "refusals")
+                assert all("refused" in pty.scheduling_refused for pty in dev.serial.values())
             assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the test's own thread: untouched
         finally:
             client.close()

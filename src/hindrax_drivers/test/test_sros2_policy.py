@@ -17,7 +17,7 @@ from lxml import etree
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.gateway.interface import INTERFACE
-from hindrax_drivers.sros2_policy import INTERNAL_ACTIONS, INTERNAL_SERVICES, INTERNAL_TOPICS, NODE_SERVICES, \
+from hindrax_drivers.gateway.sros2_policy import INTERNAL_ACTIONS, INTERNAL_SERVICES, INTERNAL_TOPICS, NODE_SERVICES, \
     NODE_TOPICS, TOOLS_ENCLAVE, gateway_internal_enclave, launch_enclaves, topside_enclaves
 from hindrax_tools.commands.sros2 import write_policies
 
@@ -99,7 +99,7 @@ def test_topside_estop_for_anyone_the_rest_for_the_operator_only(policies):
 
 
 def test_every_vehicle_process_has_an_enclave_with_the_internal_graph(policies):
-    from hindrax_drivers.launch_xml import ament_share, read_launch
+    from hindrax_drivers.layout.launch_xml import ament_share, read_launch
 
     processes = read_launch(ament_share("hindrax_drivers") / "launch" / "vehicle.launch.xml",
                             {"record": "true", "controller": "true"})
@@ -160,7 +160,7 @@ def governance_schema() -> etree.XMLSchema:
 
 
 def test_the_governance_validates_against_the_dds_security_schema():
-    from hindrax_drivers.sros2_policy import governance
+    from hindrax_drivers.gateway.sros2_policy import governance
 
     schema = governance_schema()
     root = etree.fromstring(governance("alpha", 3, 42).encode())
@@ -178,7 +178,7 @@ def test_the_governance_validates_against_the_dds_security_schema():
 def test_the_governance_opens_the_topside_estop_to_unauthenticated_participants_and_nothing_else():
     """The DDS Security governance (sros2's default refuses every participant without a certificate, the e-stop
     included): its rules, read from the XML."""
-    from hindrax_drivers.sros2_policy import governance
+    from hindrax_drivers.gateway.sros2_policy import governance
 
     root = etree.fromstring(governance("alpha", 3, 42).encode())
     rules = {int(r.findtext("domains/id")): r for r in root.iterfind("domain_access_rules/domain_rule")}

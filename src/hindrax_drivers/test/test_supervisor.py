@@ -19,7 +19,7 @@ from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
@@ -455,7 +455,7 @@ def test_supervisor_takes_the_latched_esc_state_and_disarms_a_tripped_arming():
 
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+    from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
 
     def state(output_state, armed):
         return DiagnosticStatus(values=[KeyValue(key="output_state", value=str(output_state)),

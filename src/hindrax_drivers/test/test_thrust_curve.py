@@ -1,4 +1,4 @@
-"""Tests of hindrax_drivers.allocation.thrust_curve ([Hindrax-Drag] eq. 1 / Table 2, docs/devices.md 5.2-5.3).
+"""Tests of hindrax_drivers.base.thrust_curve ([Hindrax-Drag] eq. 1 / Table 2, docs/devices.md 5.2-5.3).
 
 Expected values are computed here directly from the printed coefficients (plain Horner evaluation),
 from numpy.roots as an independent inverse, or taken from the reference tables.
@@ -11,15 +11,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hindrax_drivers.allocation.thrust_curve import (
-    HINDRAX_DRAG_NEGATIVE_COEFFS,
-    HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED,
-    ThrustCurve,
-    ThrustCurveError,
-    hindrax_default_curve,
-    point_reflection,
-    voltage_thrust_scale,
-)
+from hindrax_drivers.base.thrust_curve import (
+                                               HINDRAX_DRAG_NEGATIVE_COEFFS,
+                                               HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED,
+                                               ThrustCurve,
+                                               ThrustCurveError,
+                                               hindrax_default_curve,
+                                               point_reflection,
+                                               voltage_thrust_scale,
+                                               )
 
 # [Hindrax-Drag] Table 2, typed in again here (not imported) so that a typo in the module is caught.
 C4, C3, C2, C1 = -4.61e-7, 0.001794, -2.2726, 927.1827

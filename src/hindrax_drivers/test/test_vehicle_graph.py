@@ -1,12 +1,12 @@
-"""What speaks for a vehicle on a ROS graph (:mod:`hindrax_drivers.vehicle_graph`), pure: the topics a bag must not
-replay by default, and the ESCs and supervisors a graph shows beyond the caller's own."""
+"""What speaks for a vehicle on a ROS graph (:mod:`hindrax_drivers.node_support.vehicle_graph`), pure: the topics a bag
+must not replay by default, and the ESCs and supervisors a graph shows beyond the caller's own."""
 from __future__ import annotations
 
 from types import SimpleNamespace
 
 import pytest
 
-from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, \
+from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, \
     _refuse_heartbeat_endpoint, foreign_vehicle_processes, split_vehicle_topics, vehicle_topic_reason
 
 #: topics of the vehicle's launch layout that command the thrusters or vouch for a safety process

@@ -6,7 +6,7 @@ from rclpy.event_handler import EventHandler, SubscriptionEventCallbacks
 from std_msgs.msg import String
 
 from hindrax_drivers.testing import ros_context
-from hindrax_drivers.vehicle_node import VehicleNode
+from hindrax_drivers.node_support.vehicle_node import VehicleNode
 
 PARAMETER_SERVICES = {"describe_parameters", "get_parameter_types", "get_parameters",
                       "list_parameters", "set_parameters", "set_parameters_atomically"}

@@ -1,5 +1,5 @@
 """The hardware watchdog on /OE (its emulation and configuration) and the systemd watchdog pings
-of the safety processes (hindrax_drivers.transport.gpio, hindrax_drivers.sd_notify, docs/watchdog.md)."""
+of the safety processes (hindrax_drivers.transport.gpio, hindrax_drivers.process.sd_notify, docs/watchdog.md)."""
 from __future__ import annotations
 
 import math
@@ -14,7 +14,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import ConfigError, default_config_path, load_config
-from hindrax_drivers.sd_notify import SafetyNotifier, notify, stale_heartbeats, watchdog_period_s
+from hindrax_drivers.process.sd_notify import SafetyNotifier, notify, stale_heartbeats, watchdog_period_s
 from hindrax_drivers.testing import child_env, ros_context, wait_until
 from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
 
@@ -208,7 +208,7 @@ def test_44_9_a_starved_guard_ages_a_dead_peer_at_wall_speed():
     1173 ms once). The guard now counts each gap in full up to its timeout: a dead peer is stale after the same wall
     time whatever the tick rate; only a gap longer than the timeout (its own freeze, which the watchdog feed
     covers) is capped, so a live peer does not look dead the moment the guard resumes."""
-    from hindrax_drivers.liveness import AliveAge
+    from hindrax_drivers.node_support.liveness import AliveAge
 
     clock = FakeClock()
     age = AliveAge(0.2, clock=clock)  # OutputGuardNode: max_step_s = esc.guard_heartbeat_timeout_s

@@ -22,7 +22,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.config import DOFS, VehicleConfig
 
 from hindrax_onboard.identification.model.campaign_record import CampaignRecord

@@ -23,7 +23,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hindrax_drivers import devices as device_table
+from hindrax_drivers.base import devices as device_table
 from hindrax_drivers.config import VehicleConfig
 from hindrax_drivers.dvl75.emulator import DvlTruth
 from hindrax_drivers.ping1d.emulator import Ping1dTruth
@@ -116,7 +116,7 @@ class SerialLockStep:
 
 
 class VirtualHardware:
-    """Emulators of every device of :data:`~hindrax_drivers.devices.DEVICES`, fed by ``sim`` (module docstring);
+    """Emulators of every device of :data:`~hindrax_drivers.base.devices.DEVICES`, fed by ``sim`` (module docstring);
     a device's truth adapter is the method ``_<name>_truth`` (an output has none).
 
     Attributes: ``emulators`` (device name -> emulator), ``i2c_bus`` (EmulatedI2CBus with the I2C devices at their

@@ -26,7 +26,7 @@ With ``"thrusters"`` the bag also holds ``/allocation/status`` hindrax_msgs/msg/
 per allocated command, as the allocation node publishes it: the requested and the achieved wrench (its thrusters'
 limits: saturation), header stamp = the command's stamp, received when it is allocated.
 
-The bag (:class:`hindrax_drivers.recording.writer.BagWriter`) holds, REP-103 FLU (:mod:`hindrax_drivers.frames`):
+The bag (:class:`hindrax_drivers.recording.writer.BagWriter`) holds, REP-103 FLU (:mod:`hindrax_drivers.base.frames`):
 
 * ``/wrench`` geometry_msgs/msg/WrenchStamped, ``base_link``, at ``control_hz`` (the commanded wrench, stamped at
   the command time);
@@ -56,7 +56,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import FluidPressure, Imu
 from tf2_msgs.msg import TFMessage
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import VehicleConfig
 from hindrax_drivers.recording.writer import BagWriter, WriterOptions

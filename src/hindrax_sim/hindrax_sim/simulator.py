@@ -27,7 +27,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.config import VehicleConfig
 
 from .model import VehicleModel, euler_from_rotation_matrix, rotation_matrix_from_quaternion

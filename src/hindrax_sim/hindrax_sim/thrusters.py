@@ -5,7 +5,7 @@
   thrust_allocation_matrix` ([Hindrax-Drag] eq. 9), i.e. the wrench about the CG. The model's reference point is
   the body origin CO with the CG at r_g, so the wrench about CO is ``[F; T_cg + r_g x F]``
   (``matrix_co``; identical when r_g = 0, as in the Hindrax file).
-* Thrust: the allocation's :class:`hindrax_drivers.allocation.thrust_curve.ThrustCurve`
+* Thrust: the allocation's :class:`hindrax_drivers.base.thrust_curve.ThrustCurve`
   (:func:`hindrax_drivers.allocation.from_config.thrust_curve_from_config`: ``thrusters.curve_negative``,
   ``curve_positive``, the pulse-width range and the deadband) ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4).
   The pulse widths are those on the wire (``hindrax_msgs/ThrusterPwm``: what the ESC output wrote). A thruster

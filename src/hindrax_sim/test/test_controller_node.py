@@ -202,7 +202,7 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
     from hindrax_onboard.control.node import ControllerNode
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+    from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
 
     with ros_context() as ctx:
         node = ControllerNode(config=load_config(default_config_path()), context=ctx, model_file="")

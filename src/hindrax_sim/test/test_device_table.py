@@ -1,4 +1,4 @@
-"""The device table (hindrax_drivers.devices) is the one list of devices: every path that builds devices (the
+"""The device table (hindrax_drivers.base.devices) is the one list of devices: every path that builds devices (the
 composed processes, ``hindrax health``, the pool-day emulators, the drive replay, the simulator's virtual hardware,
 bringup) has exactly the table's devices, and a device added to the table alone appears in bringup, the replay and the
 simulator."""
@@ -11,11 +11,11 @@ from types import SimpleNamespace
 import pytest
 from rclpy.node import Node
 
-from hindrax_drivers import devices
-from hindrax_drivers.composition import GROUPS, NODE_CLASSES
+from hindrax_drivers.base import devices
+from hindrax_drivers.layout.composition import GROUPS, NODE_CLASSES
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, EmulatedDevices
-from hindrax_drivers.health import STATUS_OF_NODE
+from hindrax_drivers.layout.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, EmulatedDevices
+from hindrax_drivers.layout.health import STATUS_OF_NODE
 from hindrax_drivers.recording import replay_devices
 from hindrax_drivers.testing import ros_context
 from hindrax_sim.graph.bringup import build_graph

@@ -12,14 +12,14 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient
 from sensor_msgs.msg import Imu, Range
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_onboard.identification.online.executive import ordered_samples
 from hindrax_onboard.vehicle.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
-                                                            thrust_of_written_widths)
+                                             thrust_of_written_widths)
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -330,7 +330,7 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
     flag is known while idle from the ESC's latched ``esc/output_state``."""
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+    from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
     from hindrax_onboard.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
 
     cfg = load_config(default_config_path())

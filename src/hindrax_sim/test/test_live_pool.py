@@ -10,9 +10,9 @@ import pytest
 import serial
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.conditions import wait_until
-from hindrax_drivers.emulated_devices import I2C_DEVICES, SERIAL_DEVICES
-from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY
+from hindrax_drivers.process.conditions import wait_until
+from hindrax_drivers.layout.emulated_devices import I2C_DEVICES, SERIAL_DEVICES
+from hindrax_drivers.process.scheduling import HARDWARE_STAND_IN_PRIORITY
 from hindrax_drivers.testing import child_env, may_set_fifo
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV, SocketI2CBus
 from hindrax_sim.live_pool import LivePool

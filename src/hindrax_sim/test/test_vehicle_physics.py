@@ -11,7 +11,7 @@ import pytest
 
 from hindrax_drivers.allocation.from_config import thrust_curve_from_config
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.frames import wrap_angle
+from hindrax_drivers.base.frames import wrap_angle
 from hindrax_sim.thrusters import Thrusters
 from hindrax_onboard.vehicle.rigid_body import rigid_body_mass_matrix
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag

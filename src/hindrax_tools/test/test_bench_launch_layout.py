@@ -44,7 +44,7 @@ def _values(directory):
     """A parameter-file writer that also keeps what it wrote, to read the values back."""
     import yaml
 
-    from hindrax_drivers.launch_xml import write_parameter_file
+    from hindrax_drivers.layout.launch_xml import write_parameter_file
 
     written = []
 
@@ -85,7 +85,7 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     assert written == [{"output_dir": "/data/bags"}]
     # a composed process has no name: its nodes keep theirs; its row is the executable without _node
     assert (group.process.name, group.label, group.module) == (
-        None, "sensors", "hindrax_drivers.composition:sensors_main")
+        None, "sensors", "hindrax_drivers.layout.composition:sensors_main")
     with pytest.raises(ValueError, match="outt"):
         launch_processes(outer, {"outt": "/data"})
     outer.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
@@ -206,7 +206,7 @@ def test_node_processes_import_neither_the_pool_nor_scipy():
 _PROFILED_NODE = r"""
 from rclpy.node import Node
 
-from hindrax_drivers.node_common import run_node
+from hindrax_drivers.node_support.node_common import run_node
 
 
 class ProfiledProbe(Node):

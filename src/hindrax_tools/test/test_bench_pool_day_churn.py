@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 from hindrax_drivers.gateway.interface import INTERFACE
-from hindrax_drivers.liveness import HEARTBEAT_NAMES
+from hindrax_drivers.node_support.liveness import HEARTBEAT_NAMES
 
 from hindrax_tools.benchmarks.participant_churn import (INTERNAL_TOPICS, _Watch,
-                                                              subscriber_argv, topside_topics)
+                                                        subscriber_argv, topside_topics)
 
 
 def _spec(topic_spec: str) -> tuple[str, str]:

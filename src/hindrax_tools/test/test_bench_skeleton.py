@@ -10,7 +10,7 @@ import subprocess
 import pytest
 import rclpy
 
-from hindrax_drivers.launch_xml import write_parameter_file
+from hindrax_drivers.layout.launch_xml import write_parameter_file
 from hindrax_drivers.testing import (child_env, child_process, python_executable, ros_context,
                                      wait_until)
 from hindrax_tools.benchmarks import stack

@@ -31,9 +31,9 @@ from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.gateway.interface import relays
-from hindrax_drivers.operator_signing import Signer, create_key, load_key
-from hindrax_drivers.launch_xml import read_launch
-from hindrax_drivers.process_runner import ProcessRunner
+from hindrax_drivers.gateway.operator_signing import Signer, create_key, load_key
+from hindrax_drivers.layout.launch_xml import read_launch
+from hindrax_drivers.layout.process_runner import ProcessRunner
 from hindrax_drivers.testing import child_env, ros_context, wait_until
 
 REPO = Path(__file__).resolve().parents[3]

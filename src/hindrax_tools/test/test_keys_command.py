@@ -6,7 +6,7 @@ import stat
 import subprocess
 import sys
 
-from hindrax_drivers.operator_signing import load_key
+from hindrax_drivers.gateway.operator_signing import load_key
 from hindrax_drivers.testing import child_env
 
 

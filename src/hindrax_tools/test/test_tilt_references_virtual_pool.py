@@ -26,7 +26,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_tools import cli

@@ -43,7 +43,7 @@ from typing import Sequence
 import numpy as np
 
 from .deadband import MAX_THRUSTERS, ZERO_FORCE_N, DeadbandSearch
-from .thrust_curve import ThrustCurve, check_positive, forward_thrust
+from ..base.thrust_curve import ThrustCurve, check_positive, forward_thrust
 
 __all__ = ["AXIS_NAMES", "DEFAULT_PRIORITY_GROUPS", "InvalidWrenchError", "AllocationResult",
            "DEFAULT_EFFORT_WEIGHT", "ThrustAllocator", "weighted_pseudo_inverse"]

@@ -1,7 +1,7 @@
 """The thrust-allocation node's core, shared verbatim with ``hindrax allocate`` and ``hindrax thruster-test``.
 
 Input: a wrench in base_link (FLU, N and N m, about the CG). The core converts it to body FRD
-(:mod:`hindrax_drivers.frames`), allocates with the configuration's :class:`ThrustAllocator`
+(:mod:`hindrax_drivers.base.frames`), allocates with the configuration's :class:`ThrustAllocator`
 (weighted pseudo-inverse, saturation handling, cubic-curve inversion: [Hindrax-Drag] eqs. 1 and 9), and returns
 per-thruster forces, pulse widths and the achieved wrench back in base_link.
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import frames
+from ..base import frames
 from ..config import VehicleConfig
 from .allocator import AllocationResult, InvalidWrenchError
 from .from_config import allocator_from_config

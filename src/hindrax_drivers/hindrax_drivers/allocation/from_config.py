@@ -11,7 +11,7 @@ from ..config import VehicleConfig
 from ..pca9685 import protocol as pca
 from .allocator import ThrustAllocator
 from .matrix import thrust_allocation_matrix
-from .thrust_curve import ThrustCurve
+from ..base.thrust_curve import ThrustCurve
 
 
 def thrust_curve_from_config(cfg: VehicleConfig) -> ThrustCurve:

@@ -24,8 +24,8 @@ and reports ``stale``; the ESC node's watchdog is the second line of defence (do
 The core (:class:`~hindrax_drivers.allocation.core.AllocationCore`) is built at start-up and rebuilt only
 when a parameter changes, never per message. The thruster keys (geometry, curves, trims, limits, wrench timeout) are
 applied while running; a change is refused while the ESC is armed or has not reported its state
-(:class:`~hindrax_drivers.esc_state.ArmedWatch`), with the reason. Configuration: the vehicle file as ROS parameters
-(``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported).
+(:class:`~hindrax_drivers.node_support.esc_state.ArmedWatch`), with the reason. Configuration: the vehicle file as ROS
+parameters (``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported).
 """
 from __future__ import annotations
 
@@ -36,11 +36,11 @@ from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
-from ..esc_state import ArmedWatch
-from ..lean_cdr import cdr_decoder, prepare, thruster_pwm_encode, thruster_pwm_lean
-from ..liveness import heartbeat_qos
-from ..node_common import load_node_config, run_node, time_from_ns
-from ..vehicle_node import VehicleNode
+from ..node_support.esc_state import ArmedWatch
+from ..cdr.lean_cdr import cdr_decoder, prepare, thruster_pwm_encode, thruster_pwm_lean
+from ..node_support.liveness import heartbeat_qos
+from ..node_support.node_common import load_node_config, run_node, time_from_ns
+from ..node_support.vehicle_node import VehicleNode
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
@@ -99,7 +99,7 @@ class ThrustAllocationNode(VehicleNode):
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", heartbeat_qos())
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
-        #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.lean_cdr`: a lighter 50 Hz
+        #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.cdr.lean_cdr`: a lighter 50 Hz
         #: path than rclpy's message objects); :meth:`on_wrench` reads fields only, so it takes either form
         self._decode_wrench = cdr_decoder(WrenchStamped)
         prepare(ThrusterPwm)  # the commands' encoder: now, not in the first wrench's callback (lean_cdr.prepare)
@@ -210,7 +210,7 @@ class ThrustAllocationNode(VehicleNode):
             stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         else:
             stamp_ns = now_ns
-        # the command's CDR is published as bytes (50 Hz without an rclpy object, hindrax_drivers.lean_cdr)
+        # the command's CDR is published as bytes (50 Hz without an rclpy object, hindrax_drivers.cdr.lean_cdr)
         self.pub_pwm.publish(thruster_pwm_encode(thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us,
                                                                    not rejected)))
         saturated = np.asarray(saturated, dtype=bool)

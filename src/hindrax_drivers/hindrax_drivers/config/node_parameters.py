@@ -7,7 +7,7 @@ Each declared parameter gets a ``rcl_interfaces/ParameterDescriptor`` built from
 (meaning and unit), ``additional_constraints`` (the allowed range as the loader prints it), a
 floating-point or integer range where the schema has both bounds, a static type, and ``read_only`` unless
 the node can apply a change while running (``dynamic``). A change to a dynamic key is refused while the node's
-``locked`` says why (the ESC armed: :class:`hindrax_drivers.esc_state.ArmedWatch`), else validated like the
+``locked`` says why (the ESC armed: :class:`hindrax_drivers.node_support.esc_state.ArmedWatch`), else validated like the
 file (type, range, cross-key checks) and then handed to the node's ``on_change``; a rejected change returns
 ``SetParametersResult(successful=False, reason=<one line naming key, value and allowed range>)``. A change
 to a read-only key is refused by rclpy with the reason ``Trying to set a read-only parameter: <name>.``

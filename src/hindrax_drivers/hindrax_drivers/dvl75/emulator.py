@@ -52,8 +52,8 @@ from typing import Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .. import frames
-from ..frames import wrap_angle
+from ..base import frames
+from ..base.frames import wrap_angle
 from ..transport.pty_device import PeriodicSchedule, StreamFaults
 from .protocol import (BEAM_TILT_RAD, DvlExtended, DvlGprmc, DvlLineFramer, DvlParseError,
                        DvlPositionDelta, beam_directions_frd, format_dvext, format_dvpdl,

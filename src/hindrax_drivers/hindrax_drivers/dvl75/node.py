@@ -42,7 +42,7 @@ Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time``
 
 - ``dvl/data`` and ``dvl/twist`` carry the DVL's own time of validity: ``$DVPDL`` field ``tu``
   (microseconds since DVL boot, docs/devices.md §1.3.1) minus ``dtu/2`` (the velocity is the mean over the
-  interval ``dtu`` that ends at ``tu``), mapped to ROS time by :class:`hindrax_drivers.device_clock.DeviceClockSync`:
+  interval ``dtu`` that ends at ``tu``), mapped to ROS time by :class:`~.device_clock.DeviceClockSync`:
   offset = minimum over the last 10 s of (receive ROS time - ``tu``), i.e. ``tu`` plus the smallest
   transport latency seen, re-estimated after a DVL reboot (``tu`` backwards) or a ROS time jump.
 - ``dvl/altitude`` and messages built from ``$DVEXT`` alone use the receive time: ``$DVEXT`` carries no
@@ -59,9 +59,9 @@ from sensor_msgs.msg import Range
 from hindrax_msgs.msg import Dvl
 
 from ..config.typed_sections import SensorsDvl75Section
-from ..device_clock import DeviceClockSync
-from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
-from ..serial_node import SerialDeviceNode, range_message
+from ..base.device_clock import DeviceClockSync
+from ..node_support.node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
+from ..node_support.serial_node import SerialDeviceNode, range_message
 from .protocol import DvlExtended, DvlGprmc, DvlPositionDelta, DvlText, startup_commands
 from .report import DvlReport, DvlReportBuilder, altitude_range_m
 from .stream import DvlStreamDecoder

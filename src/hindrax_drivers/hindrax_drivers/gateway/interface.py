@@ -47,7 +47,7 @@ class Relay:
 
 
 _TRIGGER = "std_srvs/srv/Trigger"
-#: an operator's Trigger: signed on the topside (hindrax_drivers.operator_signing), plain inside
+#: an operator's Trigger: signed on the topside (hindrax_drivers.gateway.operator_signing), plain inside
 _SIGNED = "hindrax_msgs/srv/SignedTrigger"
 
 #: the topside interface, in full (module docstring). ``arm``/``disarm`` call ``esc/set_armed`` (hindrax_msgs/SetArmed).

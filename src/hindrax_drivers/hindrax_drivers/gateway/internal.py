@@ -1,7 +1,7 @@
 """The gateway's internal side: its process on the vehicle's loopback graph (docs/architecture.md §8.2).
 
 Started by the topside process (:mod:`hindrax_drivers.gateway.node`) with the vehicle's loopback transport
-(:mod:`hindrax_drivers.dds_transport`: every UDP socket on 127.0.0.1) and one end of a Unix socket pair
+(:mod:`hindrax_drivers.process.dds_transport`: every UDP socket on 127.0.0.1) and one end of a Unix socket pair
 (``--link-fd N``, :mod:`.link`). It reads the gateway's settings from its parameters (the vehicle file), sends them
 and the request bounds (:class:`.bounds.RequestBounds`) to the topside process, then serves it: calls the internal
 services, publishes the internal topics and sends the campaign goals of the interface
@@ -34,8 +34,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 
 from ..config import ConfigError, ConfigIssue
-from ..node_common import load_node_config
-from ..ros_process import RosProcess
+from ..node_support.node_common import load_node_config
+from ..process.ros_process import RosProcess
 from .bounds import RequestBounds
 from .interface import GATEWAY_NODE, relays
 from .link import Channel

@@ -5,7 +5,7 @@
   reach the tether; the topside profile's 0.5 s announcement period, ``fastdds_topside.xml``). It has no
   participant on the vehicle's internal domain.
 * Its child, :mod:`hindrax_drivers.gateway.internal`, is the internal side: the vehicle's loopback transport (every
-  UDP socket on 127.0.0.1, :mod:`hindrax_drivers.dds_transport`), like every other vehicle process.
+  UDP socket on 127.0.0.1, :mod:`hindrax_drivers.process.dds_transport`), like every other vehicle process.
 
 Why two processes: a Fast DDS profile (``FASTRTPS_DEFAULT_PROFILES_FILE``) applies to every participant of a
 process and is read once, and rmw_fastrtps picks no profile per context; under ``LOCALHOST`` it binds its own UDP
@@ -14,8 +14,8 @@ reaches the tether. The two are joined by a Unix socket pair (:mod:`.link`) that
 elements (:data:`.interface.INTERFACE`), as serialized messages; each ends when the other does.
 
 Every request is checked here before it goes inside: an operator element's signature
-(:class:`~hindrax_drivers.operator_signing.Verifier`, the key ``<keys dir>/<vehicle>.key``; none on the vehicle =
-every operator request refused, the e-stop still works), a goal's and a setpoint's bounds
+(:class:`~hindrax_drivers.gateway.operator_signing.Verifier`, the key ``<keys dir>/<vehicle>.key``; none on the
+vehicle = every operator request refused, the e-stop still works), a goal's and a setpoint's bounds
 (:class:`.bounds.RequestBounds`), ``arm`` while another gateway answers to this vehicle's name or another server
 answers one of its services (refused: :func:`.interface.extra_servers_problem`), and an
 ``arm`` that an e-stop overtook: one that arrived before an e-stop (while the operator's requests were busy) but is
@@ -57,10 +57,10 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
 
-from ..dds_transport import PROFILE_ENV, RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path
-from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key, replay_path
-from ..ros_process import RosProcess
-from ..sros2_policy import topside_enclaves
+from ..process.dds_transport import PROFILE_ENV, RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path
+from .operator_signing import OperatorKeyError, Verifier, key_path, load_key, replay_path
+from ..process.ros_process import RosProcess
+from .sros2_policy import topside_enclaves
 from .bounds import RequestBounds
 from .interface import GATEWAY_NODE, STATUS_TOPIC, duplicate_problem, extra_servers_problem, participants, relays
 from .internal import GatewaySettings, interface_type

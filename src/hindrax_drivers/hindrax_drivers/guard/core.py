@@ -15,9 +15,9 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
   tell: a killed guard would leave the outputs enabled, so the outputs are never released (the ESC refuses to arm);
 * the hardware watchdog on /OE ran out while the guard meant to feed it (docs/watchdog.md: the guard was frozen or
   starved): thrust must come back only through a new arm request;
-* either heartbeat cannot be trusted to be its sender's (:class:`~hindrax_drivers.liveness.HeartbeatIdentity`: a
-  second publisher, a wrong node name, a sequence that goes back, a new boot while armed): a forged or replayed
-  heartbeat must not keep the outputs on.
+* either heartbeat cannot be trusted to be its sender's
+  (:class:`~hindrax_drivers.node_support.liveness.HeartbeatIdentity`: a second publisher, a wrong node name, a sequence
+  that goes back, a new boot while armed): a forged or replayed heartbeat must not keep the outputs on.
 
 Once asserted it stays asserted (latched) until every cause is gone AND the ESC reports that it is disarmed with
 neutral confirmed on the chip (``OUTPUT_NEUTRAL``, ``armed`` false): thrust can then only come back through a new
@@ -71,7 +71,7 @@ class GuardCore:
 
     def on_identity(self, fault: str) -> None:
         """The heartbeats' identity check: '' (both trusted) or the first fault
-        (:attr:`hindrax_drivers.liveness.HeartbeatIdentity.fault`)."""
+        (:attr:`hindrax_drivers.node_support.liveness.HeartbeatIdentity.fault`)."""
         self.identity_fault = fault
 
     def on_drive(self, fault: str) -> None:

@@ -2,7 +2,7 @@
 
 The decision is :class:`~hindrax_drivers.guard.core.GuardCore` (ESC output state silent or unknown, supervisor
 heartbeat silent or tripped, either heartbeat not its sender's -> silence, latched until the ESC reports disarmed at
-neutral). Each heartbeat comes through a :class:`~hindrax_drivers.liveness.HeartbeatWatch` (its identity check:
+neutral). Each heartbeat comes through a :class:`~.liveness.HeartbeatWatch` (its identity check:
 at every tick the topic's live count and its publishers' node names, asked of the graph when DDS reports a change,
 at every beat its ``boot_id`` and ``seq``; a rejected beat does not count as the peer being heard). How it silences:
 
@@ -30,15 +30,15 @@ starved), the guard asserts and latches: thrust comes back only through a new ar
 Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed
 flag and the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold)
 and ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
-unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_drivers.sd_notify`): a
-frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
+unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_drivers.process.sd_notify`):
+a frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
 ``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled,
 ERROR = silenced with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics``
 (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
-(:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
-starved guard ages a dead peer at wall speed; on simulated time a peer is late only when also late on the graph's
+(:class:`~hindrax_drivers.node_support.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so
+a starved guard ages a dead peer at wall speed; on simulated time a peer is late only when also late on the graph's
 clock), timeout: the read-only node parameter ``heartbeat_timeout_s`` (default ``esc.guard_heartbeat_timeout_s``).
 The two heartbeats are callbacks in both clock modes (the path the vehicle takes is the path the tests take). A
 small process of its own (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's
@@ -54,16 +54,17 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 
 from ..config import Spec, output_enable_gpio
-from ..lean_cdr import Beat
-from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, TickGaps, heartbeat_ok, simulated_now_s
-from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..cdr.lean_cdr import Beat
+from ..node_support.liveness import (AliveAge, HeartbeatPublisher, HeartbeatWatch, TickGaps, heartbeat_ok,
+                                     simulated_now_s)
+from ..node_support.node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
 from ..transport.gpio import GpiodLine
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
-from ..sd_notify import SafetyNotifier
+from ..process.sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
-from ..vehicle_node import VehicleNode
+from ..node_support.vehicle_node import VehicleNode
 from .core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 from .outputs_off import open_output_enable, silence_chip
 

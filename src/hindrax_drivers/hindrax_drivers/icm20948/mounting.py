@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..frames import quaternion_from_euler_ned, rotation_matrix_from_quaternion
+from ..base.frames import quaternion_from_euler_ned, rotation_matrix_from_quaternion
 
 __all__ = ["mounting_rotation"]
 

@@ -1,6 +1,6 @@
 """MS5837 pressure-sensor node (TE MS5837-30BA / -02BA on I2C at 0x76; docs/devices.md §3): the I2C cycle and the
 messages; what a reading means (PROM and ADC checks, stamps, depth, variances, plausibility, zero depth) is
-:mod:`hindrax_drivers.ms5837.core`, the start-up's retry and the ERROR ``stuck`` :mod:`hindrax_drivers.i2c_node`.
+:mod:`hindrax_drivers.ms5837.core`, the start-up's retry and the ERROR ``stuck`` :mod:`~.i2c_node`.
 
 Start-up: reset command 0x1E, 10 ms, the 8 PROM words. Cycle, every 1 / ``sensors.ms5837.rate_hz`` s from ROS timers
 (no sleep in any callback): convert D1, wait the OSR's conversion time + :data:`CONVERSION_MARGIN_S`, ADC read; the
@@ -14,7 +14,7 @@ geometry_msgs/PoseWithCovarianceStamped (frame ``odom``, ``position.z = -depth_m
 §3), ``raw/ms5837`` (a cycle's I2C transactions in one message), ``/diagnostics``. Service ``pressure/zero_depth``
 (std_srvs/Trigger): the surface pressure becomes the mean of the last second, also in the node's
 ``environment.surface_pressure_pa`` parameter; it and a change of that parameter are refused while the ESC reports
-armed or has not reported (:class:`hindrax_drivers.esc_state.ArmedWatch`), with the same reason; a change of the
+armed or has not reported (:class:`hindrax_drivers.node_support.esc_state.ArmedWatch`), with the same reason; a change of the
 parameter also passes zero_depth's checks: at the surface, and within ``sensors.ms5837.zero_depth_margin_pa`` of
 the mean reading (:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`).
 Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
@@ -31,9 +31,9 @@ from sensor_msgs.msg import FluidPressure, Temperature
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
-from ..esc_state import ArmedWatch
-from ..i2c_node import I2cSensorNode
-from ..node_common import declare_frame_ids, load_node_config, run_node
+from ..node_support.esc_state import ArmedWatch
+from ..node_support.i2c_node import I2cSensorNode
+from ..node_support.node_common import declare_frame_ids, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError
 from . import protocol as p
 from .core import (TEMPERATURE_RESOLUTION_C, DepthGate, Plausibility, ZeroDepth, adc_problem, check_prom,

@@ -46,6 +46,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..process.dds_transport import UNNAMED_NODE
+
 __all__ = ["OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING", "RETRY_MIN_S", "RETRY_MAX_S", "GUARD_CONFIRM_S",
            "COMMAND_NODE", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "EscOutput", "EscCore", "EscDecision",
            "ChipOutcome", "SteadyWatchdog", "command_fault", "command_source_fault", "command_source_unnamed",
@@ -65,8 +67,6 @@ RETRY_MAX_S = 4.0
 GUARD_CONFIRM_S = 0.15
 #: the one node that may publish ``thrusters/command_pulse_width`` (docs/architecture.md §8.2)
 COMMAND_NODE = "thrust_allocation"
-#: the name the graph gives an endpoint seen before its participant's node names arrived (discovery not finished)
-UNNAMED_NODE = "_NODE_NAME_UNKNOWN_"
 #: how long a command publisher may stay unnamed before it is a command source fault, s: discovery names an
 #: endpoint within one participant-announcement round (0.1 s quiet); the rounds stretch on a loaded machine
 NAME_RESOLVE_BOUND_S = 2.0

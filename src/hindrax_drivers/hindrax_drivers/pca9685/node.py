@@ -31,7 +31,7 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest
   guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign
   of life and release condition), ``esc/output_state`` (the same state, latched: on a change of
-  armed or output state and every 1 s, :mod:`hindrax_drivers.esc_state`; for nodes that need only
+  armed or output state and every 1 s, :mod:`hindrax_drivers.node_support.esc_state`; for nodes that need only
   "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on disarm,
   on an exception in the output path and on shutdown (:meth:`EscNode.close`; SIGINT/SIGTERM).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
@@ -57,15 +57,16 @@ from hindrax_msgs.srv import SetArmed
 
 from ..config import Spec
 from ..config.sections.esc import board_id, oscillator_problem
-from ..esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
-from ..lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
-from ..liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
-from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
+from ..node_support.esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
+from ..cdr.lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
+from ..node_support.liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
+from ..node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config,
+                                        run_node)
 from ..config.node_parameters import declare_node_parameter
 from ..transport.i2c import open_smbus
 from ..transport.shared_emulation import SOCKET_ENV, open_shared_bus
 from . import protocol as p
-from ..vehicle_node import VehicleNode
+from ..node_support.vehicle_node import VehicleNode
 from .chip import EscChip
 from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, WRITE, EscCore, EscOutput, SteadyWatchdog
 from .peers import COMMAND_TOPIC, EscPeers
@@ -388,8 +389,8 @@ class EscNode(VehicleNode):
                                self.peers.guard_ack)
 
     def _publish_state(self) -> None:
-        """``esc/output_state`` when :class:`~hindrax_drivers.esc_state.EscStateLatch` says so: a change of (armed,
-        output state), or a second without one."""
+        """``esc/output_state`` when :class:`~hindrax_drivers.node_support.esc_state.EscStateLatch` says so: a change of
+        (armed, output state), or a second without one."""
         unknown = self.output_state == _UNKNOWN
         armed = self.armed and not unknown
         if self.state_latch.due(time.monotonic(), armed, self.output_state):

@@ -3,9 +3,9 @@ verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and
 (:func:`.core.command_source_fault`).
 
 :class:`EscPeers` subscribes to ``supervisor/heartbeat`` and ``guard/heartbeat`` through
-:class:`~hindrax_drivers.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another node name
+:class:`~.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another node name
 is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
-(:class:`~hindrax_drivers.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
+(:class:`~.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
 :func:`.core.heartbeat_verdict`'s. Node parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s``
 (default ``esc.heartbeat_timeout_s``).
 """
@@ -15,8 +15,9 @@ import time
 from typing import Any, Callable
 
 from ..config import Spec
-from ..lean_cdr import Beat
-from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames, heartbeat_ok, simulated_now_s
+from ..cdr.lean_cdr import Beat
+from ..node_support.liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames, heartbeat_ok,
+                                     simulated_now_s)
 from ..config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
@@ -65,7 +66,7 @@ class EscPeers:
     def tick(self) -> None:
         """Advance both ages to now (the safety tick and an arm request; the beats arrive by
         callbacks, a stale one's
-        waiting beats are taken first: :meth:`~hindrax_drivers.liveness.HeartbeatWatch.fresh`)."""
+        waiting beats are taken first: :meth:`~hindrax_drivers.node_support.liveness.HeartbeatWatch.fresh`)."""
         for kind, age in (("supervisor", self.supervisor_age), ("guard", self.guard_age)):
             age.tick()
             self.watches[kind].fresh(age, self.timeout_s)

@@ -2,7 +2,6 @@
 §11.6).
 
 Pure cores (no ROS runtime):
-- :mod:`.msgdefs`: full ``ros2msg`` definitions and RIHS01 type hashes from ``share/<pkg>/msg``;
 - :mod:`.qos`: QoS profiles in rosbag2's YAML layout, subscription/playback QoS choices;
 - :mod:`.metadata`: ``metadata.yaml`` (version 9) as typed objects;
 - :mod:`.writer`: :class:`~.writer.BagWriter` (chunks, compression, splitting, fsync per chunk);

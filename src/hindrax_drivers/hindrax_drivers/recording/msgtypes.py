@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from .msgdefs import split_type_name
+from ..cdr.msgdefs import split_type_name
 
 
 class TypeNotInstalledError(LookupError):

@@ -17,11 +17,11 @@ Thin rclpy node over :mod:`~hindrax_drivers.recording.reader` (raw CDR messages 
 - ``clock:=true`` publishes rosgraph_msgs/Clock on /clock at ``clock_rate_hz`` (wall) with the bag time;
   nodes under test then run with ``use_sim_time:=true``.
 - The safety and actuation topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``wrench``,
-  setpoints, action and service topics: :func:`~hindrax_drivers.vehicle_graph.vehicle_topic_reason`) are withheld
-  unless ``safety_topics:=true``: a bag must never answer for the vehicle's supervisor or drive its thrusters. Naming
-  one in ``topics`` without it is an error. With it, the player watches the graph
-  (:class:`~hindrax_drivers.vehicle_graph.ForeignVehicleWatch`) for the discovery window before it creates its first
-  publisher (a refused play leaves nothing on a vehicle's graph) and all through the play, and stops with a
+  setpoints, action and service topics: :func:`~hindrax_drivers.node_support.vehicle_graph.vehicle_topic_reason`) are
+  withheld unless ``safety_topics:=true``: a bag must never answer for the vehicle's supervisor or drive its thrusters.
+  Naming one in ``topics`` without it is an error. With it, the player watches the graph
+  (:class:`~hindrax_drivers.node_support.vehicle_graph.ForeignVehicleWatch`) for the discovery window before it creates
+  its first publisher (a refused play leaves nothing on a vehicle's graph) and all through the play, and stops with a
   :class:`PlayerError` naming the ESC or supervisor it sees.
 
 Parameters: ``bag`` (string, required), ``rate`` (1.0), ``start_offset_s`` (0.0), ``topics`` (string[],
@@ -46,10 +46,10 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from ..node_common import time_from_ns
-from ..ros_process import RosProcess
-from ..vehicle_graph import (DISCOVERY_WINDOW_S, ForeignVehicleError, ForeignVehicleWatch, GraphView,
-                             split_vehicle_topics)
+from ..node_support.node_common import time_from_ns
+from ..process.ros_process import RosProcess
+from ..node_support.vehicle_graph import (DISCOVERY_WINDOW_S, ForeignVehicleError, ForeignVehicleWatch, GraphView,
+                                          split_vehicle_topics)
 from .msgtypes import TypeNotInstalledError, message_class
 from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
@@ -86,7 +86,7 @@ REFUSAL = "a bag's safety and actuation topics are never published onto a live v
 class BagPlayerNode(Node):
     """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction. ``window_s``: the
     discovery window watched before the first publisher (with ``safety_topics``; 0 when the caller watched it
-    already, :func:`~hindrax_drivers.vehicle_graph.refuse_before_start`)."""
+    already, :func:`~hindrax_drivers.node_support.vehicle_graph.refuse_before_start`)."""
 
     def __init__(self, node_name: str = "player", window_s: float = DISCOVERY_WINDOW_S, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)

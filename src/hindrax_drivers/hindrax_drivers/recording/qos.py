@@ -16,7 +16,7 @@ durations are ``{sec, nsec}`` with infinity = 2^63-1 ns = {9223372036, 854775807
   publisher is reliable (a reliable subscription never matches a best-effort publisher), transient
   local only if every publisher is.
 - :func:`recorder_policies` is what this project's recorder requests: best effort for every
-  volatile topic (why: :func:`hindrax_drivers.node_common.sensor_input_qos`), rosbag2's rule for the
+  volatile topic (why: :func:`hindrax_drivers.node_support.node_common.sensor_input_qos`), rosbag2's rule for the
   transient-local ones (their history reaches a late reader only when it is reliable).
 - :func:`playback_profile` is rosbag2's ``adapt_offer_to_recorded_offers``: the recorded profile when
   all publishers agree on the compatibility-relevant policies (history reset to keep_last 10), else

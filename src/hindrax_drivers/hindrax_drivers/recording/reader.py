@@ -26,7 +26,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 
-from . import msgdefs
+from ..cdr import msgdefs
 from . import recover as _recover
 from .metadata import MetadataError, read_metadata
 from .msgtypes import TypeNotInstalledError, message_class
@@ -173,7 +173,7 @@ class BagReader:
         """(raw message, instance of the installed class) pairs of ``topics`` in log-time order.
 
         Records whose type has the installed layout (:meth:`installed_class`) go through rclpy's C
-        deserializer (``lean``: :func:`hindrax_drivers.lean_cdr.cdr_decoder`, read-only objects of
+        deserializer (``lean``: :func:`hindrax_drivers.cdr.lean_cdr.cdr_decoder`, read-only objects of
         the same fields, twice as fast);
         records of a type that changed since the bag was written are decoded from the bag's stored definition
         (:meth:`decoded`) and copied into the installed class field by field (:func:`.msgtypes.from_decoded`:
@@ -183,7 +183,7 @@ class BagReader:
         """
         from rclpy.serialization import deserialize_message
 
-        from ..lean_cdr import cdr_decoder
+        from ..cdr.lean_cdr import cdr_decoder
         from .msgtypes import from_decoded
 
         wanted = list(topics)

@@ -16,7 +16,7 @@ Behaviour
 - Data: one subscription callback per message on the node's executor, whatever the clock (the
   vehicle, the virtual pool and the tests take the same path). The subscriptions are raw: the
   callback gets the CDR bytes and they are written unchanged, never converted into a Python message
-  and back (:mod:`hindrax_drivers.lean_cdr`). Log time =
+  and back (:mod:`hindrax_drivers.cdr.lean_cdr`). Log time =
   the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag
   depends on its seed only); publish time = the log time (not the DDS source timestamp, which is
   wall-clock time; the MCAP specification asks for the log time where the publish time is not
@@ -27,7 +27,7 @@ Behaviour
   the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
   (:mod:`~hindrax_drivers.recording.writer`); ``hindrax bag recover`` repairs the bag.
 - Loss in transit: the callback also gets the message info
-  (:class:`~hindrax_drivers.ros_process.WithMessageInfo`); gaps in each topic's publication sequence
+  (:class:`~hindrax_drivers.process.ros_process.WithMessageInfo`); gaps in each topic's publication sequence
   numbers count the samples lost between its writer and this reader
   (:class:`~hindrax_drivers.recording.sequence_gaps.SequenceGaps`; a best-effort reader's loss is
   otherwise silent). The info has no publisher gid here, so the count is keyed by topic and a gap
@@ -66,12 +66,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from hindrax_msgs.srv import StartRecording, StopRecording
 
 from ..config import ConfigError
-from ..node_common import load_node_config
-from ..ros_process import RosProcess, WithMessageInfo
-from ..vehicle_node import VehicleNode
+from ..node_support.node_common import load_node_config
+from ..process.ros_process import RosProcess, WithMessageInfo
+from ..node_support.vehicle_node import VehicleNode
 from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
-from .msgdefs import normalize_type_name
+from ..cdr.msgdefs import normalize_type_name
 from .msgtypes import TypeNotInstalledError, message_class
 from .qos import profile_from_rclpy, recorder_policies
 from .selection import TopicSelection
@@ -372,7 +372,7 @@ class RecorderNode(VehicleNode):
 
     def shutdown(self) -> None:
         """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM; as :meth:`close`,
-        the clean-up of a composed process, :func:`~hindrax_drivers.node_common.run_nodes`)."""
+        the clean-up of a composed process, :func:`~hindrax_drivers.node_support.node_common.run_nodes`)."""
         try:
             self.stop_recording()
         except Exception as exc:  # noqa: BLE001 - exiting: report, never hide the bag path
@@ -386,7 +386,7 @@ def main(args: list[str] | None = None) -> int:
     """Entry point: ``python -m hindrax_drivers.recording.recorder_node --ros-args ...``.
 
     Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
-    The process spins the EventsExecutor (:mod:`hindrax_drivers.ros_process`).
+    The process spins the EventsExecutor (:mod:`hindrax_drivers.process.ros_process`).
     """
     with RosProcess(args) as proc:
         try:

@@ -2,7 +2,7 @@
 
 docs/architecture.md §6-7: "the same emulators can be driven from a recorded bag (raw device data replayed through the
 drivers)". A bag recorded by the stack holds every byte and register transaction of every driver
-(``hindrax_msgs/RawDeviceData`` on ``raw/<device>``, see :class:`~hindrax_drivers.node_common.RawDataPublisher`).
+(``hindrax_msgs/RawDeviceData`` on ``raw/<device>``, see :class:`~.node_common.RawDataPublisher`).
 This module serves them again to *fresh, unmodified* driver nodes through the same transports the simulator
 uses, so the real parsing code runs on the recorded stream:
 
@@ -54,9 +54,9 @@ from rosgraph_msgs.msg import Clock
 
 from hindrax_msgs.msg import RawDeviceData
 
-from .. import devices as device_table
+from ..base import devices as device_table
 from ..config import load_config
-from ..node_common import raw_transactions, time_from_ns
+from ..node_support.node_common import raw_transactions, time_from_ns
 from ..pca9685.emulator import Pca9685Emulator
 from ..transport.emulated_i2c import EmulatedI2CBus
 from ..transport.pty_device import PtyDevice
@@ -67,7 +67,7 @@ __all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverRep
            "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed",
            "strip_stamp"]
 
-#: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_drivers.devices.DEVICES`), with the device
+#: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_drivers.base.devices.DEVICES`), with the device
 #: whose raw data they are parsed from.
 PARSED_TOPICS: dict[str, str] = {t: d.name for d in device_table.DEVICES for t in d.topics}
 #: Topics of the I2C drivers, stamped with the ROS time of a read their own timers make: not
@@ -225,7 +225,7 @@ class ReplayHardware:
 
     Args:
         bag_path: the bag (directory or .mcap).
-        devices: device names to serve (default: those of :data:`~hindrax_drivers.devices.DEVICES` with raw data
+        devices: device names to serve (default: those of :data:`~hindrax_drivers.base.devices.DEVICES` with raw data
             in the bag).
         paced: see :class:`SerialReplayDevice`.
     Attributes:

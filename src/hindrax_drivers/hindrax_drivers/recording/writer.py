@@ -39,7 +39,7 @@ from typing import Any, Callable, Iterable, Mapping
 from mcap.writer import CompressionType, Writer
 
 from ..config.typed_sections import RecordingSection
-from . import msgdefs
+from ..cdr import msgdefs
 from .metadata import BagMetadata, FileInfo, TopicInfo, write_metadata
 from .qos import profiles_to_yaml
 

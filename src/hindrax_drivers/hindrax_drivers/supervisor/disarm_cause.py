@@ -69,8 +69,8 @@ class DisarmCauses:
             self.process, self.cause = process, cause
 
     def on_armed(self, armed: bool, esc_reason: str = "") -> None:
-        """The ESC's armed flag as the supervisor reads it (:func:`~hindrax_drivers.esc_state.armed_after`) and the
-        state's ``reason``. Arming clears the cause; a disarm without one seen before is the ESC's own."""
+        """The ESC's armed flag as the supervisor reads it (:func:`~hindrax_drivers.node_support.esc_state.armed_after`)
+        and the state's ``reason``. Arming clears the cause; a disarm without one seen before is the ESC's own."""
         if armed and not self.armed:
             self.process, self.cause = "", ""
         elif self.armed and not armed:

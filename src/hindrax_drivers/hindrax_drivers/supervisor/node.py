@@ -12,8 +12,8 @@ supported)
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
     ``imu/data_raw`` (sensor_msgs/Imu: rate, freshness and the accelerometer's tilt; taken as serialised bytes, see
     "CPU"), ``esc/output_state`` (the ESC's armed flag and output state, latched:
-    :mod:`hindrax_drivers.esc_state`; unknown after armed counts as armed; a dead ESC's last state stays, so the
-    supervisor keeps watching the envelope as if armed), ``supervisor/abort``
+    :mod:`hindrax_drivers.node_support.esc_state`; unknown after armed counts as armed; a dead ESC's last state stays,
+    so the supervisor keeps watching the envelope as if armed), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
     a manoeuvre on a limit), ``guard/heartbeat`` (the output guard's reason while it silences the outputs: read
     for the disarm cause only, :mod:`.disarm_cause`).
@@ -23,7 +23,7 @@ Services
     request still in flight, :attr:`SupervisorNode.disarm_future`, may land after a very quick re-arm).
 Publishes
     ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat with ``boot_id`` and ``seq``:
-    :class:`~hindrax_drivers.liveness.HeartbeatPublisher`) at every check
+    :class:`~hindrax_drivers.node_support.liveness.HeartbeatPublisher`) at every check
     (``supervisor.check_rate_hz``, steady clock): level OK within the envelope, ERROR with the latched reason. The
     ESC refuses to arm and disarms without a fresh OK one; the output guard silences the outputs without one
     (docs/architecture.md §8). It is the supervisor's independent stop path: a dead or hung supervisor stops
@@ -32,7 +32,7 @@ Publishes
     = the supervised quantities and, once the thrust stopped, ``disarm_cause``: ``<process>: <cause>; next:
     <step>``, :mod:`.disarm_cause`) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
-    A :class:`~hindrax_drivers.vehicle_node.VehicleNode` (no QoS event handlers): a sensor that
+    A :class:`~hindrax_drivers.node_support.vehicle_node.VehicleNode` (no QoS event handlers): a sensor that
     stops reaching the supervisor, for a QoS mismatch or any other reason, trips the
     ``supervisor.min_rate.*`` checks (where not 0).
     Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual
@@ -40,7 +40,7 @@ CPU (README "Performance on the Pi")
     once; an ESC that reports armed while the supervisor is tripped is disarmed from that callback.
     ``imu/data_raw`` (51-102 Hz) comes as its CDR bytes: the freshness check compares them (stamp aside) to find a
     sensor repeating itself, and only the specific force is decoded, with rosbags
-    (:func:`hindrax_drivers.lean_cdr.cdr_decoder`).
+    (:func:`hindrax_drivers.cdr.lean_cdr.cdr_decoder`).
 Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
     of ROS time is detected at the next check or sample, whichever reads the time first, reported (``/diagnostics``
@@ -68,14 +68,16 @@ from std_srvs.srv import Trigger
 from hindrax_msgs.msg import Dvl, Heartbeat
 from hindrax_msgs.srv import SetArmed
 
-from .. import frames
-from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
-from ..lean_cdr import cdr_decoder, read_heartbeat
-from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_ok, heartbeat_qos
+from ..base import frames
+from ..node_support.esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
+from ..cdr.lean_cdr import cdr_decoder, read_heartbeat
+from ..node_support.liveness import (HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_ok,
+                                     heartbeat_qos)
 from ..config import Spec
-from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node, sensor_input_qos
+from ..node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node,
+                                        sensor_input_qos)
 from ..config.node_parameters import declare_node_parameter
-from ..vehicle_node import VehicleNode
+from ..node_support.vehicle_node import VehicleNode
 from .core import SupervisorCore, SupervisorLimits
 from .disarm_cause import DisarmCauses
 
@@ -174,8 +176,8 @@ class SupervisorNode(VehicleNode):
 
     def on_esc(self, msg: DiagnosticStatus) -> None:
         """An ``esc/output_state``: an output state that became unknown while armed may still be thrusting, so the
-        checks go on (:func:`~hindrax_drivers.esc_state.armed_after`); a malformed one is counted and read as
-        unknown."""
+        checks go on (:func:`~hindrax_drivers.node_support.esc_state.armed_after`); a malformed one is counted and read
+        as unknown."""
         state = read_esc_state(msg)
         if state is None:
             self.diag.count("esc_state_malformed")

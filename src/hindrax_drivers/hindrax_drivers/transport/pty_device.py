@@ -27,7 +27,7 @@ import time
 import tty
 from typing import Callable, Iterable, Optional, Protocol, TypeVar, runtime_checkable
 
-from ..scheduling import set_this_thread
+from ..process.scheduling import set_this_thread
 
 __all__ = ["ByteStreamEmulator", "StreamFaults", "PeriodicSchedule", "PtyDevice"]
 
@@ -240,7 +240,7 @@ class PtyDevice:
         link_name: file name of the stable symlink inside a private temporary directory.
         start: start the service thread immediately.
         realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
-            (:func:`hindrax_drivers.scheduling.set_this_thread`): bytes on time on a loaded
+            (:func:`hindrax_drivers.process.scheduling.set_this_thread`): bytes on time on a loaded
             machine, as a UART's.
     Raises:
         OSError: if a pty cannot be created.

@@ -2,7 +2,7 @@
 machine without the hardware (docs/deployment.md §9).
 
 A driver started as its own process (the vehicle's launch layout: ``ros2 launch``, or the project's
-:class:`~hindrax_drivers.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus with
+:class:`~.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus with
 :func:`~hindrax_drivers.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket,
 that function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an
 :class:`I2CSocketServer` in another process serves an
@@ -31,7 +31,7 @@ from typing import Any
 
 from smbus2 import i2c_msg
 
-from ..scheduling import set_this_thread
+from ..process.scheduling import set_this_thread
 from .emulated_i2c import I2C_M_RD
 
 __all__ = ["SOCKET_ENV", "SMBUS_METHODS", "I2CSocketServer", "SocketI2CBus",
@@ -117,9 +117,9 @@ class I2CSocketServer:
     """Serves ``bus`` (an EmulatedI2CBus, or any object with its methods) to :class:`SocketI2CBus` clients at
     ``path``, one thread per connection; every call holds ``lock`` (share it with whatever else drives the
     emulators, e.g. a simulator's stepping). ``realtime_priority`` > 0: the serving threads alone run ``SCHED_FIFO``
-    at it (:func:`hindrax_drivers.scheduling.set_this_thread`), so that they answer within the drivers' bus deadlines
-    on a loaded machine, as the hardware does. :meth:`close` stops serving: the socket file goes and every client's
-    next call fails (a removed adapter)."""
+    at it (:func:`hindrax_drivers.process.scheduling.set_this_thread`), so that they answer within the drivers' bus
+    deadlines on a loaded machine, as the hardware does. :meth:`close` stops serving: the socket file goes and every
+    client's next call fails (a removed adapter)."""
 
     def __init__(self, bus: Any, path: str, lock: threading.Lock | None = None, realtime_priority: int = 0) -> None:
         self.bus, self.lock, self.path = bus, lock or threading.Lock(), path

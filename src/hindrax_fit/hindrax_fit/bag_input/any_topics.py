@@ -2,7 +2,7 @@
 the fit core's per-DOF records. No ROS runtime (bags are decoded by
 :class:`hindrax_drivers.recording.reader.BagReader` from their stored definitions).
 
-Inputs (:data:`ACCEPTED`), every vector converted to body FRD with :mod:`hindrax_drivers.frames` (messages are
+Inputs (:data:`ACCEPTED`), every vector converted to body FRD with :mod:`hindrax_drivers.base.frames` (messages are
 REP-103 FLU in ``base_link``):
 
 * force: ``geometry_msgs/msg/WrenchStamped`` (commanded or measured wrench about base_link), or our
@@ -45,7 +45,7 @@ from rclpy.serialization import deserialize_message
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
-from hindrax_drivers import frames
+from hindrax_drivers.base import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.recording.reader import BagReader

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.frames import wrap_angle
+from hindrax_drivers.base.frames import wrap_angle
 
 from .model import prior_inertia
 

@@ -16,7 +16,7 @@ simulator's truth):
   model-based law of :mod:`hindrax_onboard.control.law` with the vehicle file's model (or an identified one); the
   former PD/PI law is :class:`hindrax_onboard.control.legacy.LegacyPDHold`.
 
-Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_drivers.frames`.
+Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_drivers.base.frames`.
 """
 from __future__ import annotations
 

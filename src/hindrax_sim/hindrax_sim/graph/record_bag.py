@@ -33,8 +33,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hindrax_drivers.conditions import ConditionTimeout, ros_context, wait_until
-from hindrax_drivers.devices import DEVICES, I2C
+from hindrax_drivers.process.conditions import ConditionTimeout, ros_context, wait_until
+from hindrax_drivers.base.devices import DEVICES, I2C
 from hindrax_drivers.recording.make_test_bags import default_output_dir, write_bags
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.config import default_config_path
@@ -62,7 +62,7 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     file, seed :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if
     it exists), in the initialised rclpy ``context``. Returns topic -> number of messages the
     graph's nodes published while recording (every one is in the bag). Raises
-    :class:`~hindrax_drivers.conditions.ConditionTimeout` naming the condition not reached (each
+    :class:`~hindrax_drivers.process.conditions.ConditionTimeout` naming the condition not reached (each
     wait: 60 s of wall time), ConfigError for bad overrides.
     """
     timeout_s = 60.0

@@ -8,12 +8,12 @@ each beat is read by two receivers (docs/architecture.md §8), so a beat's cost 
   beat as the bytes a node publishes and to read it back as a receiver does, median of 5 blocks. Before: rosbags'
   encoder of a DiagnosticStatus with the ESC's seven key-value pairs (``boot_id``, ``seq``, ``output_state``,
   ``armed``, ``reason``, ``guard_boot_id``, ``guard_seq``), rclpy's deserialiser and the pairs parsed into numbers.
-  After: :func:`hindrax_drivers.lean_cdr.heartbeat_cdr` and :func:`~hindrax_drivers.lean_cdr.read_heartbeat`.
+  After: :func:`hindrax_drivers.cdr.lean_cdr.heartbeat_cdr` and :func:`~hindrax_drivers.cdr.lean_cdr.read_heartbeat`.
 * ``heartbeat_cycle_cpu_us_{status,heartbeat}`` and ``heartbeat_cycle_cpu_ratio``: process CPU time (every thread:
   DDS included) per beat built, published, delivered to a subscription in a second participant through rclpy's
   EventsExecutor and read, median of 5 alternating blocks of beats. Before: the DiagnosticStatus subscription of
-  rclpy objects; after: the raw subscription the receivers use (:class:`hindrax_drivers.liveness.HeartbeatWatch`).
-* ``heartbeat_graph_queries_per_s``: graph queries of one :class:`~hindrax_drivers.liveness.HeartbeatWatch` checked
+  rclpy objects; after: the raw subscription the receivers use (:class:`~.liveness.HeartbeatWatch`).
+* ``heartbeat_graph_queries_per_s``: graph queries of one :class:`~.liveness.HeartbeatWatch` checked
   at 25 Hz with its peer publishing (before: one query per check, 25 a second; the ESC and the guard check four
   watches and the command topic, 115 queries a second), and ``heartbeat_graph_query_cpu_us`` what one costs.
 """
@@ -27,9 +27,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from domain_coordinator import domain_id
 from rclpy.serialization import deserialize_message
 
-from hindrax_drivers.lean_cdr import diagnostic_status_cdr, heartbeat_cdr, read_heartbeat
-from hindrax_drivers.liveness import (SETTLE_S, HeartbeatPublisher, HeartbeatWatch, heartbeat_qos,
-                                      publisher_node_names)
+from hindrax_drivers.cdr.lean_cdr import diagnostic_status_cdr, heartbeat_cdr, read_heartbeat
+from hindrax_drivers.node_support.liveness import (SETTLE_S, HeartbeatPublisher, HeartbeatWatch, heartbeat_qos,
+                                                   publisher_node_names)
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.msg import Heartbeat
 

@@ -3,7 +3,7 @@
 For each driver (MS5837 pressure node, ICM-20948 IMU node) one process runs the node over its
 device emulator on an :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`, plus a probe node
 subscribing to the main topic, all in one EventsExecutor (the executor of every node process,
-``hindrax_drivers.ros_process``), with the shipped configuration
+``hindrax_drivers.process.ros_process``), with the shipped configuration
 (MS5837: 10 Hz, OSR 4096; ICM-20948: 100 Hz configured = 102.27 Hz, I2C-master magnetometer).
 
 * Latency: from the emulator's ``i2c_read`` of the data (ICM-20948: the 23-byte burst; MS5837: the ADC read

@@ -87,11 +87,11 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from hindrax_drivers.liveness import heartbeat_qos
+from hindrax_drivers.node_support.liveness import heartbeat_qos
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.scheduling import PRIORITY_ENV
+from hindrax_drivers.process.scheduling import PRIORITY_ENV
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
                                      SafetyHeartbeats, child_env, child_process, config_parameters,
@@ -299,7 +299,7 @@ def run(quick: bool = False) -> list[dict]:
 # modules it runs imported and rclpy initialised, then gc.collect() timed (CPU of the process) before and after
 # freeze_startup_heap(), which RosProcess.spin() calls once the nodes are built.
 
-GC_PROCESSES = {"actuation": ["hindrax_drivers.composition", "hindrax_drivers.allocation.node",
+GC_PROCESSES = {"actuation": ["hindrax_drivers.layout.composition", "hindrax_drivers.allocation.node",
                               "hindrax_drivers.pca9685.node"],
                 "supervisor": ["hindrax_drivers.supervisor.node"], "output_guard": ["hindrax_drivers.guard.node"]}
 
@@ -309,7 +309,7 @@ import rclpy
 for name in sys.argv[2:]:
     importlib.import_module(name)
 rclpy.init(args=[])
-from hindrax_drivers.ros_process import freeze_startup_heap
+from hindrax_drivers.process.ros_process import freeze_startup_heap
 
 def full_collection_ms():
     out = []
@@ -328,8 +328,8 @@ rclpy.shutdown()
 
 def gc_rows(quick: bool = False) -> list[dict]:
     """Rows ``gc_full_collection_cpu_ms_<process>`` (frozen: what a full collection costs once the process spins)
-    and ``..._unfrozen`` (the same heap without :func:`~hindrax_drivers.ros_process.freeze_startup_heap`), median
-    CPU ms of 3 (quick) or 7 collections, for each process of :data:`GC_PROCESSES`."""
+    and ``..._unfrozen`` (the same heap without :func:`~hindrax_drivers.process.ros_process.freeze_startup_heap`),
+    median CPU ms of 3 (quick) or 7 collections, for each process of :data:`GC_PROCESSES`."""
     rows = []
     for label, modules in GC_PROCESSES.items():
         out = subprocess.run([python_executable(), "-c", _GC_PROBE, "3" if quick else "7", *modules],
@@ -359,8 +359,8 @@ VEHICLE_EXECUTABLES = {"esc": "actuation_node", "supervisor": "supervisor_node",
 def vehicle_scheduling() -> dict[str, tuple[tuple[str, ...], dict[str, str]]]:
     """Name of :data:`PROCESSES` -> (launch prefix, environment additions) that ``vehicle.launch.xml`` starts its
     process with: ``nice -n -5`` and ``HINDRAX_REALTIME_PRIORITY`` (docs/deployment.md §1,
-    :mod:`hindrax_drivers.scheduling`), read from the launch file, so a benchmark schedules the safety processes as
-    the vehicle does. Read once per process (the launch file and the installed console scripts)."""
+    :mod:`hindrax_drivers.process.scheduling`), read from the launch file, so a benchmark schedules the safety processes
+    as the vehicle does. Read once per process (the launch file and the installed console scripts)."""
     read = {lp.process.executable: lp.process for lp in
             launch_processes(package_share("hindrax_drivers") / "launch" / "vehicle.launch.xml")}
     return {name: (tuple(read[exe].launch_prefix),
@@ -528,7 +528,8 @@ class _Layout:
     #: False: the real-time priority withheld (the launch file's nice -5 only), for a comparison
     realtime = True
     #: True: each node process in a session of its own, as a launched process is (the project's runner, a systemd
-    #: service), so that the kernel's session autogroups rank it as on the vehicle (hindrax_drivers/scheduling.py)
+    #: service), so that the kernel's session autogroups rank it as on the vehicle
+    #: (hindrax_drivers/process/scheduling.py)
     new_session = False
 
     def start(self, name: str, extra: tuple = ()) -> None:
@@ -780,7 +781,7 @@ _REPLAY = r"""
 import sys, time
 from rclpy.parameter import Parameter
 from hindrax_drivers.recording.player_node import BagPlayerNode
-from hindrax_drivers.ros_process import RosProcess
+from hindrax_drivers.process.ros_process import RosProcess
 class Unchecked(BagPlayerNode):
     def _check_graph(self, force=False):
         pass

@@ -6,7 +6,7 @@ supervisor and the output guard, each in its own process on the vehicle's transp
 gateway beside them, started as ``python -m hindrax_drivers.gateway.node`` on the layout's internal
 domain and a topside domain of its own, with an operator key for the vehicle (``HINDRAX_KEYS_DIR``):
 
-* ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_drivers.proc_sockets`) of the ESC,
+* ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_drivers.process.proc_sockets`) of the ESC,
   supervisor, guard and the gateway's internal process bound outside 127.0.0.1 and the multicast groups (target
   0). The gateway's topside process is not counted: it must reach the tether;
 * ``operator_{unsigned,wrong_key,replayed}_requests_accepted``: of :data:`REQUESTS` (:data:`QUICK_REQUESTS`) arm
@@ -23,8 +23,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from domain_coordinator import domain_id
-from hindrax_drivers.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
-from hindrax_drivers.proc_sockets import child_pids, exposed, udp_sockets
+from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
+from hindrax_drivers.process.proc_sockets import child_pids, exposed, udp_sockets
 from hindrax_drivers.testing import wait_until
 
 from hindrax_msgs.srv import SetArmed, SignedTrigger
@@ -43,7 +43,7 @@ KINDS = {"unsigned": "unsigned", "wrong_key": "signed with another key",
 
 def exposure_row(sockets_by_process: dict[str, list[tuple[str, int]]]) -> dict:
     """The row ``internal_sockets_reachable_from_network`` from process label -> its UDP sockets (address, port):
-    value = how many are reachable from the network (:func:`~hindrax_drivers.proc_sockets.exposed`)."""
+    value = how many are reachable from the network (:func:`~hindrax_drivers.process.proc_sockets.exposed`)."""
     found = exposed(sockets_by_process)
     total = sum(len(s) for s in sockets_by_process.values())
     return {"name": "internal_sockets_reachable_from_network", "value": sum(len(s) for s in found.values()),

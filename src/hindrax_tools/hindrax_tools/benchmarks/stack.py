@@ -56,10 +56,10 @@ from rclpy.action import ActionClient
 from rclpy.executors import ShutdownException, TimeoutException
 from std_msgs.msg import Header
 
-from hindrax_drivers.action_goal import GoalSender
+from hindrax_drivers.node_support.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path
-from hindrax_drivers.launch_xml import write_parameter_file
-from hindrax_drivers.lean_cdr import cdr_decoder, type_name_of
+from hindrax_drivers.layout.launch_xml import write_parameter_file
+from hindrax_drivers.cdr.lean_cdr import cdr_decoder, type_name_of
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
 from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
@@ -153,8 +153,8 @@ def _wrench_stream(probe: Any) -> Callable[[bool], None]:
 def _running_then_idle(probe: Any, action: Any, switch: Callable[[bool], None], window: Any,
                        spin: Any, spin_idle: Any, what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
-    :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
-    warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
+    :class:`~hindrax_drivers.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s
+    of warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
     switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one
     executor spin while running / while idle. Raises
@@ -343,7 +343,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 if lp.label in procs:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
-                # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
+                # docs/deployment.md §1; the DDS transport, hindrax_drivers.process.dds_transport)
                 argv = [*lp.process.launch_prefix, py, *wrap, lp.module,
                         *lp.process.ros_arguments(values_file), *bench]
                 own = {**dict(lp.process.env), SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}

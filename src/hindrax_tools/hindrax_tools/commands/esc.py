@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import ConfigError, default_config_path
-    from hindrax_drivers.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
+    from hindrax_drivers.base.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
     from hindrax_drivers.pca9685 import protocol as p
 
     path = args.config or str(default_config_path())

@@ -128,7 +128,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     (read on ``status_topic`` before the goal is sent: the goal is then not sent)."""
     from rclpy.action import ActionClient
 
-    from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
+    from hindrax_drivers.node_support.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
     from hindrax_sim.progress_line import ProgressLine

@@ -4,7 +4,7 @@ day on a laptop.
 One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_sim.live_pool`: the simulator
 behind the five emulated devices, in a process of its own, on the wall clock) and the *installed*
 ``hindrax_onboard/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
-process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.process_runner.ProcessRunner`), the drivers pointed at
+process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.layout.process_runner.ProcessRunner`), the drivers pointed at
 the pool's serial ports and I2C socket; ``NAME:=VALUE`` are more launch arguments (``model_file:=`` of the block's
 second launch; an undeclared one is refused in one line). The vehicle file is the installed one with its oscillator
 marked measured (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
@@ -76,12 +76,12 @@ def _domains(args: argparse.Namespace) -> tuple[int, int]:
 
 def _refuse_a_domain_in_use(domain: int) -> None:
     """Raise :class:`CommandError` ``"hindrax pool rehearse: refused: ROS domain N already has ESC /esc; ..."`` when
-    an ESC or supervisor is on ``domain`` (:func:`hindrax_drivers.vehicle_graph.refuse_before_start`, as
+    an ESC or supervisor is on ``domain`` (:func:`hindrax_drivers.node_support.vehicle_graph.refuse_before_start`, as
     ``hindrax bringup`` and ``hindrax run``): a second vehicle there would cut the first one's thrusters and mix
     into its bags."""
     import rclpy
 
-    from hindrax_drivers.vehicle_graph import ForeignVehicleError, refuse_before_start
+    from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError, refuse_before_start
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
@@ -101,9 +101,9 @@ def run(args: argparse.Namespace) -> int:
     import yaml
 
     from hindrax_drivers.config import ConfigError, load_config
-    from hindrax_drivers.launch_xml import LaunchFileError, ament_share, read_launch
-    from hindrax_drivers.operator_signing import KEYS_DIR_ENV, create_key
-    from hindrax_drivers.process_runner import ProcessRunner
+    from hindrax_drivers.layout.launch_xml import LaunchFileError, ament_share, read_launch
+    from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, create_key
+    from hindrax_drivers.layout.process_runner import ProcessRunner
 
     from hindrax_sim.live_pool import LivePool
 

@@ -221,7 +221,7 @@ def run_graph(args: argparse.Namespace) -> int:
     """The campaign through the ROS graph (module docstring). Returns the exit status."""
     from hindrax_drivers.config import default_config_path
 
-    from hindrax_drivers.vehicle_graph import ForeignVehicleError
+    from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError
 
     from hindrax_sim.graph.graph_campaign import run_graph_campaign
     from hindrax_fit.assessment.results import reference_sections

@@ -66,10 +66,10 @@ def run(args: argparse.Namespace) -> int:
 def _drive(core: AllocationCore, rows: list[dict], step_s: float, vehicle: str | None = None,
            discovery_timeout_s: float = 10.0) -> int:
     """Arm, step each thruster for ``step_s`` s with 1 s of neutral after it, disarm (also on Ctrl-C or any
-    error: registered before the node's clean-up, :class:`~hindrax_drivers.ros_process.RosProcess`)."""
+    error: registered before the node's clean-up, :class:`~hindrax_drivers.process.ros_process.RosProcess`)."""
     import rclpy
 
-    from hindrax_drivers.ros_process import RosProcess
+    from hindrax_drivers.process.ros_process import RosProcess
     from hindrax_msgs.msg import ThrusterForces
     from hindrax_msgs.srv import SetArmed
 

@@ -7,7 +7,7 @@ run on the vehicle itself) the nodes' own names, without a namespace. :func:`fin
 the gateway's topside-only node ``/<name>/gateway_operator``, refuses a name two gateways answer to, and warns (stderr)
 when another server answers one of the vehicle's services (an eavesdropper, issue 71).
 
-On the topside an operator's request is signed (:mod:`hindrax_drivers.operator_signing`) with the vehicle's key,
+On the topside an operator's request is signed (:mod:`hindrax_drivers.gateway.operator_signing`) with the vehicle's key,
 ``<keys dir>/<name>.key`` (``hindrax keys``), when this PC has it; without it the gateway refuses the request and
 says where the key goes. The e-stop is never signed.
 """
@@ -77,14 +77,14 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
 
 def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float) -> Target:
     """Spin ``executor`` until a gateway (``wanted``'s, if given) is seen and discovery has settled
-    (:func:`hindrax_drivers.dds_transport.wait_discovered`: every gateway running has announced itself), at most
+    (:func:`hindrax_drivers.process.dds_transport.wait_discovered`: every gateway running has announced itself), at most
     ``timeout_s``; then choose (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises
     :class:`CommandError` (one line) for no vehicle, several, not the one named, or a name two gateways answer to."""
-    from hindrax_drivers.dds_transport import wait_discovered
+    from hindrax_drivers.process.dds_transport import wait_discovered
     from hindrax_drivers.gateway.interface import (GATEWAY_NODE, STATUS_TOPIC, VehicleChoiceError, choose_vehicle,
                                                    duplicate_problem, extra_servers_problem, participants,
                                                    vehicles_seen)
-    from hindrax_drivers.operator_signing import OperatorKeyError, Signer, key_path, load_key
+    from hindrax_drivers.gateway.operator_signing import OperatorKeyError, Signer, key_path, load_key
 
     nodes = node.get_node_names_and_namespaces()
 

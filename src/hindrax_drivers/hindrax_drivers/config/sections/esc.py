@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Mapping
 
-from ...hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error, esc_prescale
+from ...base.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error, esc_prescale
 from ..spec import ConfigIssue, flag, integer, real, section, text
 
 SCHEMA, OPTIONAL = section("esc", {
@@ -108,7 +108,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     feed (docs/watchdog.md) with its line, rate and the circuit's timeout, and at least three rising edges per
     timeout, so that one late guard tick does not stop the outputs; the ESC's and the guard's heartbeat timeouts
     long enough for two supervisor heartbeats (one per supervisor check). The oscillator's range (23-27 MHz,
-    :data:`~hindrax_drivers.hardware_limits.PCA9685_OSCILLATOR_MIN_HZ`) is the key's own range in :data:`SCHEMA`."""
+    :data:`~.hardware_limits.PCA9685_OSCILLATOR_MIN_HZ`) is the key's own range in :data:`SCHEMA`."""
     issues: list[ConfigIssue] = []
     if "esc.pwm_frequency_hz" in c and "esc.oscillator_hz" in c:
         try:

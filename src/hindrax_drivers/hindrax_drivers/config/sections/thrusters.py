@@ -10,8 +10,8 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
-from ...allocation.thrust_curve import ThrustCurve, ThrustCurveError
-from ...hardware_limits import ESC_DEADBAND_US, ESC_NEUTRAL_US
+from ...base.thrust_curve import ThrustCurve, ThrustCurveError
+from ...base.hardware_limits import ESC_DEADBAND_US, ESC_NEUTRAL_US
 from ..spec import DOFS, STRS, THRUSTER, ConfigIssue, Spec, flag, integer, real, section, text, vector
 from ..typed_sections import ABSENT, Section
 
@@ -57,11 +57,11 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
       range; no two thrusters on one ``esc_channel``.
     * ``thrusters.pulse_width_neutral_us`` and every neutral + ``trim_us`` (what a disarmed ESC node holds on the
       wire) strictly inside the Basic ESC's own deadband, 1500 +- 25 us (docs/devices.md §5.2; ESC_NEUTRAL_US and
-      ESC_DEADBAND_US of :mod:`hindrax_drivers.hardware_limits`): outside it a vehicle that was never armed
+      ESC_DEADBAND_US of :mod:`hindrax_drivers.base.hardware_limits`): outside it a vehicle that was never armed
       thrusts (1560 us; deadband 120 with trim 100 gives 1600 us).
     * ``thrusters.curve_negative`` / ``curve_positive``: each side increasing with the right sign at its range end
       (negative thrust at ``pulse_width_min_us``, positive at ``pulse_width_max_us``) with a usable monotone branch
-      toward the deadband, the condition :class:`~hindrax_drivers.allocation.thrust_curve.ThrustCurve` needs to
+      toward the deadband, the condition :class:`~hindrax_drivers.base.thrust_curve.ThrustCurve` needs to
       start ([Hindrax-Drag] eq. 1); a negated curve is refused here rather than by the allocation at start-up.
     """
     issues: list[ConfigIssue] = []

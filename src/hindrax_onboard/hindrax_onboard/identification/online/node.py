@@ -102,13 +102,13 @@ from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_drivers import frames
-from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
-from hindrax_drivers.lean_cdr import wrench_stamped_cdr
+from hindrax_drivers.base import frames
+from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+from hindrax_drivers.cdr.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_common import load_node_config, run_node, sensor_input_qos
-from hindrax_drivers.vehicle_node import VehicleNode
+from hindrax_drivers.node_support.node_common import load_node_config, run_node, sensor_input_qos
+from hindrax_drivers.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -151,7 +151,7 @@ class IdentificationNode(VehicleNode):
     """The identification executive as a ROS node (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters,
-    :func:`~hindrax_drivers.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
+    :func:`~hindrax_drivers.node_support.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
     :class:`ConfigError` for an invalid configuration.
     """
 
@@ -362,7 +362,7 @@ class IdentificationNode(VehicleNode):
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
         # serialised by rosbags and published as bytes: the command-rate publish without rclpy's object conversion
-        # (hindrax_drivers.lean_cdr, the measured gain)
+        # (hindrax_drivers.cdr.lean_cdr, the measured gain)
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
         self.pub_wrench.publish(wrench_stamped_cdr(now.nanoseconds, "base_link", w))
 
@@ -388,11 +388,11 @@ class IdentificationNode(VehicleNode):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_common.run_node`: a running goal is
-    ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration).
+    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_support.node_common.run_node`: a running
+    goal is ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration).
 
-    The process spins the EventsExecutor like every node process (:mod:`hindrax_drivers.ros_process`): the action
-    runs no coroutine (module docstring, "Action execution")."""
+    The process spins the EventsExecutor like every node process (:mod:`hindrax_drivers.process.ros_process`): the
+    action runs no coroutine (module docstring, "Action execution")."""
     return run_node(IdentificationNode, args)
 
 

@@ -35,8 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.parameter import Parameter
 
     from hindrax_drivers.recording.player_node import REFUSAL, BagPlayerNode, PlayerError
-    from hindrax_drivers.ros_process import RosProcess
-    from hindrax_drivers.vehicle_graph import ForeignVehicleError, refuse_before_start
+    from hindrax_drivers.process.ros_process import RosProcess
+    from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError, refuse_before_start
 
     overrides = [Parameter("bag", value=str(args.bag)), Parameter("rate", value=float(args.rate)),
                  Parameter("start_offset_s", value=float(args.start_offset)), Parameter("loop", value=bool(args.loop)),

@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     from hindrax_drivers.config import ConfigError
     from hindrax_drivers.recording.recorder_node import RecorderNode
-    from hindrax_drivers.ros_process import RosProcess
+    from hindrax_drivers.process.ros_process import RosProcess
 
     if args.duration < 0:
         raise CommandError("hindrax bag record: --duration must be >= 0")

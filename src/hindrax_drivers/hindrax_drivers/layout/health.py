@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Iterable, Mapping
 
-from .devices import DEVICES
+from ..base.devices import DEVICES
 
 __all__ = ["STATUS_OF_NODE", "SUPERVISOR_STATUS_TOPIC", "Expectation", "HealthReport", "Seen", "assess",
            "expectation", "level_name"]
@@ -50,7 +50,7 @@ class Expectation:
 
 def expectation(node_names: Iterable[str]) -> Expectation:
     """The expectation for a launch layout whose nodes are ``node_names`` (e.g. the labels of
-    :func:`~hindrax_drivers.launch_xml.read_launch`)."""
+    :func:`~hindrax_drivers.layout.launch_xml.read_launch`)."""
     names = tuple(node_names)
     return Expectation(names, tuple(STATUS_OF_NODE[n] for n in names if n in STATUS_OF_NODE), "supervisor" in names)
 

@@ -50,7 +50,7 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Call
 @contextlib.contextmanager
 def ros_context(domain_id: int | None = None) -> Iterator[Any]:
     """An initialised, isolated rclpy Context (shut down on exit). Domain from ROS_DOMAIN_ID by default; discovery
-    kept on loopback over the vehicle's loopback UDP transport (:func:`~hindrax_drivers.dds_transport.
+    kept on loopback over the vehicle's loopback UDP transport (:func:`~hindrax_drivers.process.dds_transport.
     loopback_transport`) unless the environment already asks for another discovery range.
 
     On exit every node still alive in the context is destroyed before the shutdown (:func:`destroy_nodes_of`).

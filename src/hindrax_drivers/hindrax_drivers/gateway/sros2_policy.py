@@ -34,7 +34,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from typing import Iterable, Mapping
 
-from .gateway.interface import GATEWAY_NODE, INTERFACE
+from .interface import GATEWAY_NODE, INTERFACE
 
 __all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS",
            "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
@@ -85,8 +85,8 @@ def enclave_of(arguments: Iterable[str]) -> str | None:
 
 
 def launch_enclaves(processes: Iterable) -> dict[str, tuple[str, ...]]:
-    """{enclave: node names} of the launch layout's processes (:class:`~hindrax_drivers.launch_xml.NodeProcess`,
-    from :func:`~hindrax_drivers.launch_xml.read_launch`). A process of this package without ``--enclave`` is an
+    """{enclave: node names} of the launch layout's processes (:class:`~hindrax_drivers.layout.launch_xml.NodeProcess`,
+    from :func:`~hindrax_drivers.layout.launch_xml.read_launch`). A process of this package without ``--enclave`` is an
     error (ValueError naming it); the gateway is left out (its two contexts have :func:`gateway_internal_enclave`
     and the topside enclave)."""
     out: dict[str, list[str]] = {}

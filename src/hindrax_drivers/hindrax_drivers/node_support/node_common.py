@@ -20,11 +20,11 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from hindrax_msgs.msg import RawDeviceData
 
-from .config import ConfigError, VehicleConfig
-from .config.node_parameters import declare_vehicle_parameters
-from . import ros_process
-from .ros_process import RosProcess
-from .scheduling import apply_realtime_priority, describe as describe_scheduling
+from ..config import ConfigError, VehicleConfig
+from ..config.node_parameters import declare_vehicle_parameters
+from ..process import ros_process
+from ..process.ros_process import RosProcess
+from ..process.scheduling import apply_realtime_priority, describe as describe_scheduling
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
@@ -444,23 +444,23 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
               executor: str | None = None, exit_process: bool = True) -> int:
-    """Process entry point of nodes composed in one process (:mod:`hindrax_drivers.composition`):
+    """Process entry point of nodes composed in one process (:mod:`hindrax_drivers.layout.composition`):
     the nodes are built in order after ``rclpy.init`` and spun by one executor; on exit they are
     closed and destroyed in the reverse order (the last built first). executor: ``events``,
-    ``single`` or None for the default (:mod:`hindrax_drivers.ros_process`: the EventsExecutor
+    ``single`` or None for the default (:mod:`hindrax_drivers.process.ros_process`: the EventsExecutor
     unless ``HINDRAX_EXECUTOR=single``). Returns the exit status: 0 on SIGINT/SIGTERM, 1 on an
     invalid configuration (one line on stderr naming key, value, allowed range); an exception out
     of any node's callback ends the whole process (every node's ``close()`` still runs). SIGINT
     shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
-    (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``). Before
+    (:class:`~hindrax_drivers.process.ros_process.RosProcess`, ``interrupt=False``). Before
     ``rclpy.init`` the process takes the real-time priority its environment asks for
-    (:mod:`hindrax_drivers.scheduling`; a bad value of ``HINDRAX_REALTIME_PRIORITY`` is an
+    (:mod:`hindrax_drivers.process.scheduling`; a bad value of ``HINDRAX_REALTIME_PRIORITY`` is an
     invalid configuration), and logs the outcome once its nodes are built. A shutdown that takes
-    longer than :data:`~hindrax_drivers.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
+    longer than :data:`~hindrax_drivers.process.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
     thread's traceback to stderr and exits with status 1
-    (:class:`~hindrax_drivers.ros_process.RosProcess`). exit_process: in the main thread the
+    (:class:`~hindrax_drivers.process.ros_process.RosProcess`). exit_process: in the main thread the
     process ends on return, without the DDS participant's teardown
-    (:mod:`hindrax_drivers.ros_process`): the exit status becomes the process's; False returns
+    (:mod:`hindrax_drivers.process.ros_process`): the exit status becomes the process's; False returns
     it."""
     try:
         sched = apply_realtime_priority()

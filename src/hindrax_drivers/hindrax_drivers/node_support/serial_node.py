@@ -2,7 +2,7 @@
 tap.
 
 - configuration ``<section>.port`` (device path or pyserial URL) and ``<section>.baud_rate``
-  (:func:`hindrax_drivers.node_common.load_node_config`: invalid -> one line, exit 1);
+  (:func:`hindrax_drivers.node_support.node_common.load_node_config`: invalid -> one line, exit 1);
 - a :class:`~hindrax_drivers.transport.serial_transport.SerialTransport` (reader thread, reconnect
   with backoff 0.05 s doubling to 1 s);
 - raw traffic on ``raw/<device>`` (``RawDataPublisher.serial_tap``), one message per parsed report;
@@ -11,7 +11,7 @@ tap.
   published at once on every change, and at 1 Hz;
 - a :class:`CommandSequencer` that sends the start-up commands after *every* (re)connect, spaced by
   a gap, from its own thread;
-- :meth:`SerialDeviceNode.check_stuck`: one :class:`~hindrax_drivers.node_common.StuckDetector` per
+- :meth:`SerialDeviceNode.check_stuck`: one :class:`~hindrax_drivers.node_support.node_common.StuckDetector` per
   named signal, the ERROR ``stuck`` while any is stuck; the subclass then stops publishing the stuck
   values as valid (:attr:`SerialDeviceNode.stuck`).
 
@@ -29,13 +29,13 @@ from typing import Any, Iterable, List, Optional, Sequence, Tuple
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Range
 
-from .config import build_section
-from .config.node_parameters import declare_node_parameter
-from .config.spec import integer
-from .config.typed_sections import SensorsDvl75Section, SensorsPing1dSection
+from ..config import build_section
+from ..config.node_parameters import declare_node_parameter
+from ..config.spec import integer
+from ..config.typed_sections import SensorsDvl75Section, SensorsPing1dSection
 from .node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector,
                           load_node_config, time_from_ns)
-from .transport.serial_transport import SerialTransport, SerialTransportError
+from ..transport.serial_transport import SerialTransport, SerialTransportError
 from .vehicle_node import VehicleNode
 
 __all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S", "range_message"]
@@ -354,7 +354,7 @@ class SerialDeviceNode(VehicleNode):
 
     def close(self) -> None:
         """Stop the command thread and the transport (joins the reader thread). Idempotent; called by
-        :func:`~hindrax_drivers.node_common.run_node` on shutdown and by :meth:`destroy_node`."""
+        :func:`~hindrax_drivers.node_support.node_common.run_node` on shutdown and by :meth:`destroy_node`."""
         if self._closed:
             return
         self._closed = True

@@ -3,7 +3,7 @@
 On the vehicle, ``ros2 launch`` (Jazzy's ``launch`` 3.4 / ``launch_ros`` 0.26) reads the launch files and starts
 one process per ``<node>``. Neither package is on PyPI, so the development machines cannot run it; the pool-day
 test (``test/test_pool_day.py``) and anyone checking a layout here start the same processes through
-:class:`~hindrax_drivers.process_runner.ProcessRunner` from the list this module reads out of the same installed
+:class:`~hindrax_drivers.layout.process_runner.ProcessRunner` from the list this module reads out of the same installed
 file. Why our own reader: the launch XML front end is only available inside ``launch``; the subset the project's
 launch files use is small and is read here the way ``launch_xml``/``launch_ros`` read it (element and attribute
 names, substitutions, conditions, the ``--ros-args`` a node gets); anything else is refused with
@@ -26,7 +26,7 @@ Command of a node (``launch_ros.actions.Node``)
 Environment
     ``<set_env>`` and a node's ``<env>`` add to the environment the node's process inherits
     (:attr:`NodeProcess.env`); the vehicle launch file gives every vehicle process its DDS transport this way
-    (:mod:`hindrax_drivers.dds_transport`).
+    (:mod:`hindrax_drivers.process.dds_transport`).
 Launch prefix
     ``launch-prefix="nice -n -5"`` puts that command, split as a shell would (``shlex``), before the executable
     (``launch_ros.actions.Node(prefix=...)``); the vehicle launch file gives the safety processes their scheduling
@@ -102,7 +102,7 @@ class NodeProcess:
     @property
     def node_names(self) -> tuple[str, ...]:
         """The ROS node names this process runs: a composed process's nodes
-        (:func:`hindrax_drivers.composition.node_names`), else :attr:`label`."""
+        (:func:`hindrax_drivers.layout.composition.node_names`), else :attr:`label`."""
         return composition.node_names(self.package, self.executable, self.name)
 
     def ros_arguments(self, write_values: Callable[[Mapping], Path]) -> list[str]:

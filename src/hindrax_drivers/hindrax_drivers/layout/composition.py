@@ -1,7 +1,7 @@
 """Composed processes: several node classes of this package in one process, spun by one executor.
 
 rclpy has no ``rclcpp_components`` containers. A *group* is a console script that builds a fixed
-list of node classes and spins them (:func:`hindrax_drivers.node_common.run_nodes`). Nodes keep
+list of node classes and spins them (:func:`hindrax_drivers.node_support.node_common.run_nodes`). Nodes keep
 their own names and read the same vehicle file, so a group runs from a launch file like the nodes it
 composes (``<node pkg="hindrax_drivers" exec="sensors_node">`` without ``name``, which would rename
 every node of the process). Every node keeps its own executable too (``ms5837_node`` ...).
@@ -27,7 +27,7 @@ Groups (:data:`GROUPS`):
 ``ident_record_node`` (hindrax_onboard, :data:`IDENT_GROUPS`)
     the same two and the recorder: the pool test's layout with recording on.
 
-``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
+``python -m hindrax_drivers.layout.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
 :data:`NODE_CLASSES` (for measurements; the launch files use the groups).
 """
 from __future__ import annotations
@@ -35,7 +35,7 @@ from __future__ import annotations
 import sys
 from typing import Any, Callable, Mapping, Sequence
 
-from .devices import DEVICES, load
+from ..base.devices import DEVICES, load
 
 __all__ = ["GROUPS", "IDENT_GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
 
@@ -86,14 +86,14 @@ def node_factories(names: Sequence[str], classes: Mapping[str, str] = NODE_CLASS
 def run_group(names: Sequence[str], args: Sequence[str] | None = None,
               classes: Mapping[str, str] = NODE_CLASSES) -> int:
     """Run the nodes ``names`` (keys of ``classes``, :func:`node_factories`) in this process until SIGINT/SIGTERM
-    (:func:`~hindrax_drivers.node_common.run_nodes`). Returns the exit status (1 on an invalid configuration, one
-    line on stderr)."""
+    (:func:`~hindrax_drivers.node_support.node_common.run_nodes`). Returns the exit status (1 on an invalid
+    configuration, one line on stderr)."""
     return _run(node_factories(names, classes), args)
 
 
 def _run(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None) -> int:
     # imported here: node_names (launch_xml, ``hindrax health``) reads GROUPS without loading the ROS messages
-    from .node_common import run_nodes
+    from ..node_support.node_common import run_nodes
 
     return run_nodes(factories, args)
 
@@ -110,10 +110,10 @@ def actuation_main(args: Sequence[str] | None = None) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]``; exit 2 on a bad node list."""
+    """``python -m hindrax_drivers.layout.composition NODE[,NODE...] [--ros-args ...]``; exit 2 on a bad node list."""
     argv = list(sys.argv if argv is None else argv)
     if len(argv) < 2 or argv[1].startswith("-"):
-        print(f"usage: python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]; nodes: "
+        print(f"usage: python -m hindrax_drivers.layout.composition NODE[,NODE...] [--ros-args ...]; nodes: "
               f"{', '.join(NODE_CLASSES)}", file=sys.stderr)
         return 2
     names = [n for n in argv[1].split(",") if n]

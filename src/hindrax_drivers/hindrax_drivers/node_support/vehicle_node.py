@@ -6,7 +6,7 @@ one more entity in every wait of the node's executor, visited in Python at every
 one-process graph of the virtual pool (13 nodes) they were two thirds of the wait set (213 of 325).
 :class:`VehicleNode`'s publishers and subscriptions get no default event handler; event callbacks a
 node passes itself (e.g. the heartbeat subscriptions' liveliness and matched events,
-:mod:`hindrax_drivers.liveness`) are kept as given. Its parameter services stay (``ros2 param``
+:mod:`hindrax_drivers.node_support.liveness`) are kept as given. Its parameter services stay (``ros2 param``
 reads and sets the nodes' parameters) unless the node is built with
 ``start_parameter_services=False``, which then also leaves out the type-description service: the
 one-process graph of ``hindrax run`` does so (nothing outside its process talks to it).

@@ -23,7 +23,7 @@ publishes (transient local) on every goal state change (ROS 2 design, "Actions":
   result came within ``resend_every_s`` (``get_result`` is idempotent).
 
 Times are wall-clock seconds (``time.monotonic``); spinning is the caller's (one executor spin per call of
-``spin``), as in :func:`hindrax_drivers.conditions.wait_until`.
+``spin``), as in :func:`hindrax_drivers.process.conditions.wait_until`.
 """
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from .node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, OneShot, RawDataPublisher,
                           StuckAlarm)
-from .transport.i2c import BusHandle, I2CDevice
+from ..transport.i2c import BusHandle, I2CDevice
 from .vehicle_node import VehicleNode
 
 __all__ = ["I2cSensorNode", "RETRY_PERIOD_S", "STUCK_AFTER_S"]

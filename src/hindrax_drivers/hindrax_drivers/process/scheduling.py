@@ -4,8 +4,8 @@ The vehicle launch file gives the processes whose deadlines stop the thrusters (
 the supervisor, the output guard) and the sensor drivers whose rates the supervisor checks the environment variable
 :data:`PRIORITY_ENV` (``<env name="HINDRAX_REALTIME_PRIORITY" value="..."/>`` in ``vehicle.launch.xml``).
 :func:`apply_realtime_priority`, called by every node process before ``rclpy.init``
-(:func:`hindrax_drivers.node_common.run_nodes`), puts every thread of the process under ``SCHED_FIFO`` at that
-priority; threads started later (Fast DDS's, the ESC's bus worker) inherit it (glibc's ``pthread_create`` default,
+(:func:`hindrax_drivers.node_support.node_common.run_nodes`), puts every thread of the process under ``SCHED_FIFO`` at
+that priority; threads started later (Fast DDS's, the ESC's bus worker) inherit it (glibc's ``pthread_create`` default,
 ``PTHREAD_INHERIT_SCHED``). The process logs the outcome once it has a node (:func:`describe`).
 
 Why not ``nice``: on a kernel with ``CONFIG_SCHED_AUTOGROUP`` (Debian's, Raspberry Pi OS's; enabled on this

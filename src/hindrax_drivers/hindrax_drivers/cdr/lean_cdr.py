@@ -13,7 +13,7 @@ command, the ESC's pulse widths and latched state and the IMU are published as b
 allocation's ``wrench`` and the campaign bag reader's topics are decoded with :func:`cdr_decoder`
 (``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class). ``hindrax_msgs`` types
 are registered from their installed ``.msg`` files
-(:func:`hindrax_drivers.recording.msgdefs.message_definition`), the standard ones come with rosbags'
+(:func:`hindrax_drivers.cdr.msgdefs.message_definition`), the standard ones come with rosbags'
 Jazzy store.
 
 The safety heartbeats (``hindrax_msgs/Heartbeat``) are a fixed layout, fixed-size fields first and
@@ -30,7 +30,7 @@ from typing import Any, Callable, NamedTuple, Sequence
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from .recording.msgdefs import DELIMITER, message_definition
+from .msgdefs import DELIMITER, message_definition
 
 __all__ = ["Beat", "cdr_decoder", "cdr_encoder", "diagnostic_status_cdr", "heartbeat_cdr", "imu_cdr", "lean_class",
            "prepare", "read_heartbeat", "thruster_pwm_cdr", "thruster_pwm_encode", "thruster_pwm_lean", "type_name_of",
@@ -124,7 +124,7 @@ def lean_class(msg_type: Any) -> Any:
 def cdr_decoder(msg_type: Any) -> Callable[[bytes], Any]:
     """``bytes -> object`` decoding the CDR of ``msg_type`` (an rclpy message class or ``pkg/msg/Type``) with rosbags
     (module docstring). Raises ValueError for a name that is not a message type and
-    :class:`~hindrax_drivers.recording.msgdefs.DefinitionNotFoundError` when its definition is not installed."""
+    :class:`~hindrax_drivers.cdr.msgdefs.DefinitionNotFoundError` when its definition is not installed."""
     return _decoder(type_name_of(msg_type))
 
 
@@ -214,8 +214,8 @@ def _status_parts() -> tuple[Any, ...]:
 def diagnostic_status_cdr(level: int, name: str, message: str, hardware_id: str,
                           values: Sequence[tuple[str, str]] = ()) -> bytes:
     """CDR of a ``diagnostic_msgs/DiagnosticStatus`` (:func:`cdr_encoder`): ``esc/output_state``
-    (:mod:`hindrax_drivers.esc_state`). ``level``: the message's constants (OK 0 ... STALE 3, an int or rclpy's one-byte
-    bytes); ``values``: (key, value) pairs."""
+    (:mod:`hindrax_drivers.node_support.esc_state`). ``level``: the message's constants (OK 0 ... STALE 3, an int or
+    rclpy's one-byte bytes); ``values``: (key, value) pairs."""
     cls, key_value, encode = _status_parts()
     if isinstance(level, (bytes, bytearray)):  # rclpy's constants are one-byte bytes (``byte`` fields)
         level = level[0]

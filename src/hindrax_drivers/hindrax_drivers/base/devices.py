@@ -70,7 +70,7 @@ def load(ref: Any) -> Any:
     if callable(ref):
         return ref
     module, _, attr = ref.partition(":")
-    return getattr(importlib.import_module(module, __package__), attr)
+    return getattr(importlib.import_module(module, __package__.partition(".")[0]), attr)
 
 
 def settings(config: Any, device: Device) -> Any:

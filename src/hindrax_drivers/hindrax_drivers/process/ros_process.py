@@ -1,6 +1,6 @@
 """The life of an rclpy process, written once: init, run, orderly shutdown on SIGINT/SIGTERM.
 
-Every process entry point (:func:`~hindrax_drivers.node_common.run_node`, ``hindrax bringup``,
+Every process entry point (:func:`~hindrax_drivers.node_support.node_common.run_node`, ``hindrax bringup``,
 ``hindrax bag play|record``) is::
 
     with RosProcess(args, errors={ConfigError: "invalid configuration"}) as proc:

@@ -9,7 +9,7 @@ The pieces every safety node (ESC, output guard, supervisor) shares:
 * :class:`HeartbeatIdentity`: the pure check a receiver runs on the topic's publishers and every
   beat (a forger, a replayed bag); a beat it rejects does not count as the peer being alive.
 * :class:`HeartbeatWatch`: the receiver's subscription, taking the beats as bytes
-  (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: AUTOMATIC
+  (:func:`hindrax_drivers.cdr.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: AUTOMATIC
   liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the liveliness event counts the *live*
   publishers (a SIGKILLed process's endpoints stay in the graph until its participant lease runs
   out, 20 s with Fast DDS's default). A writer offering a longer lease does not match at all.
@@ -50,8 +50,8 @@ from rclpy.validate_full_topic_name import validate_full_topic_name
 
 from hindrax_msgs.msg import Heartbeat
 
-from .lean_cdr import heartbeat_cdr, read_heartbeat
-from .pca9685.core import UNNAMED_NODE
+from ..cdr.lean_cdr import heartbeat_cdr, read_heartbeat
+from ..process.dds_transport import UNNAMED_NODE
 
 __all__ = ["AliveAge", "BACKSTOP_S", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
            "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "PublisherNames", "SETTLE_S", "TickGaps",
@@ -112,7 +112,7 @@ def new_boot_id() -> int:
 
 class HeartbeatPublisher:
     """One node's heartbeat (``hindrax_msgs/Heartbeat`` on ``HEARTBEAT_NAMES[kind]``) carrying ``boot_id`` and ``seq``
-    (module docstring), published as CDR bytes (:func:`hindrax_drivers.lean_cdr.heartbeat_cdr`: no rclpy object per
+    (module docstring), published as CDR bytes (:func:`hindrax_drivers.cdr.lean_cdr.heartbeat_cdr`: no rclpy object per
     beat).
 
     ``node``: the publishing rclpy node (it must be named ``HEARTBEAT_NODES[kind]`` for receivers to accept it); the
@@ -186,7 +186,7 @@ class HeartbeatIdentity:
         return self.fault
 
     def on_beat(self, beat: Any, armed: bool) -> bool:
-        """One beat (a :class:`~hindrax_drivers.lean_cdr.Beat` or an rclpy ``Heartbeat``; None: bytes that are not
+        """One beat (a :class:`~hindrax_drivers.cdr.lean_cdr.Beat` or an rclpy ``Heartbeat``; None: bytes that are not
         one); ``armed``: the receiver's (or the vehicle's) armed state. True when the beat is accepted (the peer
         counts as heard), False when it is rejected (:attr:`beat_fault` says why, :attr:`rejected` counts it)."""
         boot_id, seq = (0, 0) if beat is None else (beat.boot_id, beat.seq)
@@ -211,7 +211,7 @@ class HeartbeatIdentity:
 
 
 def heartbeat_ok(msg: Any) -> bool:
-    """Whether a heartbeat (a :class:`~hindrax_drivers.lean_cdr.Beat` or an rclpy ``Heartbeat``) says OK (level
+    """Whether a heartbeat (a :class:`~hindrax_drivers.cdr.lean_cdr.Beat` or an rclpy ``Heartbeat``) says OK (level
     0); any other level or type is not OK."""
     level = msg.level
     return isinstance(level, int) and not isinstance(level, bool) and level == Heartbeat.OK
@@ -258,7 +258,7 @@ class HeartbeatWatch:
     """A receiver's subscription to a peer's heartbeat through its :class:`HeartbeatIdentity` (module docstring).
 
     ``node``: the receiving rclpy node; ``kind``: a key of :data:`HEARTBEAT_NAMES`; ``handler(beat)``: called with
-    every accepted beat (a :class:`~hindrax_drivers.lean_cdr.Beat`) only; ``armed()``: the receiver's armed state
+    every accepted beat (a :class:`~hindrax_drivers.cdr.lean_cdr.Beat`) only; ``armed()``: the receiver's armed state
     for the check. Call :meth:`check` at the receiver's tick (the graph asked only when due, :class:`PublisherNames`):
     it returns :attr:`identity`'s fault ('' when trusted), judged for the receiver's clock at that moment (module
     docstring: on simulated time the lease does not silence a peer). Rejected beats are counted in :attr:`identity`.

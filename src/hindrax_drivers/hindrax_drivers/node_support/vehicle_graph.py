@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable, Mapping
 import rclpy
 from rclpy.parameter import Parameter
 
-from .dds_transport import DISCOVERY_BOUND_S, wait_discovered
+from ..process.dds_transport import DISCOVERY_BOUND_S, UNNAMED_NODE, wait_discovered
 
 __all__ = ["CHECK_PERIOD_S", "DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError",
            "ForeignVehicleWatch", "GraphView", "foreign_vehicle_processes", "graph_view", "own_view",
@@ -51,10 +51,8 @@ _VEHICLE_TOPIC_RULES: tuple[tuple[re.Pattern, str], ...] = tuple((re.compile(p),
 ROLE_NODES = {"esc": "ESC", "supervisor": "supervisor"}
 #: heartbeat topic (relative name, any namespace) -> role of its one legitimate publisher
 HEARTBEAT_TOPICS = {"esc/heartbeat": "ESC", "supervisor/heartbeat": "supervisor"}
-#: rmw's node name for an endpoint whose participant's node list has not been received yet
-_UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
-#: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s:
-#: three announcement periods of the vehicle's profile (:data:`~hindrax_drivers.dds_transport.DISCOVERY_BOUND_S`)
+#: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s: three
+#: announcement periods of the vehicle's profile (:data:`~hindrax_drivers.process.dds_transport.DISCOVERY_BOUND_S`)
 DISCOVERY_WINDOW_S = DISCOVERY_BOUND_S
 #: how often a running tool looks again after the discovery window (:meth:`ForeignVehicleWatch.check_every`), s:
 #: discovery on a loaded machine can outlast the window, and a second vehicle graph may start later
@@ -153,7 +151,7 @@ def graph_view(node: Any) -> GraphView:
             # an endpoint seen before its participant's node names arrives as _NODE_NAME_UNKNOWN_: left out until
             # it can be named (one discovery round later)
             pubs[topic] = tuple(_fq(i.node_name, i.node_namespace) for i in node.get_publishers_info_by_topic(topic)
-                                if i.node_name != _UNKNOWN_NODE)
+                                if i.node_name != UNNAMED_NODE)
     return GraphView(nodes, pubs)
 
 

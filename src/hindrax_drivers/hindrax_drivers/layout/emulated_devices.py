@@ -26,17 +26,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .config import VehicleConfig
-from .devices import DEVICES, I2C, SERIAL
-from .dvl75.emulator import Dvl75Emulator, DvlTruth
-from .icm20948.emulator import Icm20948Emulator
-from .ms5837.emulator import Ms5837Emulator
-from .pca9685.emulator import Pca9685Emulator
-from .ping1d.emulator import Ping1dEmulator, Ping1dTruth
-from .scheduling import HARDWARE_STAND_IN_PRIORITY
-from .transport.emulated_i2c import EmulatedI2CBus
-from .transport.pty_device import PtyDevice
-from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer
+from ..base.devices import DEVICES, I2C, SERIAL, load, settings
+from ..config import VehicleConfig
+from ..dvl75.emulator import DvlTruth
+from ..ping1d.emulator import Ping1dTruth
+from ..process.scheduling import HARDWARE_STAND_IN_PRIORITY
+from ..transport.emulated_i2c import EmulatedI2CBus
+from ..transport.pty_device import PtyDevice
+from ..transport.socket_i2c import SOCKET_ENV, I2CSocketServer
 
 __all__ = ["EmulatedDevices", "DriverEndpoints", "SERIAL_DEVICES", "I2C_DEVICES"]
 
@@ -90,30 +87,27 @@ def _wobble(t_s: float, period_s: float, amplitude: float) -> float:
 class EmulatedDevices(DriverEndpoints):
     """The five emulated devices (module docstring), serving as soon as constructed unless ``serve_i2c`` is False.
 
+    Each device of :data:`~.devices.DEVICES` comes from its table's factory on the truth ``_<name>_truth``:
+    :attr:`emulators` by device name; the serial ones behind :attr:`serial` (node -> pty), the I2C ones on :attr:`bus`.
+
     config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
     (default: a new temporary directory). Use as a context manager or call :meth:`close`. The threads that serve the
-    devices run ``SCHED_FIFO`` :data:`~hindrax_drivers.scheduling.HARDWARE_STAND_IN_PRIORITY`, above the vehicle's
-    processes, and the rest of the process keeps its scheduling (refused without ``CAP_SYS_NICE``: they keep it too).
-    """
+    devices run ``SCHED_FIFO`` :data:`~hindrax_drivers.process.scheduling.HARDWARE_STAND_IN_PRIORITY`, above the
+    vehicle's processes, and the rest of the process keeps its scheduling (refused without ``CAP_SYS_NICE``: they keep
+    it too)."""
 
     def __init__(self, config: VehicleConfig, directory: str | os.PathLike | None = None,
                  serve_i2c: bool = True, poll_period_s: float = 0.01) -> None:
-        self._t0 = time.monotonic()
         self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-devices-"))
         self.directory.mkdir(parents=True, exist_ok=True)
         self.socket_path = str(self.directory / "i2c.sock")
-        self.dvl = PtyDevice(Dvl75Emulator(self._dvl_truth, rate_hz=10.0), poll_period_s=poll_period_s,
-                             link_name="hindrax-dvl", realtime_priority=HARDWARE_STAND_IN_PRIORITY)
-        self.ping = PtyDevice(Ping1dEmulator(self._ping_truth), poll_period_s=poll_period_s,
-                              link_name="hindrax-ping", realtime_priority=HARDWARE_STAND_IN_PRIORITY)
-        self._serial = {"dvl75": self.dvl, "ping1d": self.ping}
-        esc = config.esc
-        self.pca9685 = Pca9685Emulator(oscillator_hz=float(esc.oscillator_hz))
-        self.bus = EmulatedI2CBus({
-            int(config.sensors.ms5837.i2c_address): Ms5837Emulator(self._pressure_truth),
-            int(config.sensors.icm20948.i2c_address): Icm20948Emulator(self._imu_truth),
-            int(esc.i2c_address): self.pca9685,
-        })
+        self.emulators = {d.name: load(d.emulator)(config, getattr(self, f"_{d.name}_truth", None), time.monotonic)
+                          for d in DEVICES}
+        self.serial = {d.node: PtyDevice(self.emulators[d.name], poll_period_s=poll_period_s, link_name=d.name,
+                                         realtime_priority=HARDWARE_STAND_IN_PRIORITY)
+                       for d in DEVICES if d.transport == SERIAL}
+        self.bus = EmulatedI2CBus({int(settings(config, d).i2c_address): self.emulators[d.name]
+                                   for d in DEVICES if d.transport == I2C})
         self._server: I2CSocketServer | None = None
         self._lock = threading.Lock()
         if serve_i2c:
@@ -123,16 +117,16 @@ class EmulatedDevices(DriverEndpoints):
     @property
     def ports(self) -> dict[str, str]:
         """Node name -> serial port path (stable across :meth:`unplug` / :meth:`replug`)."""
-        return {name: dev.path for name, dev in self._serial.items()}
+        return {name: dev.path for name, dev in self.serial.items()}
 
     # -- a pool day ---------------------------------------------------------------------------------
     def unplug(self, name: str) -> None:
         """The USB-serial adapter of ``name`` (``dvl75`` or ``ping1d``) is pulled out."""
-        self._serial[name].disconnect()
+        self.serial[name].disconnect()
 
     def replug(self, name: str) -> None:
         """... and plugged in again (a new tty behind the same path)."""
-        self._serial[name].reconnect()
+        self.serial[name].reconnect()
 
     def start_i2c(self) -> None:
         """The I2C bus is there (idempotent)."""
@@ -153,26 +147,21 @@ class EmulatedDevices(DriverEndpoints):
     def close(self) -> None:
         """Stop serving everything and remove the pseudo-terminals."""
         self.stop_i2c()
-        for dev in self._serial.values():
+        for dev in self.serial.values():
             dev.close()
 
-    # -- truth: a vehicle holding station -------------------------------------------------------------
-    def _t(self) -> float:
-        return time.monotonic() - self._t0
+    # -- truth: a vehicle holding station, at the emulators' clock t_s (time.monotonic), s -----------------------
+    def _dvl75_truth(self, t_s: float) -> DvlTruth:
+        return DvlTruth(velocity_frd_m_s=(_wobble(t_s, 7.0, 0.01), 0.0, 0.0),
+                        altitude_m=self._ping1d_truth(t_s).altitude_m)
 
-    def _altitude_m(self) -> float:
-        return _ALTITUDE_M + _wobble(self._t(), 5.0, _WOBBLE_M)
+    def _ping1d_truth(self, t_s: float) -> Ping1dTruth:
+        return Ping1dTruth(altitude_m=_ALTITUDE_M + _wobble(t_s, 5.0, _WOBBLE_M))
 
-    def _dvl_truth(self, _t: float) -> DvlTruth:
-        return DvlTruth(velocity_frd_m_s=(_wobble(self._t(), 7.0, 0.01), 0.0, 0.0), altitude_m=self._altitude_m())
-
-    def _ping_truth(self, _t: float) -> Ping1dTruth:
-        return Ping1dTruth(altitude_m=self._altitude_m())
-
-    def _pressure_truth(self, _t: float) -> tuple[float, float]:
-        depth_m = _DEPTH_M + _wobble(self._t(), 4.0, _WOBBLE_M)
+    def _ms5837_truth(self, t_s: float) -> tuple[float, float]:
+        depth_m = _DEPTH_M + _wobble(t_s, 4.0, _WOBBLE_M)
         return (_SURFACE_PA + _RHO_KG_M3 * _G_M_S2 * depth_m, 20.0)
 
-    def _imu_truth(self, _t: float):
-        w = _wobble(self._t(), 3.0, 0.05)
+    def _icm20948_truth(self, t_s: float):
+        w = _wobble(t_s, 3.0, 0.05)
         return ((w, 0.0, _G_M_S2), (0.0, 0.0, 0.01 * w), _EARTH_FIELD_T, 20.0)

@@ -42,6 +42,8 @@ ANNOUNCE_PERIOD_S = 0.5
 DISCOVERY_BOUND_S = 3 * ANNOUNCE_PERIOD_S
 #: :func:`wait_discovered` gives up on a graph that keeps changing after this, s
 DISCOVERY_CAP_S = 8.0
+#: the name the graph gives an endpoint seen before its participant's node names arrived (discovery not finished)
+UNNAMED_NODE = "_NODE_NAME_UNKNOWN_"
 
 
 def wait_discovered(view: Callable[[], object], ready: Callable[[], bool], pause: Callable[[], object], *,
@@ -75,7 +77,7 @@ def profile_path(name: str = PROFILE_FILE) -> Path:
 
     Raises FileNotFoundError naming the places searched."""
     here = Path(__file__).resolve()
-    candidates = [here.parents[1] / "config" / name]  # checkout: src/hindrax_drivers/config
+    candidates = [here.parents[2] / "config" / name]  # checkout: src/hindrax_drivers/config
     for parent in here.parents:  # install space: <prefix>/lib/pythonX.Y/site-packages/hindrax_drivers
         if parent.name == "lib":
             candidates.append(parent.parent / "share" / _PACKAGE / "config" / name)

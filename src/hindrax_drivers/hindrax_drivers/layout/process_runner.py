@@ -1,7 +1,7 @@
 """Run a launch file's process list the way ``ros2 launch`` runs it: one process per node, respawned, stopped in
 order (docs/deployment.md §9).
 
-:func:`~hindrax_drivers.launch_xml.read_launch` gives the processes; :class:`ProcessRunner` starts each one with
+:func:`~hindrax_drivers.layout.launch_xml.read_launch` gives the processes; :class:`ProcessRunner` starts each one with
 the command ``launch_ros`` would build (:meth:`NodeProcess.ros_arguments`), restarts a process whenever it ends
 while the runner runs and the node asks for it (``respawn``, after ``respawn_delay``; ``launch.actions
 .ExecuteLocal`` does the same on any exit), and on :meth:`ProcessRunner.stop` sends SIGINT to every process, then
@@ -87,7 +87,7 @@ class _Slot:
 class ProcessRunner:
     """Starts, respawns and stops the processes of a launch file (module docstring).
 
-    processes: from :func:`~hindrax_drivers.launch_xml.read_launch`. command: process -> executable argv (default
+    processes: from :func:`~hindrax_drivers.layout.launch_xml.read_launch`. command: process -> executable argv (default
     :func:`installed_command`). env: environment of every process (default: this one's), updated by the launch
     file's (``<set_env>``, ``<env>``: :attr:`NodeProcess.env`), then by ``extra_env``: per-label additions (e.g.
     an emulated device for one driver). log_dir: output files (default: a temporary directory,

@@ -1,0 +1,1 @@
+"""CDR bytes without rclpy objects, and the message definitions they are read with."""

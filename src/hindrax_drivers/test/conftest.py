@@ -1,0 +1,99 @@
+"""Fixtures the I2C sensor node tests share (test_ms5837_node.py, test_icm20948_node.py): the node under test with a
+probe node in one executor, a simulated /clock, and the node run as a process without its bus."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+from rosgraph_msgs.msg import Clock
+
+from hindrax_drivers.config import default_config_path
+from hindrax_drivers.testing import child_env, child_process, interrupt, ros_context, wait_until
+
+
+class NodeProbe:
+    """The node under test and a probe node spun by one executor. The :func:`rig` fixture mixes it into the test
+    module's ``Rig``, which builds its emulator, bus and node and then calls :meth:`start`."""
+
+    def start(self, ctx, node):
+        """Spin ``node`` with a new probe node; ``diag`` collects /diagnostics."""
+        self.node = node
+        self.probe = rclpy.create_node("probe", context=ctx)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(node)
+        self.ex.add_node(self.probe)
+        self.diag = self.collect(DiagnosticArray, "/diagnostics", 10)
+
+    def collect(self, msg_type, topic, depth):
+        """The list the probe appends each ``topic`` message to."""
+        got = []
+        self.probe.create_subscription(msg_type, topic, got.append, depth)
+        return got
+
+    def spin(self):
+        self.ex.spin_once(timeout_sec=0.01)
+
+    def wait(self, predicate, timeout=10.0, message="condition"):
+        return wait_until(predicate, timeout, self.spin, message)
+
+    def clock_ticker(self, sim, step_s=0.002):
+        """A simulator: each call advances ``sim["t"]`` (s) by ``step_s``, publishes it on /clock and spins once."""
+        pub = self.probe.create_publisher(Clock, "/clock", 10)
+
+        def tick():
+            sim["t"] += step_s
+            sec = int(sim["t"])
+            pub.publish(Clock(clock=Time(sec=sec, nanosec=int(round((sim["t"] - sec) * 1e9)))))
+            self.spin()
+        return tick
+
+    def close(self):
+        self.ex.shutdown()
+        self.probe.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def rig(request):
+    """``rig(*args, **kwargs)``: the test module's ``Rig(ctx, *args, **kwargs)`` with :class:`NodeProbe` mixed in,
+    in an isolated rclpy context; every rig made is closed at the end."""
+    cls = type("Rig", (request.module.Rig, NodeProbe), {})
+    rigs = []
+    with ros_context() as ctx:
+        def make(*args, **kwargs):
+            rigs.append(cls(ctx, *args, **kwargs))
+            return rigs[-1]
+        yield make
+        for r in rigs:
+            r.close()
+
+
+@pytest.fixture
+def runs_without_its_bus():
+    """``runs_without_its_bus(device)``: ``python -m hindrax_drivers.<device>.node --ros-args --params-file
+    hindrax.yaml`` on I2C bus 31, which this machine lacks; asserts that the node stays up, reports ``cannot open I2C
+    bus 31`` as an ERROR in /diagnostics, and exits 0 on SIGINT."""
+    def run(device):
+        cmd = [sys.executable, "-m", f"hindrax_drivers.{device}.node", "--ros-args", "--params-file",
+               str(default_config_path()), "-p", f"sensors.{device}.i2c_bus:=31"]
+        assert not os.path.exists("/dev/i2c-31")
+        repo = Path(__file__).resolve().parents[3]
+        with child_process(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
+            with ros_context() as ctx:
+                probe = rclpy.create_node("probe", context=ctx)
+                ex = SingleThreadedExecutor(context=ctx)
+                ex.add_node(probe)
+                got = []
+                probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+                wait_until(lambda: any("cannot open I2C bus 31" in s.message and s.level == DiagnosticStatus.ERROR
+                                       for a in got for s in a.status), 20, lambda: ex.spin_once(timeout_sec=0.05),
+                           "bus error in diagnostics")
+                ex.shutdown()
+                probe.destroy_node()
+            assert interrupt(proc, 10) == 0
+    return run
