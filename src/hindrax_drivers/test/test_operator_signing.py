@@ -1,5 +1,5 @@
-"""Signed operator commands (hindrax_drivers.gateway.operator_signing): MAVLink-2-style HMAC-SHA256 with a 32-byte key, a
-48-bit timestamp near the vehicle's clock, a link id, a persisted replay cache. Unsigned, wrong-key, replayed,
+"""Signed operator commands (hindrax_drivers.gateway.operator_signing): MAVLink-2-style HMAC-SHA256 with a 32-byte
+key, a 48-bit timestamp near the vehicle's clock, a link id, a persisted replay cache. Unsigned, wrong-key, replayed,
 re-targeted, out-of-range, ahead and stale requests are refused with one line and counted; the key file is created
 with mode 0600 and refused when others can read it. Issue 71: +k*2^48 replays, lock-outs, replays after a restart
 and file paths in refusals (each test below fails on the old per-link-timestamp Verifier)."""
@@ -16,9 +16,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hindrax_drivers.gateway.operator_signing import (AHEAD_LIMIT, KEY_BYTES, STALE_LIMIT, TIMESTAMP_MAX, OperatorKeyError,
-                                              Signature, Signer, Verifier, create_key, key_path, load_key, mac,
-                                              replay_path, signed_payload)
+from hindrax_drivers.gateway.operator_signing import (AHEAD_LIMIT, KEY_BYTES, STALE_LIMIT, TIMESTAMP_MAX,
+                                                      OperatorKeyError, Signature, Signer, Verifier, create_key,
+                                                      key_path, load_key, mac, replay_path, signed_payload)
 
 KEY = bytes(range(32))
 OTHER = bytes(range(1, 33))

@@ -51,7 +51,8 @@ def _launch_path(spec: str):
 def collect(timeout_s: float, done=None):
     """Listen to the graph for up to ``timeout_s`` s (returning early once ``done(nodes, statuses, supervisor)``):
     returns (node names, {status name: Seen}, Seen of supervisor/status or None, the graph's
-    :class:`~hindrax_drivers.node_support.vehicle_graph.GraphView` at the end: node names with duplicates, heartbeat publishers)."""
+    :class:`~hindrax_drivers.node_support.vehicle_graph.GraphView` at the end: node names with duplicates, heartbeat
+    publishers)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from rclpy.executors import SingleThreadedExecutor
@@ -92,9 +93,11 @@ def collect(timeout_s: float, done=None):
 def second_vehicle(expected_nodes, view) -> str:
     """The problem line when ``view`` (:func:`collect`) shows an ESC or supervisor beyond the one each of the
     launch's ``expected_nodes`` (node names, no namespace) accounts for, e.g. ``"a second vehicle on this domain:
-    ESC /esc, supervisor /supervisor: ..."`` (:func:`hindrax_drivers.node_support.vehicle_graph.foreign_vehicle_processes`);
+    ESC /esc, supervisor /supervisor: ..."``
+    (:func:`hindrax_drivers.node_support.vehicle_graph.foreign_vehicle_processes`);
     "" when there is none."""
-    from hindrax_drivers.node_support.vehicle_graph import HEARTBEAT_TOPICS, ROLE_NODES, GraphView, foreign_vehicle_processes
+    from hindrax_drivers.node_support.vehicle_graph import (HEARTBEAT_TOPICS, ROLE_NODES, GraphView,
+                                                            foreign_vehicle_processes)
 
     own = GraphView(tuple("/" + n for n in expected_nodes if n in ROLE_NODES),
                     {"/" + t: ("/" + t.split("/")[0],) for t in HEARTBEAT_TOPICS if t.split("/")[0] in expected_nodes})
