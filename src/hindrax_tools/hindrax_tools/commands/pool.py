@@ -6,8 +6,8 @@ behind the five emulated devices, in a process of its own, on the wall clock) an
 ``hindrax_onboard/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
 process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.layout.process_runner.ProcessRunner`), the drivers
 pointed at the pool's serial ports and I2C socket; ``NAME:=VALUE`` are more launch arguments (``model_file:=`` of the
-block's second launch; an undeclared one is refused in one line). The vehicle file is the installed one with its oscillator
-marked measured (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
+block's second launch; an undeclared one is refused in one line). The vehicle file is the installed one with its
+oscillator marked measured (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
 
 Domains, as the README names them: the **internal domain** is this shell's ``ROS_DOMAIN_ID`` (the vehicle's
 processes; default 0), the **topside domain** is ``--topside-domain`` (default: the internal one + 1), where the
