@@ -18,7 +18,6 @@ thrust (docs/devices.md §5.2).
 from __future__ import annotations
 
 import math
-import time
 from typing import Any, Callable
 
 import numpy as np
@@ -40,7 +39,8 @@ def truth_keywords(config: VehicleConfig, device: device_table.Device) -> dict[s
     return {k: getattr(section, k) for k in device.truth_keywords}
 
 
-#: Wall time a serial step gate waits with its driver's reader idle before it re-bases its byte count, s.
+#: Time a serial step gate waits (its own waits added up) with its driver's reader idle before it re-bases its byte
+#: count, s.
 RESYNC_AFTER_S = 1.0
 #: Wall time a clock tick waits for a driver to handle the bytes it was just sent, s (then the gate holds on).
 HANDOFF_TIMEOUT_S = 0.5
@@ -55,8 +55,10 @@ class SerialLockStep:
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
-    reconnect between a write and the check), a gate that has waited :data:`RESYNC_AFTER_S` of wall time with the
-    reader idle re-bases the count rather than stall the simulation.
+    reconnect between a write and the check), a gate that has itself waited :data:`RESYNC_AFTER_S` for the bytes
+    with the reader idle re-bases the count rather than stall the simulation: its own waits add up, not the wall
+    time between its checks (a process a loaded machine did not schedule for a second has lost no byte, and
+    re-basing then would let simulated time run on before the driver handled them).
 
     Args:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
@@ -70,7 +72,7 @@ class SerialLockStep:
         self.pty, self.transport, self.wait_s, self.ready = pty, transport, float(wait_s), ready
         self._connection: int | None = None
         self._written0 = self._handled0 = 0
-        self._stalled_since: float | None = None
+        self._stalled_s = 0.0  # what settled() has waited for the bytes since they were last all handled, s
         transport.pump(0, 0.0)  # from now on the driver's bytes are read in the simulator's thread
 
     def tick(self, _t_s: float = 0.0) -> None:
@@ -103,14 +105,13 @@ class SerialLockStep:
             return True
         target = self._handled0 + self.pty.bytes_to_host - self._written0
         if self.transport.pump(target, self.wait_s):
-            self._stalled_since = None
+            self._stalled_s = 0.0
             return True
-        st, now = self.transport.status(), time.monotonic()
-        if self._stalled_since is None:
-            self._stalled_since = now
-        elif now - self._stalled_since > RESYNC_AFTER_S and st.bytes_rx == st.bytes_handled:
+        st = self.transport.status()
+        self._stalled_s += self.wait_s
+        if self._stalled_s > RESYNC_AFTER_S and st.bytes_rx == st.bytes_handled:
             self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
-            self._stalled_since = None
+            self._stalled_s = 0.0
             return True
         return False
 

@@ -7,6 +7,9 @@ Who flies (``PilotSettings.pilot``):
   setpoints one move at a time, as an engineer flies in a pool: "forward 1.5 m", "right 1 m", "down 0.4 m",
   "turn 90 deg" (targets drawn until they lie inside ``pool.*`` less ``pool.margin_m``), plus a random jitter on
   every commanded axis;
+* ``"openloop"``: open-loop runs as a team without a controller flies them: each axis a force level held 1-4 s,
+  uniform up to 60 % of the saturation, its sign toward the pool's centre when the vehicle is past half the way to
+  a wall (no feedback within a level);
 * ``"autopilot"``: a closed-loop survey autopilot nobody designed for identification: lawnmower legs along the
   pool at ``cruise_m_s`` with a PI surge-speed loop, cross-track and heading PD, a depth PI loop with a depth step
   at every leg end, the turn between legs, and a small jitter. Its commands are smooth and mostly steady: little
@@ -67,7 +70,7 @@ from .simulator import Simulator, fill_odometry, fill_wrench
 __all__ = ["PilotSettings", "write_piloted_bag"]
 
 EPOCH_NS = 1_700_000_000 * 1_000_000_000  # ROS time of the run's start (any fixed epoch)
-PILOTS = ("setpoints", "autopilot")
+PILOTS = ("setpoints", "autopilot", "openloop")
 ACTUATIONS = ("wrench", "thrusters")
 SENSORS = ("odometry", "dvl")
 
@@ -206,6 +209,25 @@ class _Autopilot:
         return np.array([x, y, z, n])
 
 
+class _OpenLoopPilot:
+    """Held force levels per axis (module docstring), [X, Y, Z, N] in body axes."""
+
+    def __init__(self, s: PilotSettings, rng, lo, hi, start) -> None:
+        self.rng, self.lo, self.hi, self.mid = rng, lo, hi, start
+        self.top = 0.6 * np.array([s.max_force_n[0], s.max_force_n[0], s.max_force_n[1], s.max_moment_n_m])
+        self.level, self.until = np.zeros(4), np.zeros(4)
+
+    def command(self, t: float, pos, eul, nu, tick_s: float) -> np.ndarray:
+        c, sn = math.cos(eul[2]), math.sin(eul[2])
+        off = (pos - self.mid) / np.maximum(0.5 * (self.hi - self.lo), 1e-3)  # -1..1 across the pool
+        off_body = np.array([c * off[0] + sn * off[1], -sn * off[0] + c * off[1], off[2], 0.0])
+        for i in np.flatnonzero(t >= self.until):
+            a = float(self.rng.uniform(0.2, 1.0)) * self.top[i] * float(self.rng.choice([-1.0, 1.0]))
+            self.level[i] = -math.copysign(a, off_body[i]) if abs(off_body[i]) > 0.5 else a
+            self.until[i] = t + float(self.rng.uniform(1.0, 4.0))
+        return self.level.copy()
+
+
 def _allocation_status(res, stamp_ns: int) -> AllocationStatus:
     """The allocation node's ``allocation/status`` of one allocation ``res`` (FluAllocation) of the command
     stamped ``stamp_ns``."""
@@ -240,6 +262,8 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     sim.reset(position_ned_m=start, rpy_rad=[0.0, 0.0, float(rng.uniform(-math.pi, math.pi))])
     if s.pilot == "setpoints":
         pilot = _SetpointPilot(s, rng, lo, hi, start, float(sim.euler_rad[2]))
+    elif s.pilot == "openloop":
+        pilot = _OpenLoopPilot(s, rng, lo, hi, start)
     else:
         pilot = _Autopilot(s, rng, lo, hi, start)
     core = None

@@ -120,3 +120,31 @@ def test_serial_lock_step_has_a_slow_driver_handle_every_byte_before_the_tick_en
     finally:
         transport.close()
         pty.close()
+
+
+def test_a_serial_gate_holds_time_in_a_process_the_machine_did_not_schedule(monkeypatch):
+    """The gate re-bases its byte count only after it has itself waited RESYNC_AFTER_S for the bytes: a process a
+    loaded machine leaves unscheduled between two checks (here the steady clock jumps 5 s per reading) still holds
+    simulated time until the driver has handled every byte sent at the tick. Re-based on wall time, it let time run
+    on with the DVL's message unhandled, so the message's stamp (and the run) depended on the load."""
+    import itertools
+    import time
+    from types import SimpleNamespace
+
+    clock = itertools.count(0.0, 5.0)
+    monkeypatch.setattr(time, "monotonic", lambda: float(next(clock)))
+    arrived = [False]
+    st = SimpleNamespace(connected=True, connections=1, bytes_rx=0, bytes_handled=0)
+    pty = SimpleNamespace(bytes_to_host=0, bytes_from_host=0)
+
+    def service(deliver: bool = True) -> bool:  # the emulator sends a 40-byte message at the tick
+        pty.bytes_to_host += 40
+        return True
+
+    pty.service = service
+    transport = SimpleNamespace(status=lambda: st, connected=True, pump=lambda _n, _t: arrived[0])
+    link = SerialLockStep(pty, transport)
+    link.tick()  # sent; the bytes are still in the kernel's pty buffer (not received, not handled)
+    assert not any(link.settled() for _ in range(20))  # 100 s of wall time: the gate still holds
+    arrived[0] = True
+    assert link.settled()

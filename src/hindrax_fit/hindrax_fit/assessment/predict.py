@@ -42,6 +42,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..fit import fit_core
 from ..bag_input.any_topics import FitInputError, FitOptions, TopicChoice, dof_records, preprocess_bag
+from .results import IdentificationFileError, model_spec, validate
 
 __all__ = ["ModelError", "DofModel", "load_model", "Prediction", "predict_bag", "score", "write_csv",
            "VELOCITY_NAMES"]
@@ -72,42 +73,28 @@ class DofModel:
     run_count: int = 0
 
 
-def _value(entry: dict, name: str, dof: str) -> float:
-    par = entry.get(name)
-    if par is None and dof == "heave":  # one pair for both directions is written per direction
-        par = entry.get(f"{name}_positive")
-    if not isinstance(par, dict) or "value" not in par:
-        raise ModelError(f"dofs.{dof}.{name}: missing (the model's terms need it)")
-    return float(par["value"])
-
-
 def load_model(doc: dict) -> tuple[dict, np.ndarray]:
     """({dof: :class:`DofModel`}, inertia (6,) of the fitted DOFs, NaN elsewhere) of an identification.yaml
-    document. Raises :class:`ModelError` for a document without ``dofs`` or a DOF without ``terms`` (written by an
-    older ``hindrax ident fit``: fit again)."""
+    document, validated (:func:`.results.validate`) and each DOF's model read from its explicit lists
+    (:func:`.results.model_spec`). Raises :class:`ModelError` (one line naming the key) for a document that fails
+    the schema, has no ``dofs`` or a DOF without ``terms`` (written by an older ``hindrax ident fit``: fit again)."""
     dofs = doc.get("dofs") if isinstance(doc, dict) else None
     if not isinstance(dofs, dict) or not dofs:
         raise ModelError("dofs: missing or empty (an identification.yaml of hindrax ident fit is needed)")
     inertia = np.full(6, np.nan)
     out = {}
-    for dof, e in dofs.items():
-        if dof not in DOFS:
-            raise ModelError(f"dofs.{dof}: not a DOF (one of {', '.join(DOFS)})")
-        t = e.get("terms")
-        if not isinstance(t, dict):
-            raise ModelError(f"dofs.{dof}.terms: missing (written by an older hindrax ident fit: fit again)")
-        terms = fit_core.Terms(str(t["damping"]), bool(t["by_direction"]), bool(t["coriolis"]), bool(t["cross"]),
-                               bool(t["reverse_gain"]), bool(t.get("cross_force", False)),
-                               bool(t.get("run_bias", False)), bool(t.get("saturation", False)))
-        cross = tuple(n[len("cross_"):] for n in e if n.startswith("cross_")) if terms.cross else ()
-        forces = tuple(n[len("force_from_"):] for n in e if n.startswith("force_from_")) if terms.cross_force else ()
-        runs = sum(n.startswith("bias_run_") for n in e) + 1 if terms.run_bias else 0
-        layout = fit_core.parameter_layout(dof, terms, len(cross), cross, forces, runs)
-        theta = np.array([_value(e, n, dof) for n, _k, _lo, _hi in layout])
-        tm = e.get("timing") or {}
-        timing = fit_core.Timing(float(tm.get("delay_s", 0.0)), float(tm.get("lag_s", 0.0)), "model file")
-        out[dof] = DofModel(dof, terms, layout, theta, timing, cross, str(e.get("verdict", "")), forces, runs)
-        inertia[DOFS.index(dof)] = theta[0]
+    try:
+        validate(doc)
+        for dof, e in dofs.items():
+            if "terms" not in e:
+                raise ModelError(f"dofs.{dof}.terms: missing (written by an older hindrax ident fit: fit again)")
+            terms, cross, forces, runs, layout, theta = model_spec(dof, e)
+            tm = e.get("timing") or {}
+            timing = fit_core.Timing(float(tm.get("delay_s", 0.0)), float(tm.get("lag_s", 0.0)), "model file")
+            out[dof] = DofModel(dof, terms, layout, theta, timing, cross, str(e.get("verdict", "")), forces, runs)
+            inertia[DOFS.index(dof)] = theta[0]
+    except IdentificationFileError as exc:
+        raise ModelError(str(exc)) from exc
     return out, inertia
 
 

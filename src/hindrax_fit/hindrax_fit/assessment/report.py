@@ -486,7 +486,7 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
     out = Path(out)
     rep = out / "report"
     rep.mkdir(parents=True, exist_ok=True)
-    path = write_identification(out / "identification.yaml", doc, check=False)
+    path = write_identification(out / "identification.yaml", doc)
     dofs = doc["dofs"]
     params = [(dof, name, p) for dof, e in dofs.items() for name, p in e.items()
               if isinstance(p, dict) and "value" in p]

@@ -12,6 +12,8 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
         verdict: trusted | suspect | no model beats holding the velocity   # suspect when any parameter is
         reasons: [<text>, ...]              # the DOF-wide checks that failed
         model: <text>                       # the fit core's terms chosen by cross-validation
+        terms: {damping, by_direction, ...}, cross_dofs: [<dof>], force_dofs: [<dof>], bias_runs: <int>,
+        parameters: [<parameter>, ...]      # hindrax ident fit's model, in layout order (model_spec reads it)
         model_selection: [{terms, parameters, cv_nrmse, cv_nrmse_hold, chosen}, ...]  # + persistence and zero
         persistence: {nrmse, nrmse_hold, nrmse_zero, margin, beats}   # fit_core.persistence
         training: {initial_state: {used, cv_nrmse: {<rule>: <float>}},        # fit_core.training_rules
@@ -55,6 +57,7 @@ from hindrax_onboard.estimation.drag_coefficient import (characteristic_length_f
 from hindrax_onboard.estimation.least_squares import EstimationError
 from ..fit.calibration import calibration_section, decay_inertia, joint_estimate
 from hindrax_onboard.identification.model.dof_model import parameter_units, rigid_inertia, rls_published_std
+from ..fit import fit_core
 from ..fit.fit_core import NO_MODEL_VERDICT
 from hindrax_onboard.identification.model.posterior import (finite_or_none as _f, prior_entries, prior_posterior,
                              prior_std_rel_of, theta_priors)
@@ -65,7 +68,8 @@ from .verdicts import (FitEvidence, apply_reference_verdicts, apply_verdicts, as
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "build_document", "assessment",
            "reference_sections", "training_lines", "drag_coefficient_entry", "write_identification",
-           "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "TERM_MEANING", "CONFIG_READY_REASON"]
+           "read_identification", "to_config_overrides", "model_spec", "model_lists", "REQUIRED_PARAMETERS",
+           "TERM_MEANING", "CONFIG_READY_REASON"]
 
 SCHEMA_VERSION = 1
 
@@ -208,26 +212,26 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         if drag is not None:
             entry["drag_coefficient"] = drag
         dofs[dof] = entry
-    doc = {
-        "schema_version": SCHEMA_VERSION,
-        "provenance": _provenance(cfg, source, method or (
-            "[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on the raw sensor "
-            "samples (docs/identification.md §7); equation-error batch LS ([Hindrax-Drag] eqs. 6-8), RLS online and "
-            "steady-state LS ([Hindrax-Drag] eqs. 2-8) for comparison"), seed),
-        "dofs": dofs,
-    }
-    if joint:
-        doc["joint"] = joint
-    if calibration:
-        doc["calibration"] = calibration_section(calibration, cfg)
-    return doc
+    return _document(_provenance(cfg, source, method or (
+        "[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on the raw sensor "
+        "samples (docs/identification.md §7); equation-error batch LS ([Hindrax-Drag] eqs. 6-8), RLS online and "
+        "steady-state LS ([Hindrax-Drag] eqs. 2-8) for comparison"), seed), dofs,
+        joint=joint or None, calibration=calibration_section(calibration, cfg) if calibration else None)
 
 
-def write_identification(path: str | Path, document: Mapping, check: bool = True) -> Path:
-    """Validate ``document`` (:func:`validate`; ``check`` False: a :func:`build_document` without a vehicle file,
-    which has no added mass) and write it as YAML; returns the path."""
-    if check:
-        validate(document)
+def _document(provenance: dict, dofs: dict, **sections: Any) -> dict:
+    """The one builder of identification.yaml's top level (both :func:`build_results` and :func:`build_document`):
+    schema version, ``provenance``, ``dofs`` and the further ``sections`` that are not None, as plain YAML values,
+    checked by :func:`validate` (raises :class:`IdentificationFileError`)."""
+    doc = {"schema_version": SCHEMA_VERSION, "provenance": provenance, "dofs": dofs,
+           **{k: v for k, v in sections.items() if v is not None}}
+    return validate(_plain(doc))
+
+
+def write_identification(path: str | Path, document: Mapping) -> Path:
+    """Validate ``document`` (:func:`validate`) and write it as YAML; returns the path. Raises
+    :class:`IdentificationFileError`."""
+    validate(document)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text("# Hindrax identified hydrodynamics (hindrax_fit.assessment.results, schema "
@@ -248,14 +252,18 @@ def validate(doc: Any) -> dict:
         if key not in prov:
             raise IdentificationFileError(f"provenance.{key}: missing")
     dofs = doc.get("dofs")
-    if not isinstance(dofs, Mapping) or not dofs:
+    if not isinstance(dofs, Mapping) or not (dofs or doc.get("not_identified")):
         raise IdentificationFileError("dofs: missing or empty mapping")
     for dof, entry in dofs.items():
         if dof not in DOFS:
             raise IdentificationFileError(f"dofs.{dof}: unknown DOF (one of {', '.join(DOFS)})")
         if not isinstance(entry, Mapping):
             raise IdentificationFileError(f"dofs.{dof}: must be a mapping")
+        if "terms" in entry:  # a model hindrax ident predict simulates
+            model_spec(dof, entry)
         for name in REQUIRED_PARAMETERS(dof):
+            if name == "added_mass" and doc.get("config_ready") is False:  # no vehicle file: inertia only
+                continue
             par = entry.get(name)
             if not isinstance(par, Mapping):
                 raise IdentificationFileError(f"dofs.{dof}.{name}: missing")
@@ -269,6 +277,77 @@ def validate(doc: Any) -> dict:
             if par["std"] < 0:
                 raise IdentificationFileError(f"dofs.{dof}.{name}.std: must be >= 0")
     return dict(doc)
+
+
+def _dof_list(dof: str, entry: Mapping, key: str) -> tuple[str, ...]:
+    """``dofs.<dof>.<key>``: a list of other DOFs, each once."""
+    v = entry.get(key)
+    if not isinstance(v, list) or any(d not in DOFS or d == dof for d in v) or len(set(v)) != len(v):
+        raise IdentificationFileError(f"dofs.{dof}.{key}: {v!r}: must be a list of other DOFs, each once "
+                                      f"(of {', '.join(DOFS)})")
+    return tuple(v)
+
+
+def model_spec(dof: str, entry: Mapping) -> tuple[fit_core.Terms, tuple, tuple, int, list, np.ndarray]:
+    """(terms, cross-term DOFs, force DOFs, runs of the per-run bias (0: none), parameter layout
+    (:func:`~..fit.fit_core.parameter_layout`), values (p,) in layout order) of one DOF of a model written by
+    :func:`build_document`: the explicit lists ``terms``, ``cross_dofs``, ``force_dofs``, ``bias_runs`` and
+    ``parameters`` (the layout's names, checked against the one the others give) and each parameter's finite
+    ``value`` (heave's one damping pair under its ``_positive`` name). A file of an older ``hindrax ident fit``
+    without the lists: the lists from the parameter entries named ``cross_<dof>``, ``force_from_<dof>``,
+    ``bias_run_<k>``. Raises :class:`IdentificationFileError` naming the key."""
+    t = entry.get("terms")
+    fields = {f.name: f.default for f in dataclasses.fields(fit_core.Terms)}
+    if not isinstance(t, Mapping) or set(t) - set(fields):
+        raise IdentificationFileError(f"dofs.{dof}.terms: {t!r}: must be a mapping of {', '.join(fields)}")
+    kw = {k: t.get(k, d) for k, d in fields.items()}
+    if kw["damping"] not in ("both", "linear", "quadratic") or any(
+            not isinstance(v, bool) for k, v in kw.items() if k != "damping"):
+        raise IdentificationFileError(f"dofs.{dof}.terms: {dict(t)!r}: damping one of both, linear, quadratic, the "
+                                      "others true or false")
+    terms = fit_core.Terms(**kw)
+    if "parameters" in entry:
+        cross, forces = _dof_list(dof, entry, "cross_dofs"), _dof_list(dof, entry, "force_dofs")
+        runs = entry.get("bias_runs")
+        if not isinstance(runs, int) or isinstance(runs, bool) or runs < 0:
+            raise IdentificationFileError(f"dofs.{dof}.bias_runs: {runs!r}: must be an integer >= 0")
+    else:  # older file: the lists from the parameter entries (a mapping with a value, named after a DOF)
+        def named(prefix: str) -> tuple:
+            return tuple(n[len(prefix):] for n, v in entry.items() if n.startswith(prefix) and isinstance(v, Mapping)
+                         and "value" in v and n[len(prefix):] in DOFS)
+        cross, forces = named("cross_"), named("force_from_")
+        runs = sum(n.startswith("bias_run_") and isinstance(v, Mapping) for n, v in entry.items()) + 1
+    layout = fit_core.parameter_layout(dof, terms, len(cross) if terms.cross else 0, cross,
+                                       forces if terms.cross_force else (), runs if terms.run_bias else 0)
+    names = [n for n, _k, _lo, _hi in layout]
+    if "parameters" in entry and entry["parameters"] != names:
+        raise IdentificationFileError(f"dofs.{dof}.parameters: {entry['parameters']!r}, but terms, cross_dofs, "
+                                      f"force_dofs and bias_runs give {names!r}")
+    theta = np.empty(len(names))
+    for i, n in enumerate(names):
+        par = entry.get(n)
+        if par is None and dof == "heave":  # one pair for both directions is written per direction
+            par = entry.get(f"{n}_positive")
+        v = par.get("value") if isinstance(par, Mapping) else None
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise IdentificationFileError(f"dofs.{dof}.{n}.value: {v!r}: a finite number is needed (the model's "
+                                          "terms need it)")
+        theta[i] = float(v)
+    return terms, cross, forces, runs if terms.run_bias else 0, layout, theta
+
+
+def model_lists(core: Any) -> dict:
+    """identification.yaml's explicit description of a fit core's model (:class:`~..fit.fit_core.DofResult`), read
+    back by :func:`model_spec`: ``terms``, ``cross_dofs`` (the velocities of the cross terms), ``force_dofs`` (the
+    forces of ``force_from_*``), ``bias_runs`` (runs of the per-run bias, 0: none) and ``parameters`` (the layout's
+    names in order)."""
+    layout = core.chosen.layout
+    runs = sum(k.startswith("runbias") for _n, k, _lo, _hi in layout)
+    return {"terms": dataclasses.asdict(core.terms),
+            "cross_dofs": [n[len("cross_"):] for n, k, _lo, _hi in layout if k.startswith("cross")],
+            "force_dofs": [n[len("force_from_"):] for n, k, _lo, _hi in layout if k.startswith("xforce")],
+            "bias_runs": runs + 1 if core.terms.run_bias else 0,
+            "parameters": [n for n, _k, _lo, _hi in layout]}
 
 
 def read_identification(path: str | Path) -> dict:
@@ -530,7 +609,7 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
         c = r.core
         e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
         e["model"] = c.terms.label
-        e["terms"] = dataclasses.asdict(c.terms)
+        e.update(model_lists(c))
         e["terms_meaning"] = {k: TERM_MEANING[k] for k, on in e["terms"].items() if on is True and k in TERM_MEANING}
         e["model_selection"] = model_selection(c)
         if c.persistence is not None:
@@ -562,25 +641,19 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
         dofs[dof] = e
         main = r.validation.get("holdout") or r.validation.get("cross_validation")
         if main:
-            val[dof] = {**{k: main[k] for k in ("nrmse", "nrmse_hold", "nrmse_zero", "samples")},
+            val[dof] = {**{k: main.get(k) for k in ("nrmse", "nrmse_hold", "nrmse_zero", "samples")},
                         "data": "holdout" if "holdout" in r.validation else "cross-validation",
                         **{k: ({kk: vv for kk, vv in v.items() if kk not in ("sse", "sst")} if isinstance(v, dict)
                                else v) for k, v in r.validation.items()}}
-    return _plain({
-        "schema_version": SCHEMA_VERSION,
-        "provenance": {**_provenance(cfg, ", ".join(str(b) for b in bags), "hindrax ident fit: segment-wise output "
-                                     "error (prediction error) over free-form excitation, equation-error start; model "
-                                     "of [Hindrax-Drag] eq. 2 with inertia and bias", None),
-                       "bags": [str(b) for b in bags], "holdout": [str(b) for b in holdout],
-                       "validation_design": res.design},
-        "config_ready": cfg is not None,
-        "config_ready_reason": (CONFIG_READY_REASON if cfg is None else
-                                "added_mass = inertia - the vehicle file's rigid-body inertia"),
-        "dofs": dofs,
-        "not_identified": other,
-        "validation": val,
-        "preprocessing": res.preprocessing,
-    })
+    return _document({**_provenance(cfg, ", ".join(str(b) for b in bags), "hindrax ident fit: segment-wise output "
+                                    "error (prediction error) over free-form excitation, equation-error start; model "
+                                    "of [Hindrax-Drag] eq. 2 with inertia and bias", None),
+                      "bags": [str(b) for b in bags], "holdout": [str(b) for b in holdout],
+                      "validation_design": res.design}, dofs,
+                     config_ready=cfg is not None,
+                     config_ready_reason=(CONFIG_READY_REASON if cfg is None else
+                                          "added_mass = inertia - the vehicle file's rigid-body inertia"),
+                     not_identified=other, validation=val, preprocessing=res.preprocessing)
 
 
 # ------------------------------------------------------------------------------------------------ references

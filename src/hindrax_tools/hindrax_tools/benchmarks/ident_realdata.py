@@ -1,11 +1,13 @@
 """Real-like data to tune ``hindrax ident fit`` on, and the figures it gives: piloted and closed-loop
 virtual-pool bags with what real pool days have and the vehicle file does not.
 
-Two data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_onboard.identification.piloted_bag`, the
-command through the thrust allocation to the simulated thrusters and sensors), both on Hindrax:
+Three data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_sim.piloted_bag`, the
+command through the thrust allocation to the simulated thrusters and sensors), all on Hindrax:
 
 * ``realdata_piloted``: the setpoint pilot; ``realdata_closedloop``: the survey autopilot (integral action against
-  the tether and the current, little excitation);
+  the tether and the current, little excitation); ``realdata_openloop``: few long open-loop runs (held levels), a
+  0.25 s transport delay, per-thruster thrust 0.7-1.3 of the curve and a gyro ten times noisier (issue 72's
+  vehicle B, four bags fitted and four predicted);
 * tether drift: a tether whose pull changes from run to run (anchor and tension) under a current that drifts over
   four minutes; per-run bias: each bag gets its own tether lay and current offset (``DataSet.runs``), so the force
   that moves a vehicle at rest differs between runs;
@@ -80,6 +82,17 @@ DATASETS: tuple[DataSet, ...] = (
                                                 "duration_s": 150.0, "jitter": 0.1},
             seed=4700, runs=_RUNS,
             note="survey autopilot; the same vehicle and disturbances"),
+    # what vehicle B showed (issue 72): few long open-loop runs, a transport delay of 0.25 s, a thrust model tens of
+    # percent off per thruster, a noisy gyro
+    DataSet("realdata_openloop", {}, {**_TRUTH, "thrusters": {"time_constant_s": 0.05},
+                                      "disturbances": {**_TRUTH["disturbances"], "thrust": {
+                                          "per_thruster": [1.25, 0.8, 1.2, 0.75, 1.3, 0.85, 0.7, 1.15],
+                                          "negative": 0.75}},
+                                      "simulation": {"sensors": {"icm20948_gyro": {"noise_std_rad_s": 0.03}}}},
+            {"actuation": "thrusters", "sensors": "dvl", "pilot": "openloop", "duration_s": 60.0, "delay_s": 0.25,
+             "jitter": 0.0}, seed=4800, train=4, holdout=4, runs=_RUNS,
+            note="open-loop held levels, 60 s runs; delay 0.25 s; per-thruster thrust 0.7-1.3, reverse 0.75; gyro "
+                 "noise 0.03 rad/s"),
 )
 
 
