@@ -369,13 +369,14 @@ class TickGaps:
         self._last = tuple(c() for c in self._clocks)
         self.worst = (0.0, 0.0, 0.0)
 
-    def tick(self) -> None:
-        """Call at every tick, from the ticking thread."""
+    def tick(self) -> float:
+        """Call at every tick, from the ticking thread; returns the steady-clock gap since the previous one, s."""
         now = tuple(c() for c in self._clocks)
         gap = tuple(b - a for a, b in zip(self._last, now))
         self._last = now
         if gap[0] > self.worst[0]:
             self.worst = gap
+        return gap[0]
 
     def report(self) -> list[tuple[str, str]]:
         """``/diagnostics`` pairs of the worst gap since the last report (ms): ``tick_gap_max_ms``,

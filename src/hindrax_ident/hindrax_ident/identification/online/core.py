@@ -33,6 +33,11 @@ Rules (one test row each in ``test/test_identification_core.py``):
   phase and the step's message; estimates every ``publish_period_s``.
 * **Undo** (:attr:`~IdentificationCore.pending_undo`): the loads a stopped goal's calibration asked for and did not
   see removed are named in its result and confirmed first by the next goal (:class:`~.steps.Confirm`).
+* **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more
+  than :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is
+  said in a warning naming it ("identification starved for 0.31 s"); one later than ``thrusters.wrench_timeout_s``
+  (the allocation has dropped the last wrench as stale: the manoeuvre is not what the executive commanded) stops
+  the goal with that reason, which trips the supervisor (its ``disarm_cause`` then names the starvation).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
   past the next control tick while a goal runs.
 """
@@ -56,7 +61,7 @@ from .steps import undo_line
 __all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem",
            "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
-           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED"]
+           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED", "STARVED_WARN_TICKS"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
@@ -83,6 +88,8 @@ FUTURE_STAMP_TOLERANCE_S = 1.0
 #: a sample stamped further than this before the previous tick is stale and left out (s): sensor latencies through the
 #: graph (a conversion start, a report's time of validity) are tens to hundreds of milliseconds
 STALE_STAMP_TOLERANCE_S = 2.0
+#: a control tick this many periods after the previous one is a starved tick, said in a warning (module docstring)
+STARVED_WARN_TICKS = 5
 
 
 def goal_problem(dofs: Sequence[str], calibrate: Sequence[str], calibration_only: bool,
@@ -285,6 +292,23 @@ class IdentificationCore:
         return Event("end", (run,))
 
     # ------------------------------------------------------------------ control tick
+    def starved(self, t: float, gap_s: float) -> list[Event]:
+        """Call before :meth:`tick` at ROS time ``t`` (s) with ``gap_s``, the steady-clock time since the previous
+        control tick of the goal (s): a warning for a starved tick, the goal's stop beyond
+        ``thrusters.wrench_timeout_s`` (module docstring, "Starvation"). No goal moving the vehicle: nothing."""
+        run = self.run
+        if run is None or run.ended or run.stop_since_s is not None or not run.executive.started \
+                or gap_s <= STARVED_WARN_TICKS * self.tick_s:
+            return []
+        limit_s = float(self.config.thrusters.wrench_timeout_s)
+        said = (f"identification starved for {gap_s:.2f} s (control tick due every {self.tick_s:g} s; the CPU is "
+                f"short: docs/architecture.md §10.1)")
+        if gap_s <= limit_s:
+            return [Event("warn_throttled", (said,))]
+        out: list[Event] = []
+        self._stop(run, t, f"{said[:-1]}, beyond thrusters.wrench_timeout_s {limit_s:g} s)", out)
+        return out
+
     def tick(self, t: float, cancel: bool) -> list[Event]:
         """One control tick at ROS time ``t`` (s); ``cancel``: the goal's cancel was requested. Returns the events."""
         out: list[Event] = []
