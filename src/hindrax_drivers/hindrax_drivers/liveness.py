@@ -356,6 +356,21 @@ class AliveAge:
         return self.age_s <= timeout_s
 
 
+#: a tick this many periods after the previous one is a starved tick, said in a warning (docs/architecture.md §10.1)
+STARVED_WARN_TICKS = 5
+
+
+def starvation(who: str, gap_s: float, tick_s: float) -> str:
+    """``"<who> starved for 0.31 s (tick due every 0.04 s; the CPU is short: docs/architecture.md §10.1)"`` when
+    ``gap_s`` (s, steady clock, since the previous tick; :meth:`TickGaps.tick`) is beyond :data:`STARVED_WARN_TICKS`
+    periods ``tick_s`` (s), else ''. The campaign and the controller stop their thrust on one beyond
+    ``thrusters.wrench_timeout_s`` (the allocation has then dropped their wrench as stale)."""
+    if gap_s <= STARVED_WARN_TICKS * tick_s:
+        return ""
+    return (f"{who} starved for {gap_s:.2f} s (tick due every {tick_s:g} s; the CPU is short: "
+            "docs/architecture.md §10.1)")
+
+
 class TickGaps:
     """The longest gap between two calls of a node's steady tick since the last :meth:`report`, and where the CPU went
     during it: the calling (executor) thread's CPU time, high when a long callback held the tick, and the whole

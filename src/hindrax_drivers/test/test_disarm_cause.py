@@ -57,7 +57,7 @@ def test_each_cause_has_its_next_step(process, cause, words):
     assert words in next_step(process, cause)
 
 
-STARVED = ("identification starved for 1.80 s (control tick due every 0.04 s; the CPU is short: docs/architecture.md "
+STARVED = ("identification starved for 1.80 s (tick due every 0.04 s; the CPU is short: docs/architecture.md "
            "§10.1, beyond thrusters.wrench_timeout_s 0.5 s)")
 
 

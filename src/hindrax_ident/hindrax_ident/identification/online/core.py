@@ -50,6 +50,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.liveness import STARVED_WARN_TICKS, starvation
 
 from ..bag_input import calibration_topic
 from ..bag_input.campaign_record import CampaignRecord
@@ -88,8 +89,6 @@ FUTURE_STAMP_TOLERANCE_S = 1.0
 #: a sample stamped further than this before the previous tick is stale and left out (s): sensor latencies through the
 #: graph (a conversion start, a report's time of validity) are tens to hundreds of milliseconds
 STALE_STAMP_TOLERANCE_S = 2.0
-#: a control tick this many periods after the previous one is a starved tick, said in a warning (module docstring)
-STARVED_WARN_TICKS = 5
 
 
 def goal_problem(dofs: Sequence[str], calibrate: Sequence[str], calibration_only: bool,
@@ -297,12 +296,10 @@ class IdentificationCore:
         control tick of the goal (s): a warning for a starved tick, the goal's stop beyond
         ``thrusters.wrench_timeout_s`` (module docstring, "Starvation"). No goal moving the vehicle: nothing."""
         run = self.run
-        if run is None or run.ended or run.stop_since_s is not None or not run.executive.started \
-                or gap_s <= STARVED_WARN_TICKS * self.tick_s:
+        said = starvation("identification", gap_s, self.tick_s)
+        if run is None or run.ended or run.stop_since_s is not None or not run.executive.started or not said:
             return []
         limit_s = float(self.config.thrusters.wrench_timeout_s)
-        said = (f"identification starved for {gap_s:.2f} s (control tick due every {self.tick_s:g} s; the CPU is "
-                f"short: docs/architecture.md §10.1)")
         if gap_s <= limit_s:
             return [Event("warn_throttled", (said,))]
         out: list[Event] = []
