@@ -23,7 +23,8 @@ Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals 
 the reference machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`.
 Wake-ups per process and the DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process
 costs. ``--baseline GIT_REF`` measures that commit's launch layout first (:func:`baseline_launch`,
-rows ``..._vs_baseline``).
+rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``): the launch layout alone in a Pi-sized CPU rig of F
+cores here (:func:`rig_rows`, :mod:`hindrax_drivers.rig`), rows ``rig_*``.
 
 Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
 with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
