@@ -364,11 +364,19 @@ def starvation(who: str, gap_s: float, tick_s: float) -> str:
     """``"<who> starved for 0.31 s (tick due every 0.04 s; the CPU is short: docs/architecture.md §10.1)"`` when
     ``gap_s`` (s, steady clock, since the previous tick; :meth:`TickGaps.tick`) is beyond :data:`STARVED_WARN_TICKS`
     periods ``tick_s`` (s), else ''. The campaign and the controller stop their thrust on one beyond
-    ``thrusters.wrench_timeout_s`` (the allocation has then dropped their wrench as stale)."""
+    :func:`starved_stop_s`."""
     if gap_s <= STARVED_WARN_TICKS * tick_s:
         return ""
     return (f"{who} starved for {gap_s:.2f} s (tick due every {tick_s:g} s; the CPU is short: "
             "docs/architecture.md §10.1)")
+
+
+def starved_stop_s(wrench_timeout_s: float) -> float:
+    """The tick gap (s) beyond which the campaign and the controller stop their thrust: twice
+    ``thrusters.wrench_timeout_s``, the allocation has then held neutral for as long as a wrench may be old. One
+    gap just past the timeout (one stale wrench, neutral for tens of ms) is survived: on a loaded development
+    machine six of them came in one pool day."""
+    return 2.0 * float(wrench_timeout_s)
 
 
 class TickGaps:

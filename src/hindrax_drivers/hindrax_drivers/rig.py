@@ -117,6 +117,7 @@ class Rig:
         self._thread = threading.Thread(target=self._balance, name="rig-balance", daemon=True)
         self._t0 = time.monotonic()
         self.quota_us = self._quota_us(0.0)
+        self.busy_quota_us = int(self.busy_loops * PI4_CORE_HERE * CFS_PERIOD_US)  # one Pi core each
         #: the real-time runtime per CPU and period, us: F over the CPUs (the kernel lends a CPU's runtime to another)
         self.rt_runtime_us = int(min(self.cores, 0.9) / (os.cpu_count() or 1) * CFS_PERIOD_US)
 
@@ -154,7 +155,7 @@ class Rig:
                     _write(d / "cpu.rt_runtime_us", self.rt_runtime_us)
         self._set_quota(self.path, self.quota_us)
         if self.busy_loops:
-            self._set_quota(self.path / "busy", int(self.busy_loops * PI4_CORE_HERE * CFS_PERIOD_US))
+            self._set_quota(self.path / "busy", min(self.quota_us, self.busy_quota_us))
         self._t0 = time.monotonic()
         self._start_usage = self._read_usage()
         self._thread.start()
@@ -234,9 +235,12 @@ class Rig:
             (t0, c0), (t1, c1) = history[0], history[-1]
             rt = max(0.0, (c1 - c0) / (t1 - t0)) if t1 > t0 else 0.0  # a process that ended: its CPU is gone
             quota = self._quota_us(rt)
-            if quota != self.quota_us:
-                with contextlib.suppress(OSError):
-                    self._set_quota(self.path, quota)
+            if quota != self.quota_us:  # a child's quota may not exceed its parent's (v1): the lower one first
+                steps = [(self.path, quota)] + ([(self.path / "busy", min(quota, self.busy_quota_us))]
+                                                if self.busy_loops else [])
+                with contextlib.suppress(RigError):
+                    for group, q in (steps if quota > self.quota_us else steps[::-1]):
+                        self._set_quota(group, q)
                     self.quota_us = quota
 
 

@@ -58,7 +58,7 @@ def test_each_cause_has_its_next_step(process, cause, words):
 
 
 STARVED = ("identification starved for 1.80 s (tick due every 0.04 s; the CPU is short: docs/architecture.md "
-           "§10.1, beyond thrusters.wrench_timeout_s 0.5 s)")
+           "§10.1, beyond 1 s: twice thrusters.wrench_timeout_s)")
 
 
 def test_a_starvation_reported_after_the_stop_it_caused_joins_that_cause_once():

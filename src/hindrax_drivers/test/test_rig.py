@@ -67,3 +67,15 @@ def test_busy_loops_beside_take_one_pi_core_each():
         time.sleep(3.0)  # a measurement window, not a wait for a condition
         u = rig.usage()
     assert 0.6 * PI4_CORE_HERE < u.busy_cpu_s / u.wall_s < 1.15 * PI4_CORE_HERE, u
+
+
+def test_the_quota_follows_a_realtime_process_below_the_busy_loops_own():
+    """Half a Pi with two busy loops (their quota 0.4, the rig's): a SCHED_FIFO process lowers the rig's quota under
+    the busy loops' own (cgroup v1 refuses a parent quota below a child's: the busy loops' goes down first); the
+    balancer keeps running, the busy loops get less than their 0.4 and the rig about its 0.4 in all."""
+    with Rig(0.4, busy_loops=2, busy_s=10.0) as rig:
+        for p in _spin(rig, 3.0, realtime=True):
+            p.wait()
+        u = rig.usage()
+        assert rig._thread.is_alive()
+    assert u.busy_cpu_s / u.wall_s < 0.33 and 0.3 < (u.cpu_s + u.busy_cpu_s) / u.wall_s < 0.5, u

@@ -12,7 +12,7 @@ Interfaces, and who owns ``wrench``: docs/control.md §3. The controller publish
 ``controller/status`` and the log) when ``identification/status`` reports a running goal, when a
 ``wrench`` message it did not send arrives, when the ESC output is disarmed (``esc/output_state``),
 or when its depth or attitude is older than ``control.sensor_timeout_s``, or when its own tick came later than
-``thrusters.wrench_timeout_s`` on the steady clock ("controller starved for ...": the CPU is short; then it
+twice ``thrusters.wrench_timeout_s`` on the steady clock ("controller starved for ...": the CPU is short; then it
 publishes one zero wrench). Enabling again is always an explicit request (``controller/hold``, ``controller/enable``).
 
 It also publishes ``odom`` (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz
@@ -47,7 +47,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.lean_cdr import cdr_decoder
-from hindrax_drivers.liveness import TickGaps, starvation
+from hindrax_drivers.liveness import TickGaps, starvation, starved_stop_s
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node, sensor_input_qos
 from hindrax_drivers.vehicle_node import VehicleNode
@@ -360,17 +360,18 @@ class ControllerNode(VehicleNode):
         self._pending = []
         self._last_tick_s = t
         gap_s = self.tick_gaps.tick()
-        # on the wall clock only (simulated time may stand): a starved tick is said, and beyond the wrench timeout
-        # (the allocation has dropped the last wrench as stale) the hold stops with it (liveness.starvation)
+        # on the wall clock only (simulated time may stand): a starved tick is said, and beyond
+        # liveness.starved_stop_s the hold stops with it
         starved = "" if self.get_clock().ros_time_is_active else starvation("controller", gap_s, self.tick_s)
         if self.enabled and starved:
             self.get_logger().warn(starved, throttle_duration_sec=5.0)
         if self.enabled:
             stale = [d for d in ("ms5837", "dvl75_attitude") if t - self._last_sample_s.get(d, -math.inf)
                      > self.settings.sensor_timeout_s]
-            if starved and gap_s > self.config.thrusters.wrench_timeout_s:
-                self._disable(f"stopped: {starved[:-1]}, beyond thrusters.wrench_timeout_s "
-                              f"{self.config.thrusters.wrench_timeout_s:g} s)", zero=True)
+            limit_s = starved_stop_s(self.config.thrusters.wrench_timeout_s)
+            if starved and gap_s > limit_s:
+                self._disable(f"stopped: {starved[:-1]}, beyond {limit_s:g} s: twice thrusters.wrench_timeout_s)",
+                              zero=True)
             elif stale:
                 self._disable(f"stopped: no {', '.join(stale)} for {self.settings.sensor_timeout_s:g} s", zero=True)
             else:

@@ -35,9 +35,10 @@ Rules (one test row each in ``test/test_identification_core.py``):
   see removed are named in its result and confirmed first by the next goal (:class:`~.steps.Confirm`).
 * **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more
   than :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is
-  said in a warning naming it ("identification starved for 0.31 s"); one later than ``thrusters.wrench_timeout_s``
-  (the allocation has dropped the last wrench as stale: the manoeuvre is not what the executive commanded) stops
-  the goal with that reason, which trips the supervisor (its ``disarm_cause`` then names the starvation).
+  said in a warning naming it ("identification starved for 0.31 s"); one later than twice
+  ``thrusters.wrench_timeout_s`` (the allocation has held neutral for as long as a wrench may be old: the manoeuvre
+  is not what the executive commanded) stops the goal with that reason, which trips the supervisor (its
+  ``disarm_cause`` then names the starvation).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
   past the next control tick while a goal runs.
 """
@@ -50,7 +51,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.liveness import STARVED_WARN_TICKS, starvation
+from hindrax_drivers.liveness import STARVED_WARN_TICKS, starvation, starved_stop_s
 
 from ..bag_input import calibration_topic
 from ..bag_input.campaign_record import CampaignRecord
@@ -294,16 +295,17 @@ class IdentificationCore:
     def starved(self, t: float, gap_s: float) -> list[Event]:
         """Call before :meth:`tick` at ROS time ``t`` (s) with ``gap_s``, the steady-clock time since the previous
         control tick of the goal (s): a warning for a starved tick, the goal's stop beyond
-        ``thrusters.wrench_timeout_s`` (module docstring, "Starvation"). No goal moving the vehicle: nothing."""
+        :func:`~hindrax_drivers.liveness.starved_stop_s` (module docstring, "Starvation"). No goal moving the
+        vehicle: nothing."""
         run = self.run
         said = starvation("identification", gap_s, self.tick_s)
         if run is None or run.ended or run.stop_since_s is not None or not run.executive.started or not said:
             return []
-        limit_s = float(self.config.thrusters.wrench_timeout_s)
+        limit_s = starved_stop_s(self.config.thrusters.wrench_timeout_s)
         if gap_s <= limit_s:
             return [Event("warn_throttled", (said,))]
         out: list[Event] = []
-        self._stop(run, t, f"{said[:-1]}, beyond thrusters.wrench_timeout_s {limit_s:g} s)", out)
+        self._stop(run, t, f"{said[:-1]}, beyond {limit_s:g} s: twice thrusters.wrench_timeout_s)", out)
         return out
 
     def tick(self, t: float, cancel: bool) -> list[Event]:
