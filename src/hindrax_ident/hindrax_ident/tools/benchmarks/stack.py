@@ -492,7 +492,8 @@ def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, window
                       "note": "the launch's processes in the rig (cpuacct / cpu.stat), busy loops excluded"},
                      {"name": f"rig_{phase}_throttled", "value": 100 * sum(
                          b.throttled_s - a.throttled_s for a, b in spans) / wall, "unit": "% of the time",
-                      "note": "time the rig's quota held its processes off a CPU"}]
+                      "note": "time the rig's quota held its processes off the CPUs, summed over the CPUs (cpu.stat "
+                              f"throttled time; up to {100 * (os.cpu_count() or 1)} %)"}]
     rows += [
         {"name": "rig_whole_run_cpu", "value": 100 * whole.cores, "unit": "% of a core",
          "note": f"start to stop, {whole.wall_s:.0f} s (start-up included); busy loops {whole.busy_cpu_s:.0f} s CPU"},
