@@ -13,7 +13,7 @@ SETUP_INPUTS := requirements.txt requirements-colcon.txt constraints.txt scripts
 	$(foreach p,onboard fit sim tools,src/hindrax_$(p)/setup.py src/hindrax_$(p)/package.xml) \
 	third_party/tf2_msgs/CMakeLists.txt third_party/tf2_msgs/package.xml $(wildcard third_party/tf2_msgs/msg/*.msg)
 
-.PHONY: setup run test bench clean ros-install
+.PHONY: setup run test bench clean ros-install rig rig-pool-day
 
 setup: $(STAMP)
 
@@ -36,6 +36,19 @@ test: setup
 
 bench: setup
 	$(PY) -m hindrax_tools.bench --results-doc docs/results.md $(BENCH_ARGS)
+
+# The vehicle on a Pi's CPU budget (hindrax_drivers/layout/rig.py; root, a cgroup cpu controller): the launch's processes in
+# a cgroup of RIG_CORES cores here (a Pi 4 core = 0.2: 0.4 half a Pi, 0.8 the whole Pi), RIG_BUSY_LOOPS busy loops
+# beside them, the virtual pool outside. rig: the stack bench's launch layout in it (rows rig_*); rig-pool-day: the
+# README's pool day in it (test/test_pool_day.py, after make ros-install).
+RIG_CORES ?= 0.4
+RIG_BUSY_LOOPS ?= 0
+rig: setup
+	$(PY) -m hindrax_tools.benchmarks.stack --rig-cores $(RIG_CORES) --rig-busy-loops $(RIG_BUSY_LOOPS)
+
+rig-pool-day: setup
+	HINDRAX_RIG_CORES=$(RIG_CORES) HINDRAX_RIG_BUSY_LOOPS=$(RIG_BUSY_LOOPS) \
+	  $(PY) -m pytest -n0 -p no:randomly -s test/test_pool_day.py -k readme_writes
 
 # The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, hindrax_msgs, hindrax_drivers and
 # hindrax_onboard only (the fit, the simulator and the tools are topside: the venv's editable installs), against the

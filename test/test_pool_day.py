@@ -37,6 +37,7 @@ from hindrax_drivers.config import load_config
 from hindrax_drivers.layout.emulated_devices import EmulatedDevices
 from hindrax_drivers.layout.launch_xml import read_launch
 from hindrax_drivers.layout.process_runner import ProcessRunner
+from hindrax_drivers.layout.rig import Rig
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
@@ -52,7 +53,7 @@ class Day:
     """The runner of one launch, the emulated devices and a probe node counting what arrives (arrival times)."""
 
     def __init__(self, install, devices: EmulatedDevices, launch_file: str, arguments: dict, only=None,
-                 env: dict | None = None) -> None:
+                 env: dict | None = None, prefix: tuple = ()) -> None:
         procs = read_launch(install.share(launch_file.split("/")[0]) / "launch" / launch_file.split("/")[1],
                             arguments, find_share=install.share)
         self.processes = [p for p in procs if only is None or set(p.node_names) & set(only)]
@@ -60,7 +61,7 @@ class Day:
         # hindrax_drivers.layout.composition)
         self.process_of = {n: p.label for p in self.processes for n in p.node_names}
         self.runner = ProcessRunner(
-            self.processes, command=lambda p: [str(install.executable(p.package, p.executable))],
+            self.processes, command=lambda p: [*prefix, str(install.executable(p.package, p.executable))],
             env=env or install.env,
             extra_env={p.label: {k: v for n in p.node_names for k, v in devices.env(n).items()}
                        for p in self.processes},
@@ -295,7 +296,14 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     truth (the simulator's truth file, which the nodes never read); the identified model's hold keeps the true
     altitude within 0.1 m of the README's 0.9 m. The ESC's and the guard's deadlines are the vehicle's own
     (0.2 s heartbeats, 0.15 s bus call): the safety processes run ``SCHED_FIFO`` as the launch file asks, and the live
-    pool, the vehicle's hardware here, runs above them (``live_pool.take_hardware_priority``)."""
+    pool, the vehicle's hardware here, runs above them (``live_pool.take_hardware_priority``).
+
+    ``HINDRAX_RIG_CORES=F`` (``make rig-pool-day``): the launch's processes run in a Pi-sized CPU rig of F cores here
+    (hindrax_drivers/layout/rig.py), with ``HINDRAX_RIG_BUSY_LOOPS`` busy loops beside them; the pool and this test
+    outside.
+    What the rig took is printed at the end, and in the message of a failure."""
+    import contextlib
+    import os
     import queue
     import threading
 
@@ -335,7 +343,11 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
         assert words[0] == "hindrax", command
         return subprocess.run(words, env=env, capture_output=True, text=True, timeout=timeout)
 
-    with domain_id() as topside_domain, LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
+    rigged = contextlib.ExitStack()
+    rig_cores = float(os.environ.get("HINDRAX_RIG_CORES") or 0)
+    rig = rigged.enter_context(Rig(rig_cores, int(os.environ.get("HINDRAX_RIG_BUSY_LOOPS") or 0))) \
+        if rig_cores else None
+    with rigged, domain_id() as topside_domain, LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
             ros_context(domain_id=topside_domain) as top_ctx:
         fill["<topside_domain>"] = str(topside_domain)
         topside_env = {**install.env, "ROS_DOMAIN_ID": str(topside_domain),
@@ -356,7 +368,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
             assert words[:4] == ["ros2", "launch", "hindrax_onboard", "pool_test.launch.xml"], line
             args = dict(w.split(":=", 1) for w in words[4:])
             d = Day(install, pool, "hindrax_onboard/pool_test.launch.xml", {"config": str(vehicle_file), **args},
-                    env={**install.env, **keys})
+                    env={**install.env, **keys}, prefix=tuple(rig.prefix) if rig else ())
             d.__enter__()
             d.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
                                        lambda m: armed.append((time.monotonic(), bool(m.armed))), 50)
@@ -396,7 +408,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
                 proc.wait()
             transcript = "".join(printed)
             assert proc.returncode == 0 and "result: complete" in transcript, \
-                f"{transcript[-4000:]}\npool truth {pool.truth()}\n" + "\n".join(
+                f"{transcript[-4000:]}\npool truth {pool.truth()}\n{rig.usage() if rig else ''}\n" + "\n".join(
                     f"--- {n}:\n{day.log(n)[-2500:]}" for n in ("supervisor", "esc", "output_guard", "identification"))
             return transcript
 
@@ -474,6 +486,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
         finally:
             if day is not None:
                 day.__exit__(None, None, None)
+            if rig:
+                print(f"rig {rig_cores:g} cores: {rig.usage()}", flush=True)
             top_ex.shutdown()
             top.destroy_node()
 

@@ -55,3 +55,29 @@ def test_a_guard_error_while_disarmed_is_no_cause_and_an_esc_disarm_names_its_ow
 ])
 def test_each_cause_has_its_next_step(process, cause, words):
     assert words in next_step(process, cause)
+
+
+STARVED = ("identification starved for 1.80 s (tick due every 0.04 s; the CPU is short: docs/architecture.md "
+           "§10.1, beyond 1 s: twice thrusters.wrench_timeout_s)")
+
+
+def test_a_starvation_reported_after_the_stop_it_caused_joins_that_cause_once():
+    """Starved, the campaign's wrench went stale, the vehicle sank and the supervisor tripped on the DVL before the
+    identification ran again; its abort naming the starvation then comes second, and the line says both, the step
+    the starvation's."""
+    c = armed()
+    c.on_trip("no valid DVL velocity for 2.0 s, beyond supervisor.max_invalid_dvl_s 2")
+    c.on_starved("thruster test aborted")                 # not a starvation: no change
+    c.on_starved(STARVED)
+    c.on_starved(STARVED.replace("1.80", "2.40"))         # once
+    assert c.line == (f"supervisor: no valid DVL velocity for 2.0 s, beyond supervisor.max_invalid_dvl_s 2 (after: "
+                      f"{STARVED}); next: a process was starved of CPU (docs/architecture.md §10.1): stop what else "
+                      "loads the vehicle's computer, then hindrax reset, hindrax arm")
+
+
+def test_a_starvation_before_any_stop_is_the_cause_itself():
+    c = armed()
+    c.on_starved(STARVED)
+    assert c.line == ""                                    # the supervisor's trip on the abort names it
+    c.on_trip(f"abort requested: {STARVED}")
+    assert c.line.startswith(f"supervisor: abort requested: {STARVED}; next: a process was starved of CPU")

@@ -10,7 +10,8 @@ import pytest
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_onboard.identification.online.core import (ARMED_GRACE_S, DISARMED, NEEDED_SENSORS, NOT_ARMED,
-                                                      STATUS_PERIOD_S, IdentificationCore, goal_problem)
+                                                      STARVED_WARN_TICKS, STATUS_PERIOD_S, IdentificationCore,
+                                                      goal_problem)
 from hindrax_onboard.identification.online.executive import ExecutiveStatus
 
 CFG = load_config(default_config_path())
@@ -379,3 +380,30 @@ def test_close_ends_a_running_goal_with_its_record():
     run = c.close()
     assert run is c.run and run.error == "node shutting down" and run.record is not None
     assert c.end(run).kind == "end" and c.run is None and c.finish(run) == (False, "node shutting down")
+
+
+def test_a_starved_tick_is_named_and_beyond_the_wrench_timeout_stops_the_goal_with_that_reason():
+    """The node's steady-clock gap between two control ticks: within STARVED_WARN_TICKS periods nothing; beyond, a
+    warning naming it, also just past thrusters.wrench_timeout_s (one stale wrench is survived); beyond twice it the
+    goal stops with the starvation as its reason: aborted status, supervisor/abort, zero wrench; no goal or before
+    the start: nothing."""
+    c = core()
+    assert c.starved(0.5, 5.0) == []                             # no goal
+    ready(c)
+    c.accept("h", goal(), 0.0)
+    assert c.starved(0.9, 5.0) == []                             # accepted, not started: nothing commanded yet
+    c.tick(1.0, False)
+    assert c.starved(1.02, STARVED_WARN_TICKS * TICK) == []
+    timeout = CFG.thrusters.wrench_timeout_s
+    for gap in (0.3, 2 * timeout):
+        warned = c.starved(1.04, gap)
+        assert kinds(warned) == ["warn_throttled"] and \
+            warned[0].data[0].startswith(f"identification starved for {gap:.2f} s")
+    out = c.starved(3.0, 2 * timeout + 0.3)
+    reason = out[[e.kind for e in out].index("abort")].data[0]
+    assert reason.startswith(f"identification starved for {2 * timeout + 0.3:.2f} s") and \
+        f"beyond {2 * timeout:g} s: twice thrusters.wrench_timeout_s" in reason
+    assert statuses(out)[0] == ("aborted", reason) and kinds(out)[-1] == "wrench" and \
+        not np.any(out[-1].data[0])
+    assert c.starved(3.1, 9.0) == []                             # stopping already: once
+    assert c.finish(c.run)[1] == reason

@@ -345,3 +345,28 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
             ex.shutdown()
             probe.destroy_node()
             node.destroy_node()
+
+
+def test_a_starved_tick_stops_the_hold_naming_the_starvation():
+    """Injected delay: the controller's tick held off 1.2 s (beyond twice thrusters.wrench_timeout_s, 0.5 s) while
+    enabled. It disables itself saying "controller starved for 1.2 s" and sends one zero wrench, instead of
+    leaving the allocation to drop its last wrench as stale. The node's tick is driven directly."""
+    import time
+
+    from hindrax_onboard.control.node import ControllerNode
+
+    cfg = load_config(default_config_path())
+    with ros_context() as ctx:
+        node = ControllerNode(config=cfg, context=ctx, model_file="")
+        sent: list = []
+        node._publish_wrench = lambda w: sent.append(np.asarray(w))
+        try:
+            node._on_tick()
+            time.sleep(1.2)  # the injected delay: the process held off its tick (what this test is about)
+            node.enabled = True
+            node._on_tick()
+            assert not node.enabled and node.message.startswith("stopped: controller starved for 1.2"), node.message
+            assert f"beyond {2 * cfg.thrusters.wrench_timeout_s:g} s: twice thrusters.wrench_timeout_s" in node.message
+            assert len(sent) == 1 and not np.any(sent[0])
+        finally:
+            node.destroy_node()

@@ -360,3 +360,41 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
             ex.shutdown()
             probe.destroy_node()
             node.destroy_node()
+
+
+def test_a_starved_control_tick_stops_the_goal_naming_the_starvation():
+    """Injected delay: the node's control tick held off 1.2 s (beyond twice thrusters.wrench_timeout_s, 0.5 s) while
+    a goal moves the vehicle. The node measures the gap on the steady clock and stops the goal naming the starvation
+    as its reason, on supervisor/abort and its aborted status, then a zero wrench (the core's rule: core.starved). The
+    node's callbacks are driven directly, the campaign a stand-in (test_identification_core.StandInExecutive)."""
+    import importlib.util
+    from pathlib import Path
+
+    from hindrax_onboard.identification.online.core import NEEDED_SENSORS
+    spec = importlib.util.spec_from_file_location("core_cases", Path(__file__).with_name("test_identification_core.py"))
+    cases = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cases)
+    from hindrax_onboard.identification.online.node import IdentificationNode
+
+    cfg = load_config(default_config_path())
+    with ros_context() as ctx:
+        node = IdentificationNode(config=cfg, context=ctx)
+        node.core._executive = cases.StandInExecutive
+        wrenches, status, aborts = [], [], []
+        node._publish_wrench = lambda w, now: wrenches.append(np.asarray(w))
+        node._publish_status = lambda phase, st, message: status.append((phase, message))
+        node.pub_abort.publish = lambda m: aborts.append(m.data)
+        try:
+            node._on_accepted(_stand_in_handle(3))
+            node._on_pwm(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True))
+            node.core.add_samples([(d, SimpleNamespace(stamp_s=node._now_s())) for d in NEEDED_SENSORS])
+            node._on_tick()
+            node._on_tick()
+            assert node.core.run.executive.started and not aborts and np.any(wrenches[-1])
+            time.sleep(1.2)  # the injected delay: the process held off its tick (what this test is about)
+            node._on_tick()
+            assert len(aborts) == 1 and aborts[0].startswith("identification starved for 1.2"), aborts
+            assert "beyond 1 s: twice thrusters.wrench_timeout_s" in aborts[0]
+            assert status[-1] == (ManeuverStatus.PHASE_ABORTED, aborts[0]) and not np.any(wrenches[-1])
+        finally:
+            node.destroy_node()

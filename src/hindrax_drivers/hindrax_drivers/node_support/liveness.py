@@ -356,6 +356,29 @@ class AliveAge:
         return self.age_s <= timeout_s
 
 
+#: a tick this many periods after the previous one is a starved tick, said in a warning (docs/architecture.md §10.1)
+STARVED_WARN_TICKS = 5
+
+
+def starvation(who: str, gap_s: float, tick_s: float) -> str:
+    """``"<who> starved for 0.31 s (tick due every 0.04 s; the CPU is short: docs/architecture.md §10.1)"`` when
+    ``gap_s`` (s, steady clock, since the previous tick; :meth:`TickGaps.tick`) is beyond :data:`STARVED_WARN_TICKS`
+    periods ``tick_s`` (s), else ''. The campaign and the controller stop their thrust on one beyond
+    :func:`starved_stop_s`."""
+    if gap_s <= STARVED_WARN_TICKS * tick_s:
+        return ""
+    return (f"{who} starved for {gap_s:.2f} s (tick due every {tick_s:g} s; the CPU is short: "
+            "docs/architecture.md §10.1)")
+
+
+def starved_stop_s(wrench_timeout_s: float) -> float:
+    """The tick gap (s) beyond which the campaign and the controller stop their thrust: twice
+    ``thrusters.wrench_timeout_s``, the allocation has then held neutral for as long as a wrench may be old. One
+    gap just past the timeout (one stale wrench, neutral for tens of ms) is survived: on a loaded development
+    machine six of them came in one pool day."""
+    return 2.0 * float(wrench_timeout_s)
+
+
 class TickGaps:
     """The longest gap between two calls of a node's steady tick since the last :meth:`report`, and where the CPU went
     during it: the calling (executor) thread's CPU time, high when a long callback held the tick, and the whole
@@ -369,13 +392,14 @@ class TickGaps:
         self._last = tuple(c() for c in self._clocks)
         self.worst = (0.0, 0.0, 0.0)
 
-    def tick(self) -> None:
-        """Call at every tick, from the ticking thread."""
+    def tick(self) -> float:
+        """Call at every tick, from the ticking thread; returns the steady-clock gap since the previous one, s."""
         now = tuple(c() for c in self._clocks)
         gap = tuple(b - a for a, b in zip(self._last, now))
         self._last = now
         if gap[0] > self.worst[0]:
             self.worst = gap
+        return gap[0]
 
     def report(self) -> list[tuple[str, str]]:
         """``/diagnostics`` pairs of the worst gap since the last report (ms): ``tick_gap_max_ms``,

@@ -12,7 +12,8 @@ supervisor trip, then the guard's "supervisor tripped" and the ESC's "disarmed" 
 supervisor trip is a cause whether armed or not (it also refuses the next arming). The guard's beat counts while
 the supervisor sees the ESC armed: a killed ESC stops reporting, its last (armed) state stays latched, and only the
 guard's beat says that its outputs were silenced. An ESC that reports disarmed without a cause seen before is named
-with its own reason.
+with its own reason. A starvation a node reports after the stop it caused joins that cause
+(:meth:`DisarmCauses.on_starved`).
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ __all__ = ["DisarmCauses", "next_step"]
 
 #: (words in a cause, the operator's next step), first match wins; checked in order
 _NEXT_STEPS: tuple[tuple[tuple[str, ...], str], ...] = (
+    ((" starved for ",), "a process was starved of CPU (docs/architecture.md §10.1): stop what else loads the "
+                         "vehicle's computer, then hindrax reset, hindrax arm"),
     (("esc output state silent", "no esc heartbeat"),
      "check the ESC process (hindrax health; the launch respawns it), then hindrax arm"),
     (("no supervisor heartbeat", "supervisor heartbeat"),
@@ -80,6 +83,13 @@ class DisarmCauses:
     def on_trip(self, reason: str) -> None:
         """The supervisor latched a breach (a limit, an e-stop, an abort): ``reason``, its one line."""
         self._set("supervisor", reason)
+
+    def on_starved(self, report: str) -> None:
+        """Another node's abort ``report``: one that names a starvation (``... starved for 1.80 s ...``) and comes
+        after the cause it explains (a stale command, a sensor check tripping while that node could not run) is
+        added to that cause (``(after: <report>)``), once."""
+        if " starved for " in report and self.cause and " starved for " not in self.cause:
+            self.cause += f" (after: {report})"
 
     def on_guard(self, ok: bool, message: str) -> None:
         """One ``guard/heartbeat``: level OK (``ok``) or the reason the guard silences the outputs (``message``);

@@ -209,6 +209,7 @@ class SupervisorNode(VehicleNode):
             self._status_dirty = True
 
     def on_abort(self, msg: String) -> None:
+        self._cause(lambda: self.causes.on_starved(msg.data))  # the starvation behind an earlier stop, if it is one
         self._handle(self.core.trip(f"abort requested: {msg.data}"), force=True)
 
     def on_estop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

@@ -11,8 +11,9 @@ Interfaces, and who owns ``wrench``: docs/control.md §3. The controller publish
 **enabled**, which it never is at start-up; it **yields** (disables itself, saying why in
 ``controller/status`` and the log) when ``identification/status`` reports a running goal, when a
 ``wrench`` message it did not send arrives, when the ESC output is disarmed (``esc/output_state``),
-or when its depth or attitude is older than ``control.sensor_timeout_s`` (then it publishes one zero
-wrench). Enabling again is always an explicit request (``controller/hold``, ``controller/enable``).
+or when its depth or attitude is older than ``control.sensor_timeout_s``, or when its own tick came later than
+twice ``thrusters.wrench_timeout_s`` on the steady clock ("controller starved for ...": the CPU is short; then it
+publishes one zero wrench). Enabling again is always an explicit request (``controller/hold``, ``controller/enable``).
 
 It also publishes ``odom`` (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz
 (REP-105, :mod:`.odometry`) while its sensor streams are open; a malformed ``esc/output_state``
@@ -46,6 +47,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.cdr.lean_cdr import cdr_decoder
+from hindrax_drivers.node_support.liveness import TickGaps, starvation, starved_stop_s
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_support.node_common import load_node_config, run_node, sensor_input_qos
 from hindrax_drivers.node_support.vehicle_node import VehicleNode
@@ -127,6 +129,7 @@ class ControllerNode(VehicleNode):
         self._last_status_s = -math.inf
         self._last_odom_s = -math.inf
         self._last_tick_s: float | None = None
+        self.tick_gaps = TickGaps()  # steady-clock gaps between ticks (a starved tick, _on_tick)
         self._report = self.hold.core.gain_report()
         self._streams: list = []
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
@@ -354,10 +357,20 @@ class ControllerNode(VehicleNode):
         self.loop.add(self._pending)
         self._pending = []
         self._last_tick_s = t
+        gap_s = self.tick_gaps.tick()
+        # on the wall clock only (simulated time may stand): a starved tick is said, and beyond
+        # liveness.starved_stop_s the hold stops with it
+        starved = "" if self.get_clock().ros_time_is_active else starvation("controller", gap_s, self.tick_s)
+        if self.enabled and starved:
+            self.get_logger().warn(starved, throttle_duration_sec=5.0)
         if self.enabled:
             stale = [d for d in ("ms5837", "dvl75_attitude") if t - self._last_sample_s.get(d, -math.inf)
                      > self.settings.sensor_timeout_s]
-            if stale:
+            limit_s = starved_stop_s(self.config.thrusters.wrench_timeout_s)
+            if starved and gap_s > limit_s:
+                self._disable(f"stopped: {starved[:-1]}, beyond {limit_s:g} s: twice thrusters.wrench_timeout_s)",
+                              zero=True)
+            elif stale:
                 self._disable(f"stopped: no {', '.join(stale)} for {self.settings.sensor_timeout_s:g} s", zero=True)
             else:
                 w = self.loop.wrench(t)

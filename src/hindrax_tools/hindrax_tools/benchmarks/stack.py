@@ -23,7 +23,8 @@ Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals 
 the reference machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`.
 Wake-ups per process and the DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process
 costs. ``--baseline GIT_REF`` measures that commit's launch layout first (:func:`baseline_launch`,
-rows ``..._vs_baseline``).
+rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``): the launch layout alone in a Pi-sized CPU rig of F
+cores here (:func:`rig_rows`, :mod:`hindrax_drivers.layout.rig`), rows ``rig_*``.
 
 Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
 with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
@@ -60,13 +61,16 @@ from hindrax_drivers.node_support.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.layout.launch_xml import write_parameter_file
 from hindrax_drivers.cdr.lean_cdr import cdr_decoder, type_name_of
+from hindrax_drivers.node_support.liveness import heartbeat_qos
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
+from hindrax_drivers.layout.rig import PI4_CORE_HERE, Rig
 from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
+from hindrax_msgs.msg import AllocationStatus, Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import launch_processes, package_share, read_ports_file
@@ -307,11 +311,14 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- launch layout
-def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
+def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = None,
+            tally: dict | None = None) -> dict:
     """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in
     another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle
     phase); per window the CPU of every process and its wall-clock span (the rates come from the
-    bag)."""
+    bag). ``rig``: the launch's processes start inside it (:mod:`hindrax_drivers.layout.rig`), the pool outside.
+    ``tally``: filled as it runs (:func:`rig_rows`): ``disarms`` after the first arming, ``stale`` allocation
+    statuses rejecting a stale wrench, per window the rig's ``(phase, RigUsage)`` in ``rig``."""
     py = python_executable()
     sock = str(tmp / "i2c.sock")
     ports_file = tmp / "ports.json"
@@ -344,7 +351,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
                 # docs/deployment.md §1; the DDS transport, hindrax_drivers.process.dds_transport)
-                argv = [*lp.process.launch_prefix, py, *wrap, lp.module,
+                argv = [*lp.process.launch_prefix, *(rig.prefix if rig else ()), py, *wrap, lp.module,
                         *lp.process.ros_arguments(values_file), *bench]
                 own = {**dict(lp.process.env), SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}
                 procs[lp.label] = start_logged(tmp / f"{lp.label}.log", argv, env={**env, **own})
@@ -356,6 +363,8 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 extra[name] = start_logged(tmp / f"{name}.log", argv, env=env)
             with probe_spinning(did) as (probe, _ex, spin):
                 counts, lock = subscribe_recorder_counts(probe, 50)
+                if tally is not None:
+                    _tally(probe, tally)
                 arm = probe.create_client(SetArmed, "esc/set_armed")
                 action = ActionClient(probe, RunIdentification, "run_identification")
                 switch = _wrench_stream(probe)
@@ -395,7 +404,10 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                         cpu0 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake0 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         load0, t0_ns = os.getloadavg()[0], time.time_ns()
+                        rig0 = rig.usage() if rig else None
                         bench, wall = spin_for(duration_s, spin)
+                        if rig and tally is not None:
+                            tally["rig"].append((phase, rig0, rig.usage()))
                         cpu1 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake1 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         t1_ns = time.time_ns()
@@ -429,6 +441,70 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
     out["bag"] = str(bags[0])
     _bag_rates(out)
     return out
+
+
+def _tally(probe: Any, tally: dict) -> None:
+    """Count on ``probe`` what breaks first when the launch is starved (:func:`rig_rows`): disarms
+    (``thrusters/pulse_width`` armed -> not armed, once armed), allocation statuses rejecting a stale wrench, and
+    the output guard's reasons for silencing the outputs (``guard/heartbeat`` above OK), in ``tally``."""
+    def on_pwm(msg: ThrusterPwm) -> None:
+        armed = bool(msg.armed)
+        tally["disarms"] += int(tally["armed"] is True and not armed)
+        tally["armed"] = armed if armed or tally["armed"] is not None else None
+
+    def on_status(msg: AllocationStatus) -> None:
+        tally["stale"] += int(msg.rejected and "stale" in msg.reason)
+
+    def on_guard(msg: Heartbeat) -> None:
+        if tally["armed"] is not None and msg.level != 0 and msg.message not in tally["why"] and len(tally["why"]) < 5:
+            tally["why"].append(msg.message)
+
+    probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", on_pwm, 50)
+    probe.create_subscription(AllocationStatus, "allocation/status", on_status, 50)
+    probe.create_subscription(Heartbeat, "guard/heartbeat", on_guard, heartbeat_qos())
+
+
+def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, windows: int = 1) -> list[dict]:
+    """The launch layout (:func:`_launch`) inside a rig of ``cores`` cores here with ``busy_loops`` beside it
+    (:class:`~hindrax_drivers.layout.rig.Rig`, the virtual pool and this benchmark outside): the rig's CPU and
+    throttling in the running and idle windows, and what broke: disarms, stale-wrench statuses, whether the
+    surge goal ran through its running window (else the first line of why not). Raises
+    :class:`~hindrax_drivers.layout.rig.RigError` where no cgroup cpu controller is writable."""
+    tally: dict = {"armed": None, "disarms": 0, "stale": 0, "why": [], "rig": []}
+    error = ""
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-rig-") as tmpdir, \
+            Rig(cores, busy_loops=busy_loops) as rig:
+        try:
+            _launch(duration_s, Path(tmpdir), windows, rig=rig, tally=tally)
+        except (RuntimeError, ConditionTimeout) as exc:
+            error = str(exc).splitlines()[0]
+        whole = rig.usage()
+    beside = f"{busy_loops} busy loop(s) of one Pi core each beside it" if busy_loops else "nothing beside it"
+    rows = [{"name": "rig_cores", "value": cores, "unit": "cores here",
+             "note": f"{cores / PI4_CORE_HERE:g} Pi 4 cores at {PI4_CORE_HERE:g} core here each (hindrax_drivers/"
+                     f"rig.py); {beside}; launch of {LAUNCH_FILE[1]} inside, the virtual pool outside"}]
+    for phase in ("running", "idle"):
+        spans = [(a, b) for p, a, b in tally["rig"] if p == phase]
+        if spans:
+            wall = sum(b.wall_s - a.wall_s for a, b in spans)
+            rows += [{"name": f"rig_{phase}_cpu", "value": 100 * sum(b.cpu_s - a.cpu_s for a, b in spans) / wall,
+                      "unit": "% of a core", "target": f"<= {100 * cores:g}",
+                      "note": "the launch's processes in the rig (cpuacct / cpu.stat), busy loops excluded"},
+                     {"name": f"rig_{phase}_throttled", "value": 100 * sum(
+                         b.throttled_s - a.throttled_s for a, b in spans) / wall, "unit": "% of the time",
+                      "note": "time the rig's quota held its processes off the CPUs, summed over the CPUs (cpu.stat "
+                              f"throttled time; up to {100 * (os.cpu_count() or 1)} %)"}]
+    rows += [
+        {"name": "rig_whole_run_cpu", "value": 100 * whole.cores, "unit": "% of a core",
+         "note": f"start to stop, {whole.wall_s:.0f} s (start-up included); busy loops {whole.busy_cpu_s:.0f} s CPU"},
+        {"name": "rig_disarms", "value": tally["disarms"], "unit": "", "target": "0",
+         "note": "; ".join(tally["why"]) or "the output guard never silenced the outputs"},
+        {"name": "rig_stale_wrench_statuses", "value": tally["stale"], "unit": "", "target": "0",
+         "note": "allocation/status rejecting a stale wrench (neutral thrust)"},
+        {"name": "rig_goal_ran_through", "value": 0 if error else 1, "unit": "", "target": "1",
+         "note": error or "the surge goal ran through the running window; cancelled, then the idle window"},
+    ]
+    return rows
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
@@ -1022,9 +1098,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="skip the bare rclpy baseline and the launch's skeleton")
     parser.add_argument("--quick", action="store_true", help="one 8 s window")
     parser.add_argument("--json", type=Path, default=None, help="also write the rows to this file")
+    parser.add_argument("--rig-cores", type=float, default=None,
+                        help="only the launch layout in a Pi-sized rig of this many cores here (rig_rows; root)")
+    parser.add_argument("--rig-busy-loops", type=int, default=0, help="busy loops beside the rig's launch")
     args = parser.parse_args(argv)
-    rows = run(quick=args.quick, layouts=tuple(args.layouts), windows=args.windows,
-               duration_s=args.window_s, baselines=not args.no_baselines)
+    if args.rig_cores:
+        rows = rig_rows(args.rig_cores, args.rig_busy_loops, args.window_s or 10.0, args.windows or 1)
+    else:
+        rows = run(quick=args.quick, layouts=tuple(args.layouts), windows=args.windows,
+                   duration_s=args.window_s, baselines=not args.no_baselines)
     print(json.dumps(rows, indent=2))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))

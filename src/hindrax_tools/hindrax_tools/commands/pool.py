@@ -17,11 +17,13 @@ then reads the pool operator's hands from its standard input: a prompt's code (`
 ``remove_ballast``, ``apply_line_pull_surge``, ...) does that in the pool; ``quit``, end of input or Ctrl-C stops the
 launch (SIGINT: the recorder closes its bag) and the pool. Logs: ``DIR/logs/``; bags: ``DIR/runs/``. It does
 the block's ``hindrax keys`` itself (the gateway reads the key at its start): a new operator key in ``DIR/keys/``,
-named in both environments (``HINDRAX_KEYS_DIR``).
+named in both environments (``HINDRAX_KEYS_DIR``). ``--rig-cores F``: the launch's processes run in a Pi-sized
+CPU rig (:mod:`hindrax_drivers.layout.rig`), the pool outside it.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shlex
 import sys
@@ -45,6 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("launch_arguments", nargs="*", metavar="NAME:=VALUE",
                         help="more arguments of the launch, as ros2 launch takes them (e.g. model_file:=FILE for "
                              "the block's second launch, the identified model)")
+    parser.add_argument("--rig-cores", type=float, default=None,
+                        help="the launch inside a Pi-sized CPU rig of this many cores here, the pool outside "
+                             "(hindrax_drivers/layout/rig.py; root): 0.4 half a Pi 4, 0.8 the whole Pi")
+    parser.add_argument("--rig-busy-loops", type=int, default=0, help="busy loops in the rig, one Pi core each")
 
 
 def rehearsal_env(domain: int, **extra: str) -> str:
@@ -103,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.config import ConfigError, load_config
     from hindrax_drivers.layout.launch_xml import LaunchFileError, ament_share, read_launch
     from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, create_key
-    from hindrax_drivers.layout.process_runner import ProcessRunner
+    from hindrax_drivers.layout.process_runner import ProcessRunner, installed_command
+    from hindrax_drivers.layout.rig import Rig, RigError
 
     from hindrax_sim.live_pool import LivePool
 
@@ -146,9 +153,14 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"pool rehearse: {exc}") from None
     files = {"vehicle": (internal, {"HINDRAX_CONFIG": str(vehicle_file), **keys}),
              "topside": (topside, {"HINDRAX_VEHICLE": name, **keys})}
-    with LivePool(vehicle_file, folder / "pool", env=env, truth=args.truth) as pool:
+    with contextlib.ExitStack() as rigged, LivePool(vehicle_file, folder / "pool", env=env, truth=args.truth) as pool:
+        try:
+            rig = rigged.enter_context(Rig(args.rig_cores, args.rig_busy_loops)) if args.rig_cores else None
+        except (RigError, ValueError) as exc:
+            raise CommandError(f"pool rehearse: {exc}") from None
         runner = ProcessRunner(
             processes, env=env, log_dir=folder / "logs",
+            command=lambda p: [*(rig.prefix if rig else ()), *installed_command(p)],
             extra_env={p.label: {k: v for n in p.node_names for k, v in pool.env(n).items()} for p in processes},
             extra_ros_args={p.label: [a for n in p.node_names for a in pool.ros_arguments(n)] for p in processes})
         try:
@@ -173,5 +185,9 @@ def run(args: argparse.Namespace) -> int:
                     print(f"pool: {code} {'done' if pool.act(code) else 'unknown: not an operator code'}", flush=True)
         finally:
             runner.stop()
+            if rig:
+                u = rig.usage()
+                print(f"rig {args.rig_cores:g} cores: the launch took {u.cores:.3f} cores, throttled "
+                      f"{u.throttled_s:.1f} s of {u.wall_s:.0f} s", flush=True)
     print("rehearsal: stopped", flush=True)
     return 0

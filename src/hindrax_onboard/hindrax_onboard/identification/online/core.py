@@ -33,6 +33,12 @@ Rules (one test row each in ``test/test_identification_core.py``):
   phase and the step's message; estimates every ``publish_period_s``.
 * **Undo** (:attr:`~IdentificationCore.pending_undo`): the loads a stopped goal's calibration asked for and did not
   see removed are named in its result and confirmed first by the next goal (:class:`~.steps.Confirm`).
+* **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more
+  than :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is
+  said in a warning naming it ("identification starved for 0.31 s"); one later than twice
+  ``thrusters.wrench_timeout_s`` (the allocation has held neutral for as long as a wrench may be old: the manoeuvre
+  is not what the executive commanded) stops the goal with that reason, which trips the supervisor (its
+  ``disarm_cause`` then names the starvation).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
   past the next control tick while a goal runs.
 """
@@ -45,6 +51,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.node_support.liveness import STARVED_WARN_TICKS, starvation, starved_stop_s
 
 from ..model import calibration_topic
 from ..model.campaign_record import CampaignRecord
@@ -56,7 +63,7 @@ from .steps import undo_line
 __all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem",
            "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
-           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED"]
+           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED", "STARVED_WARN_TICKS"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
@@ -285,6 +292,22 @@ class IdentificationCore:
         return Event("end", (run,))
 
     # ------------------------------------------------------------------ control tick
+    def starved(self, t: float, gap_s: float) -> list[Event]:
+        """Call before :meth:`tick` at ROS time ``t`` (s) with ``gap_s``, the steady-clock time since the previous
+        control tick of the goal (s): a warning for a starved tick, the goal's stop beyond
+        :func:`~hindrax_drivers.node_support.liveness.starved_stop_s` (module docstring, "Starvation"). No goal moving
+        the vehicle: nothing."""
+        run = self.run
+        said = starvation("identification", gap_s, self.tick_s)
+        if run is None or run.ended or run.stop_since_s is not None or not run.executive.started or not said:
+            return []
+        limit_s = starved_stop_s(self.config.thrusters.wrench_timeout_s)
+        if gap_s <= limit_s:
+            return [Event("warn_throttled", (said,))]
+        out: list[Event] = []
+        self._stop(run, t, f"{said[:-1]}, beyond {limit_s:g} s: twice thrusters.wrench_timeout_s)", out)
+        return out
+
     def tick(self, t: float, cancel: bool) -> list[Event]:
         """One control tick at ROS time ``t`` (s); ``cancel``: the goal's cancel was requested. Returns the events."""
         out: list[Event] = []

@@ -105,6 +105,7 @@ from std_srvs.srv import Trigger
 from hindrax_drivers.base import frames
 from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.cdr.lean_cdr import wrench_stamped_cdr
+from hindrax_drivers.node_support.liveness import TickGaps
 from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_support.node_common import load_node_config, run_node, sensor_input_qos
@@ -175,6 +176,7 @@ class IdentificationNode(VehicleNode):
                                        dvl_lock_timeout_s=self.dvl_lock_timeout_s,
                                        sensor_timeout_s=self.sensor_timeout_s, stop_timeout_s=self.stop_timeout_s)
         self._ended: dict[bytes, GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
+        self.tick_gaps = TickGaps()  # steady-clock gaps between the control ticks of a goal (core.starved)
 
         # no QoS event handlers (VehicleNode): a missing sensor fails the goal (timeouts, DVL lock)
         self._inputs: list = []  # the sensor subscriptions, open while a goal is accepted or runs
@@ -234,6 +236,7 @@ class IdentificationNode(VehicleNode):
             return
         if active:
             self.core.forget_inputs()
+            self.tick_gaps = TickGaps()  # the control ticks' gaps, from now (core.starved)
             # (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
             # best effort (sensor_input_qos): the writers then run no reliability protocol for this reader
             add = self.core.add_samples
@@ -319,7 +322,10 @@ class IdentificationNode(VehicleNode):
         now = self.get_clock().now()
         run = self.core.run
         cancel = run is not None and not run.ended and bool(run.handle.is_cancel_requested)
-        self._act(self.core.tick(now.nanoseconds * 1e-9, cancel), now)
+        # on the wall clock only: simulated time stands while the operator is asked (docs/architecture.md §10)
+        gap_s = self.tick_gaps.tick() if self._inputs and not self.get_clock().ros_time_is_active else 0.0
+        self._act(self.core.starved(now.nanoseconds * 1e-9, gap_s) + self.core.tick(now.nanoseconds * 1e-9, cancel),
+                  now)
 
     def _act(self, events: list[Event], now) -> None:
         """Do what the core decided, in its order (:class:`~.core.Event`)."""

@@ -1,0 +1,81 @@
+"""The Pi-sized CPU rig (hindrax_drivers/layout/rig.py): which controller it finds, and that a real one bounds the CPU.
+
+The real cases need a writable cgroup cpu controller (root; the CI machine and the development machines run as root
+with cgroup v1's). Each busy loop is bounded by ``timeout``.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hindrax_drivers.layout.rig import PI4_CORE_HERE, Rig, RigError, find_cpu_controller
+
+BUSY = [sys.executable, "-c", "while True: pass"]
+
+
+def test_finds_v1_then_v2_and_names_both_when_neither(tmp_path):
+    v1, v2 = tmp_path / "cpu", tmp_path / "unified"
+    v2.mkdir()
+    (v2 / "cgroup.controllers").write_text("memory pids\n")  # no cpu: not usable
+    with pytest.raises(RigError) as err:
+        find_cpu_controller(v1, (v2,))
+    assert "\n" not in str(err.value) and str(v1) in str(err.value) and str(v2) in str(err.value)
+    (v2 / "cgroup.controllers").write_text("cpu memory pids\n")
+    assert find_cpu_controller(v1, (v2,)) == (2, v2)
+    v1.mkdir()
+    (v1 / "cpu.cfs_quota_us").write_text("-1\n")
+    assert find_cpu_controller(v1, (v2,)) == (1, v1)
+
+
+def test_bad_cores_named():
+    with pytest.raises(ValueError, match=r"rig cores 0\.0: allowed above 0"):
+        Rig(0.0)
+
+
+def _spin(rig: Rig, seconds: float, realtime: bool = False) -> list[subprocess.Popen]:
+    fifo = ["chrt", "-f", "5"] if realtime else []
+    return [subprocess.Popen([*rig.prefix, *fifo, "timeout", f"{seconds:g}", *BUSY])]
+
+
+def test_a_busy_loop_gets_the_rigs_share_and_a_realtime_one_counts_against_it():
+    """0.2 core: a nice-0 busy loop takes about 0.2 (not the whole core it would take); with a SCHED_FIFO busy loop
+    beside it, the two together still take about 0.2 plus the kernel's least quota (1 ms per 20 ms period), not 0.4
+    (the quota follows the real-time process's CPU); the group is gone afterwards."""
+    with Rig(0.2) as rig:
+        path = rig.path
+        assert path.is_dir()
+        for p in _spin(rig, 3.0):
+            p.wait()
+        alone = rig.usage()
+        both = _spin(rig, 3.0) + _spin(rig, 3.0, realtime=True)
+        t0 = time.monotonic()
+        for p in both:
+            p.wait()
+        pair = rig.usage()
+    assert 0.12 < alone.cores < 0.24 and alone.throttled_periods > 10, alone
+    together = (pair.cpu_s - alone.cpu_s) / (time.monotonic() - t0)
+    assert 0.12 < together < 0.3, (together, pair)
+    assert not Path(path).exists()
+
+
+def test_busy_loops_beside_take_one_pi_core_each():
+    with Rig(0.8, busy_loops=1, busy_s=10.0) as rig:
+        time.sleep(3.0)  # a measurement window, not a wait for a condition
+        u = rig.usage()
+    assert 0.6 * PI4_CORE_HERE < u.busy_cpu_s / u.wall_s < 1.15 * PI4_CORE_HERE, u
+
+
+def test_the_quota_follows_a_realtime_process_below_the_busy_loops_own():
+    """Half a Pi with two busy loops (their quota 0.4, the rig's): a SCHED_FIFO process lowers the rig's quota under
+    the busy loops' own (cgroup v1 refuses a parent quota below a child's: the busy loops' goes down first); the
+    balancer keeps running, the busy loops get less than their 0.4 and the rig about its 0.4 in all."""
+    with Rig(0.4, busy_loops=2, busy_s=10.0) as rig:
+        for p in _spin(rig, 3.0, realtime=True):
+            p.wait()
+        u = rig.usage()
+        assert rig._thread.is_alive()
+    assert u.busy_cpu_s / u.wall_s < 0.33 and 0.3 < (u.cpu_s + u.busy_cpu_s) / u.wall_s < 0.5, u
