@@ -37,7 +37,7 @@ test: setup
 bench: setup
 	$(PY) -m hindrax_tools.bench --results-doc docs/results.md $(BENCH_ARGS)
 
-# The vehicle on a Pi's CPU budget (hindrax_drivers/layout/rig.py; root, a cgroup cpu controller): the launch's processes in
+# The vehicle on a Pi's CPU budget (hindrax_tools/benchmarks/rig.py; root, a cgroup cpu controller): the launch's processes in
 # a cgroup of RIG_CORES cores here (a Pi 4 core = 0.2: 0.4 half a Pi, 0.8 the whole Pi), RIG_BUSY_LOOPS busy loops
 # beside them, the virtual pool outside. rig: the stack bench's launch layout in it (rows rig_*); rig-pool-day: the
 # README's pool day in it (test/test_pool_day.py, after make ros-install).

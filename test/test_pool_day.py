@@ -37,7 +37,7 @@ from hindrax_drivers.config import load_config
 from hindrax_drivers.layout.emulated_devices import EmulatedDevices
 from hindrax_drivers.layout.launch_xml import read_launch
 from hindrax_drivers.layout.process_runner import ProcessRunner
-from hindrax_drivers.layout.rig import Rig
+from hindrax_tools.benchmarks.rig import Rig
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
@@ -299,7 +299,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     pool, the vehicle's hardware here, runs above them (``live_pool.take_hardware_priority``).
 
     ``HINDRAX_RIG_CORES=F`` (``make rig-pool-day``): the launch's processes run in a Pi-sized CPU rig of F cores here
-    (hindrax_drivers/layout/rig.py), with ``HINDRAX_RIG_BUSY_LOOPS`` busy loops beside them; the pool and this test
+    (hindrax_tools/benchmarks/rig.py), with ``HINDRAX_RIG_BUSY_LOOPS`` busy loops beside them; the pool and this test
     outside.
     What the rig took is printed at the end, and in the message of a failure."""
     import contextlib

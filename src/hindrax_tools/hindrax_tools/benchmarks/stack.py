@@ -24,7 +24,7 @@ the reference machine's speed, per unit of the virtual pool's CPU and at :data:`
 Wake-ups per process and the DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process
 costs. ``--baseline GIT_REF`` measures that commit's launch layout first (:func:`baseline_launch`,
 rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``): the launch layout alone in a Pi-sized CPU rig of F
-cores here (:func:`rig_rows`, :mod:`hindrax_drivers.layout.rig`), rows ``rig_*``.
+cores here (:func:`rig_rows`, :mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
 
 Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
 with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
@@ -64,7 +64,7 @@ from hindrax_drivers.cdr.lean_cdr import cdr_decoder, type_name_of
 from hindrax_drivers.node_support.liveness import heartbeat_qos
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
-from hindrax_drivers.layout.rig import PI4_CORE_HERE, Rig
+from hindrax_tools.benchmarks.rig import PI4_CORE_HERE, Rig
 from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
@@ -316,7 +316,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = No
     """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in
     another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle
     phase); per window the CPU of every process and its wall-clock span (the rates come from the
-    bag). ``rig``: the launch's processes start inside it (:mod:`hindrax_drivers.layout.rig`), the pool outside.
+    bag). ``rig``: the launch's processes start inside it (:mod:`hindrax_tools.benchmarks.rig`), the pool outside.
     ``tally``: filled as it runs (:func:`rig_rows`): ``disarms`` after the first arming, ``stale`` allocation
     statuses rejecting a stale wrench, per window the rig's ``(phase, RigUsage)`` in ``rig``."""
     py = python_executable()
@@ -466,10 +466,10 @@ def _tally(probe: Any, tally: dict) -> None:
 
 def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, windows: int = 1) -> list[dict]:
     """The launch layout (:func:`_launch`) inside a rig of ``cores`` cores here with ``busy_loops`` beside it
-    (:class:`~hindrax_drivers.layout.rig.Rig`, the virtual pool and this benchmark outside): the rig's CPU and
+    (:class:`~hindrax_tools.benchmarks.rig.Rig`, the virtual pool and this benchmark outside): the rig's CPU and
     throttling in the running and idle windows, and what broke: disarms, stale-wrench statuses, whether the
     surge goal ran through its running window (else the first line of why not). Raises
-    :class:`~hindrax_drivers.layout.rig.RigError` where no cgroup cpu controller is writable."""
+    :class:`~hindrax_tools.benchmarks.rig.RigError` where no cgroup cpu controller is writable."""
     tally: dict = {"armed": None, "disarms": 0, "stale": 0, "why": [], "rig": []}
     error = ""
     with tempfile.TemporaryDirectory(prefix="hindrax-bench-rig-") as tmpdir, \

@@ -18,7 +18,7 @@ then reads the pool operator's hands from its standard input: a prompt's code (`
 launch (SIGINT: the recorder closes its bag) and the pool. Logs: ``DIR/logs/``; bags: ``DIR/runs/``. It does
 the block's ``hindrax keys`` itself (the gateway reads the key at its start): a new operator key in ``DIR/keys/``,
 named in both environments (``HINDRAX_KEYS_DIR``). ``--rig-cores F``: the launch's processes run in a Pi-sized
-CPU rig (:mod:`hindrax_drivers.layout.rig`), the pool outside it.
+CPU rig (:mod:`hindrax_tools.benchmarks.rig`), the pool outside it.
 """
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the block's second launch, the identified model)")
     parser.add_argument("--rig-cores", type=float, default=None,
                         help="the launch inside a Pi-sized CPU rig of this many cores here, the pool outside "
-                             "(hindrax_drivers/layout/rig.py; root): 0.4 half a Pi 4, 0.8 the whole Pi")
+                             "(hindrax_tools/benchmarks/rig.py; root): 0.4 half a Pi 4, 0.8 the whole Pi")
     parser.add_argument("--rig-busy-loops", type=int, default=0, help="busy loops in the rig, one Pi core each")
 
 
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.layout.launch_xml import LaunchFileError, ament_share, read_launch
     from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, create_key
     from hindrax_drivers.layout.process_runner import ProcessRunner, installed_command
-    from hindrax_drivers.layout.rig import Rig, RigError
+    from hindrax_tools.benchmarks.rig import Rig, RigError
 
     from hindrax_sim.live_pool import LivePool
 

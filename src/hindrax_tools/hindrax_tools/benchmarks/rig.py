@@ -270,9 +270,9 @@ def _write(path: Path, value: object) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m hindrax_drivers.layout.rig --cores F [--busy-loops N] -- COMMAND...``: run a command (and the
+    """``python -m hindrax_tools.benchmarks.rig --cores F [--busy-loops N] -- COMMAND...``: run a command (and the
     processes it starts) in a rig of F cores here; print the rig's CPU at its end. Exit status: the command's."""
-    ap = argparse.ArgumentParser(prog="python -m hindrax_drivers.layout.rig", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m hindrax_tools.benchmarks.rig", description=__doc__.splitlines()[0])
     ap.add_argument("--cores", type=float, required=True,
                     help=f"cores here (a Pi 4 core = {PI4_CORE_HERE:g}: half a Pi 0.4, the whole Pi 0.8)")
     ap.add_argument("--busy-loops", type=int, default=0, help="busy loops beside it, one Pi core each")

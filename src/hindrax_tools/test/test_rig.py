@@ -1,4 +1,5 @@
-"""The Pi-sized CPU rig (hindrax_drivers/layout/rig.py): which controller it finds, and that a real one bounds the CPU.
+"""The Pi-sized CPU rig (hindrax_tools/benchmarks/rig.py): which controller it finds, and that a real one bounds
+the CPU.
 
 The real cases need a writable cgroup cpu controller (root; the CI machine and the development machines run as root
 with cgroup v1's). Each busy loop is bounded by ``timeout``.
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_drivers.layout.rig import PI4_CORE_HERE, Rig, RigError, find_cpu_controller
+from hindrax_tools.benchmarks.rig import PI4_CORE_HERE, Rig, RigError, find_cpu_controller
 
 BUSY = [sys.executable, "-c", "while True: pass"]
 
