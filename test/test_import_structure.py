@@ -53,8 +53,8 @@ VEHICLE_PACKAGES = ("hindrax_msgs", "hindrax_drivers", "hindrax_onboard")
 ENTRY_POINTS = frozenset({
     "hindrax_sim.graph.bringup",
     "hindrax_drivers.recording.replay_devices",
-    "hindrax_tools.commands.bag.play",
-    "hindrax_tools.commands.bag.record",
+    "hindrax_onboard.commands.bag.play",
+    "hindrax_onboard.commands.bag.record",
 })
 #: Packages whose every module is an entry point: the ``make bench`` benchmarks start the nodes they measure.
 ENTRY_POINT_PACKAGES = ("hindrax_tools.benchmarks",)
@@ -301,6 +301,10 @@ def test_the_vehicle_build_holds_no_topside_module():
             assert used <= set(VEHICLE_PACKAGES), f"{launch.name}: {sorted(used)}"
     make = (ROOT / "Makefile").read_text()
     assert "--packages-up-to hindrax_onboard" in make
+    # one `hindrax` script, the vehicle's, which the image's /usr/local/bin/hindrax runs; the topside adds commands
+    assert "hindrax = hindrax_onboard.cli:main" in setup_kwargs("hindrax_onboard")["entry_points"]["console_scripts"]
+    assert "console_scripts" not in setup_kwargs("hindrax_tools")["entry_points"]
+    assert "/ws/install/lib/hindrax_onboard/hindrax" in (ROOT / "docker" / "hindrax-exec.sh").read_text()
 
 
 # ------------------------------------------------------------------------------------------------ layers
@@ -338,6 +342,8 @@ LAYERS = (
     ("hindrax_onboard.identification.model", 10),
     ("hindrax_onboard.identification.online", 11),
     ("hindrax_onboard.composition", 12),  # the composed processes of the pool test launch
+    ("hindrax_onboard.commands", 12),  # the vehicle's `hindrax` commands (over the drivers only)
+    ("hindrax_onboard.cli", 12),  # the `hindrax` command line; other packages add commands by entry point
     ("hindrax_fit", 13),
     ("hindrax_fit.fit", 13),
     ("hindrax_fit.bag_input", 14),  # the fit core defines the per-DOF record (Chunk) the bag reader returns
@@ -348,7 +354,7 @@ LAYERS = (
 )
 #: Modules that may sit at a package's root beside its public surface (``__init__``): the drivers' helpers for tests
 #: and benchmarks, the sim's root room, the tools' command line and its helpers, the composed processes.
-ROOT_MODULES = {"hindrax_drivers": {"testing"}, "hindrax_onboard": {"composition"}, "hindrax_fit": set(),
+ROOT_MODULES = {"hindrax_drivers": {"testing"}, "hindrax_onboard": {"composition", "cli"}, "hindrax_fit": set(),
                 "hindrax_tools": {
     "cli", "bench", "progress_run", "results_doc", "output_dirs"}}
 

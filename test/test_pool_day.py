@@ -20,6 +20,7 @@ Every wait is on a condition (a message, a status, a process state) with a gener
 """
 from __future__ import annotations
 
+import shutil
 import signal
 import subprocess
 import time
@@ -266,17 +267,22 @@ def readme_pool_day() -> list[tuple[str, str]]:
 def test_the_readme_pool_day_names_the_machine_and_the_domain_of_each_line():
     """Each step of the README's pool day says on which machine and in which of the two domains it runs, with one
     name for each (internal, topside), defined once above the block; the vehicle's shell is never said to be on the
-    topside's ``ROS_DOMAIN_ID`` (it is the internal one)."""
+    topside's ``ROS_DOMAIN_ID`` (it is the internal one); the vehicle's lines use the vehicle's commands."""
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     section = readme.split("## A pool day", 1)[1].split("\n## ", 1)[0]
     intro, block = section.split("```bash", 1)[0], section.split("```bash", 1)[1].split("```", 1)[0]
     assert "**internal domain**" in intro and "**topside domain**" in intro
     assert "the vehicle's `ROS_DOMAIN_ID`" not in readme
     headers = [ln for ln in block.splitlines() if ln.startswith("# on the ")]
-    assert len(headers) == 4 and all(
+    assert len(headers) == 6 and all(
         ("internal domain" in h) == h.startswith("# on the vehicle") and ("topside domain" in h) ==
         h.startswith("# on the topside PC") for h in headers), headers
     assert all("<topside_domain>" in ln for ln in block.splitlines() if "topside_domain_id:=" in ln)
+    # the vehicle's `hindrax` has the vehicle's commands only (hindrax_onboard's; the fit is the topside's)
+    from hindrax_onboard.cli import COMMANDS
+
+    on_vehicle = [c.split()[1:] for m, c in readme_pool_day() if m == "vehicle" and c.startswith("hindrax ")]
+    assert len(on_vehicle) >= 3 and all(any(c[:len(w)] == list(w) for w, _m, _h in COMMANDS) for c in on_vehicle)
 
 
 CAMPAIGN_S = 900.0  # wall-time deadline of the campaign (about 190 s of pool time, on a loaded two-core machine)
@@ -288,7 +294,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     of its own, on the wall clock): the vehicle on this worker's domain, the topside on another (LOCALHOST here,
     SUBNET at the pool), the topside's settings from docker/topside.env.example's three variables. ``ros2 launch``,
     ``ros2 topic echo`` and ``ros2 service call`` (no ros2 CLI here) are done by the project's runner and rclpy;
-    every ``hindrax`` line runs as written, placeholders filled in. The operator of the campaign's prompts is this
+    every ``hindrax`` line runs as written, placeholders filled in; ``rsync`` between the vehicle and the topside PC
+    is a copy between their two folders of this machine. The operator of the campaign's prompts is this
     test: at each ``>>> [code]`` it does what the code asks in the pool (the ballast on or off) and runs the README's
     ``hindrax ident continue``. Asserted: armed from each ``hindrax arm`` to its ``hindrax disarm`` with no disarm
     between (a topside subscriber and ``hindrax health`` on the vehicle come and go while armed); the campaign
@@ -331,7 +338,10 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     # the operator key: `hindrax keys` writes it on the vehicle; the topside's copy is the same file on this machine
     keys = {"HINDRAX_KEYS_DIR": str(tmp_path / "keys")}
     vehicle_env = {**install.env, "HINDRAX_CONFIG": str(vehicle_file), **keys}
-    fill: dict[str, str] = {"/var/lib/hindrax/runs": str(runs), "<name>": name, "SUBNET": "LOCALHOST"}
+    # the topside PC's folder of copied bags; `rsync -a pi@<vehicle>:SRC DST/` is a local copy on this one machine
+    topside_runs = tmp_path / "topside_runs"
+    fill: dict[str, str] = {"/var/lib/hindrax/runs": str(runs), "~/runs": str(topside_runs), "pi@<vehicle>:": "",
+                            "<name>": name, "SUBNET": "LOCALHOST"}
 
     def filled(line: str) -> str:
         for key in sorted(fill, key=len, reverse=True):  # <bag>_ident_<time> before <bag>
@@ -416,6 +426,10 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
             it = iter(lines)
             for machine, line in it:
                 env = vehicle_env if machine == "vehicle" else topside_env
+                if "<bag>" in line and "<bag>" not in fill:  # the one bag the first launch recorded
+                    recorded = bags(runs)
+                    assert len(recorded) == 1, recorded
+                    fill["<bag>"] = recorded[0].name
                 line = filled(line)
                 if line.startswith("ros2 launch"):
                     assert day is None, "a second launch beside the first"
@@ -456,14 +470,16 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
                     day.wait(lambda: any(not a for t, a in armed if t >= t_disarm), "disarmed")
                     during = [a for t, a in armed if t_arm <= t < t_disarm]
                     assert during and all(during[during.index(True):]), "a disarm while armed"
+                elif line.startswith("rsync -a "):
+                    src, dst = map(Path, line.split()[2:4])
+                    assert line.split()[3].endswith("/") and src.is_dir(), line
+                    shutil.copytree(src, dst / src.name)
                 elif line.startswith("hindrax ident bag"):
-                    recorded = bags(runs)
-                    assert len(recorded) == 1, recorded
-                    fill["<bag>"] = recorded[0].name
-                    r = hindrax(env, filled(line), timeout=600)
+                    bag = Path(line.split()[3])
+                    r = hindrax(env, line, timeout=600)
                     assert r.returncode == 0, r.stdout + r.stderr
-                    made = [b for b in bags(runs) if b.name.startswith(recorded[0].name + "_ident_")]
-                    assert len(made) == 1, (bags(runs), r.stdout)
+                    made = [b for b in bags(bag.parent) if b.name.startswith(bag.name + "_ident_")]
+                    assert len(made) == 1, (bags(bag.parent), r.stdout)
                     fill["<bag>_ident_<time>"] = made[0].name
                     # heave against the pool's truth: the simulator's vehicle, not the vehicle file
                     truth = load_truth(cfg, None).config

@@ -4,12 +4,13 @@ installed executables run from the install space with the installed vehicle file
 Built once per session in a copy of the repository's ros_ws + src (test/conftest.py; about 50 s on 2 idle cores).
 Checks: the vehicle's build installs hindrax_msgs, hindrax_drivers and hindrax_onboard only (no fit, simulator or
 tools: those are the topside's, here the venv's editable installs), every node's console script is installed in
-lib/<package>, `hindrax` (the venv's) is on PATH after sourcing the install and finds the installed vehicle file
-without --config, the launch files, the Foxglove layout and the virtual pool's truth files are in share/ (so the
+lib/<package>, the install's `hindrax` (hindrax_onboard's) is on PATH after sourcing it, finds the installed vehicle
+file without --config, and without hindrax_tools lists the vehicle's commands and answers a topside one in a line,
+the launch files, the Foxglove layout and the virtual pool's truth files are in share/ (so the
 venv's simulator_node runs on them), installed allocation_node answers a wrench and
 installed static_tf_node publishes /tf_static (both started with `--ros-args --params-file <installed
 hindrax.yaml>`), a driver whose device is absent keeps running and reports the error on /diagnostics;
-a topside `colcon build --symlink-install` of the tools puts its `hindrax` wrapper on PATH, and colcon at the
+a topside `colcon build --symlink-install` up to the tools puts the `hindrax` wrapper on PATH, and colcon at the
 repository root sees the six packages and none of the third_party stand-ins.
 """
 from __future__ import annotations
@@ -70,9 +71,10 @@ def test_every_node_and_hindrax_are_installed(install):
         assert os.access(inst / "lib" / "hindrax_onboard" / node, os.X_OK), node
     installed = sorted(p.name for pkg in ("hindrax_drivers", "hindrax_onboard") for p in (inst / "lib" / pkg).iterdir())
     print("installed executables:", " ".join(installed))
-    # the vehicle's build: no fit, simulator or tools code, no hindrax wrapper
+    # the vehicle's build: no fit, simulator or tools code; its own `hindrax` (hindrax_onboard) and the PATH wrapper
     assert not [p for p in inst.rglob("*") if any(t in p.name for t in TOPSIDE)], "topside code in the install"
-    assert not (inst / "bin" / "hindrax").exists()
+    assert os.access(inst / "bin" / "hindrax", os.X_OK) and os.access(inst / "lib" / "hindrax_onboard" / "hindrax",
+                                                                     os.X_OK)
     # the installed packages are the ones imported, not the repository's
     r = subprocess.run(["python3", "-c", "import hindrax_drivers, hindrax_onboard; print(hindrax_drivers.__file__); "
                         "print(hindrax_onboard.__file__)"], env=env, capture_output=True, text=True, timeout=60)
@@ -97,11 +99,47 @@ def test_share_holds_vehicle_file_launch_files_and_layout(install):
 def test_installed_hindrax_is_on_path_and_finds_the_installed_vehicle_file(install, tmp_path):
     inst, env = install
     which = shutil.which("hindrax", path=env["PATH"])
-    assert which == str(VENV / "bin" / "hindrax")  # the topside's command (hindrax_tools), not the vehicle's build
+    assert which == str(inst / "bin" / "hindrax")  # the vehicle's command (hindrax_onboard), before the venv's
     r = subprocess.run(["hindrax", "config", "check"], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0, r.stdout + r.stderr
     assert r.stdout.startswith(f"{inst / 'share' / 'hindrax_drivers' / 'config' / 'hindrax.yaml'}: OK"), r.stdout
+
+
+#: runs the installed ``lib/hindrax_onboard/hindrax`` as the vehicle has it: the venv's editable hindrax_tools
+#: (topside) hidden from the entry-point lookup, and never imported
+_WITHOUT_TOOLS = """
+import importlib.metadata as md, runpy, sys
+real = md.entry_points
+md.entry_points = lambda **kw: [e for e in real(**kw) if e.dist.name != "hindrax_tools"]
+sys.argv = sys.argv[1:]
+try:
+    runpy.run_path(sys.argv[0], run_name="__main__")
+finally:
+    assert "hindrax_tools" not in sys.modules
+"""
+
+
+def test_the_vehicles_hindrax_lists_its_commands_and_answers_a_topside_one_in_a_line(install, tmp_path):
+    inst, env = install
+    script = str(inst / "lib" / "hindrax_onboard" / "hindrax")
+
+    def vehicle_hindrax(*args):
+        return subprocess.run([sys.executable, "-c", _WITHOUT_TOOLS, script, *args], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=60)
+
+    r = vehicle_hindrax("--help")
+    assert r.returncode == 0, r.stderr
+    listed = {line.split()[0] for line in r.stdout.split("COMMAND\n", 1)[1].split("options:")[0].splitlines()
+              if line.startswith("    ") and not line.startswith("     ")}
+    assert {"config", "health", "keys", "esc", "thruster-test", "arm", "bag", "decode"} <= listed, r.stdout
+    assert not {"ident", "run", "pool", "control", "allocate"} & listed, r.stdout
+    r = vehicle_hindrax("config", "check")
+    assert r.returncode == 0 and r.stdout.startswith(f"{inst / 'share' / 'hindrax_drivers' / 'config'}"), r.stderr
+    r = vehicle_hindrax("ident", "bag", "/var/lib/hindrax/runs/x")
+    assert r.returncode == 1 and r.stdout == ""
+    assert r.stderr == ("`hindrax ident bag` is not a vehicle command: topside commands run on the topside PC "
+                        "(hindrax_tools is not installed here)\n")
 
 
 def _start(inst, env, exe, *ros_args):

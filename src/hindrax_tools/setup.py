@@ -1,15 +1,8 @@
-"""ament_python package hindrax_tools (topside). Metadata: package.xml. Colcon also installs bin/hindrax (on PATH)."""
-import sys
-
+"""ament_python package hindrax_tools (topside). Metadata: package.xml. Its commands join hindrax_onboard's `hindrax`
+through the hindrax.commands entry point (hindrax_onboard/cli.py)."""
 from setuptools import find_packages, setup
 
 PACKAGE = "hindrax_tools"
-
-#: bin/hindrax only for what colcon runs: `setup.py install` (a plain build), `setup.py develop ... symlink_data`
-#: (--symlink-install; colcon links the data files it read from `setup.py --dry-run`, so that run lists it too). A pip
-#: install already puts the console script itself in the environment's bin/, which the wrapper must not replace.
-COLCON_COMMANDS = {"install", "symlink_data", "--dry-run"}
-BIN = [("bin", ["bin/hindrax"])] if COLCON_COMMANDS & set(sys.argv[1:]) else []
 
 setup(
     name=PACKAGE,
@@ -18,6 +11,6 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-    ] + BIN,
-    entry_points={"console_scripts": ["hindrax = hindrax_tools.cli:main"]},
+    ],
+    entry_points={"hindrax.commands": ["topside = hindrax_tools.cli:TOPSIDE"]},
 )

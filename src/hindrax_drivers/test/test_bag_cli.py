@@ -17,7 +17,7 @@ from hindrax_drivers.recording.info import bag_info
 from hindrax_drivers.recording.make_test_bags import STREAMS
 from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.testing import burst_qos, child_env, python_executable, ros_context, wait_until
-from hindrax_tools.cli import main as cli_main
+from hindrax_onboard.cli import main as cli_main
 
 DATA = Path(__file__).parent / "data"
 
@@ -60,7 +60,7 @@ def test_bag_info_bad_input_is_one_line(tmp_path, capsys):
 @pytest.mark.ros
 def test_bag_record_until_interrupted(tmp_path):
     bag = tmp_path / "cli_bag"
-    proc = subprocess.Popen([python_executable(), "-m", "hindrax_tools.cli", "bag", "record",
+    proc = subprocess.Popen([python_executable(), "-m", "hindrax_onboard.cli", "bag", "record",
                              "--topics", "/cli/a",
                              "--regex", "^/cli/re", "--out", str(bag)],
                             env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -103,7 +103,7 @@ def test_bag_record_until_interrupted(tmp_path):
 @pytest.mark.ros
 def test_bag_record_duration_stops_by_itself_and_finishes_the_bag(tmp_path):
     bag = tmp_path / "timed"
-    proc = subprocess.Popen([python_executable(), "-m", "hindrax_tools.cli", "bag", "record",
+    proc = subprocess.Popen([python_executable(), "-m", "hindrax_onboard.cli", "bag", "record",
                              "--all", "--out",
                              str(bag), "--duration", "0.5"], env=child_env(), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)

@@ -106,7 +106,7 @@ def test_loop_repeats_and_stop_ends_early():
 
 # ----------------------------------------------------------------------------------------------- processes
 def start_player(args: list[str]) -> subprocess.Popen:
-    return subprocess.Popen([python_executable(), "-m", "hindrax_tools.cli", "bag", "play",
+    return subprocess.Popen([python_executable(), "-m", "hindrax_onboard.cli", "bag", "play",
                              *args],
                             env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 

@@ -18,7 +18,7 @@ from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.recording.qos import default_profile
 from hindrax_drivers.recording.recover import RecoverError, is_complete, recover_bag, recover_file
 from hindrax_drivers.recording.writer import BagWriter, WriterOptions
-from hindrax_tools.cli import main as cli_main
+from hindrax_onboard.cli import main as cli_main
 
 T0 = 1_700_000_000_000_000_000
 N = 400

@@ -19,7 +19,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.gateway.interface import INTERFACE
 from hindrax_drivers.gateway.sros2_policy import INTERNAL_ACTIONS, INTERNAL_SERVICES, INTERNAL_TOPICS, NODE_SERVICES, \
     NODE_TOPICS, TOOLS_ENCLAVE, gateway_internal_enclave, launch_enclaves, topside_enclaves
-from hindrax_tools.commands.sros2 import write_policies
+from hindrax_onboard.commands.sros2 import write_policies
 
 SCHEMAS = Path(__file__).resolve().parents[3] / "third_party" / "sros2"
 XML_XSD_URL = "http://www.w3.org/2001/03/xml.xsd"
@@ -146,7 +146,7 @@ def test_the_internal_lists_cover_every_name_the_vehicle_nodes_use(tmp_path):
 
 
 def test_keystore_without_sros2_says_where_it_comes_from(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "hindrax_tools.cli", "sros2", "keystore",
+    r = subprocess.run([sys.executable, "-m", "hindrax_onboard.cli", "sros2", "keystore",
                         str(tmp_path / "ks")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 1

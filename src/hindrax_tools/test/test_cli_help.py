@@ -24,7 +24,7 @@ except SystemExit as exc:
     status = exc.code
 heavy = json.loads(sys.argv[2])
 loaded = sorted({m.split(".")[0] for m in sys.modules if m.split(".")[0] in heavy})
-commands = sorted(m for m in sys.modules if m.startswith("hindrax_tools.commands."))
+commands = sorted(m for m in sys.modules if m.startswith(("hindrax_tools.commands.", "hindrax_onboard.commands.")))
 sys.stderr.write(json.dumps({"status": status, "loaded": loaded, "commands": commands}) + "\\n")
 """
 
@@ -57,8 +57,8 @@ def test_help_of_one_command_imports_that_command_only():
     """``hindrax bag info --help`` shows its arguments, loading bag/info.py (and no ROS, no numpy)."""
     r = probe(["bag", "info", "--help"])
     assert r["status"] == 0 and "usage: hindrax bag info [-h] bag" in r["stdout"]
-    assert r["commands"] == ["hindrax_tools.commands.bag",
-                             "hindrax_tools.commands.bag.info"]
+    assert r["commands"] == ["hindrax_onboard.commands.bag",
+                             "hindrax_onboard.commands.bag.info"]
     assert r["loaded"] == []
 
 

@@ -14,7 +14,7 @@
   did what the prompt asked; exit 1 when nothing was awaited or no service answered.
 
 Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain
-(:mod:`hindrax_tools.commands.vehicle`): on the topside through the vehicle's gateway
+(:mod:`hindrax_onboard.commands.vehicle`): on the topside through the vehicle's gateway
 (``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
 The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise.
 """
@@ -27,7 +27,8 @@ import time
 from typing import Any, Callable
 
 from .common import CommandError, choices
-from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, wait_for, with_ros
+from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service, find_vehicle, wait_for,
+                                              with_ros)
 
 __all__ = ["add_arguments", "run", "format_estimate", "format_feedback", "format_status", "start_campaign",
            "call_continue"]
@@ -122,7 +123,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
     (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
     ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside); ``sign``:
-    signs the goal for the gateway (:meth:`~hindrax_tools.commands.vehicle.Target.sign`); ``status_topic``:
+    signs the goal for the gateway (:meth:`~hindrax_onboard.commands.vehicle.Target.sign`); ``status_topic``:
     the node's ManeuverStatus (``/<vehicle>/identification/status`` on the topside). Returns (success, message).
     Raises :class:`CommandError` when no server answers, the goal is rejected, or a campaign is already running
     (read on ``status_topic`` before the goal is sent: the goal is then not sent)."""

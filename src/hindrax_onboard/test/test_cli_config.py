@@ -51,7 +51,7 @@ def test_without_a_file_the_shipped_vehicle_file_is_checked():
 def test_every_command_reading_the_vehicle_file_reports_an_invalid_one_in_one_line(tmp_path, capsys):
     """One mechanism (commands/common.py load_vehicle): one line on stderr naming key, value, allowed range,
     exit 1, nothing on stdout, for each command that loads the vehicle file."""
-    from hindrax_tools import cli
+    from hindrax_onboard import cli
 
     doc = yaml.safe_load(default_config_path().read_text())
     doc["/**"]["ros__parameters"]["thrusters"]["t3"]["esc_channel"] = 17
@@ -89,7 +89,7 @@ def test_update_vehicle_file_keeps_every_comment_key_order_and_other_value(tmp_p
     import pytest
 
     from hindrax_drivers.config import ConfigError, load_config
-    from hindrax_tools.commands.common import update_vehicle_file
+    from hindrax_onboard.commands.common import update_vehicle_file
 
     conf = tmp_path / "hindrax.yaml"
     original = default_config_path().read_text()
@@ -128,7 +128,7 @@ def test_update_vehicle_file_keeps_every_comment_key_order_and_other_value(tmp_p
 def test_the_shipped_vehicle_file_survives_a_round_trip_byte_for_byte(tmp_path):
     """Setting a value to what it already is rewrites the file unchanged: the shipped file is in the layout the
     round-trip writer keeps (flow collections on one line), so an edit shows as the edited lines only."""
-    from hindrax_tools.commands.common import update_vehicle_file
+    from hindrax_onboard.commands.common import update_vehicle_file
 
     conf = tmp_path / "hindrax.yaml"
     conf.write_text(default_config_path().read_text())

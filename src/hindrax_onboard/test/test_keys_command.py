@@ -11,7 +11,7 @@ from hindrax_drivers.testing import child_env
 
 
 def keys(tmp_path, *args):
-    return subprocess.run([sys.executable, "-m", "hindrax_tools.cli", "keys", *args],
+    return subprocess.run([sys.executable, "-m", "hindrax_onboard.cli", "keys", *args],
                           capture_output=True, text=True,
                           env=child_env(HINDRAX_KEYS_DIR=str(tmp_path / "keys")), timeout=120)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_tools.cli import main as cli_main
+from hindrax_onboard.cli import main as cli_main
 
 DATA = Path(__file__).resolve().parents[2] / "hindrax_drivers" / "test" / "data" / "sensors_4s" / "sensors_4s_0.mcap"
 

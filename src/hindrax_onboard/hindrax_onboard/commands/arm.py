@@ -5,7 +5,7 @@ On the topside (the operator's PC on the vehicle's topside domain) the command c
 ``/<name>/arm`` or ``/<name>/disarm`` (hindrax_msgs/SignedTrigger, signed with the vehicle's key,
 docs/architecture.md §8.2); run on the vehicle itself it calls the ESC's ``esc/set_armed``
 (hindrax_msgs/SetArmed). The vehicle is the one named, or the only one on the domain
-(:mod:`hindrax_tools.commands.vehicle`). Prints one line, ``<name>: armed`` / ``<name>:
+(:mod:`hindrax_onboard.commands.vehicle`). Prints one line, ``<name>: armed`` / ``<name>:
 disarmed``, and exits 0; a refusal (the ESC's reason: not yet at neutral long enough, the
 supervisor tripped, the guard silent...) or no answer prints the reason on stderr and exits 1.
 
@@ -35,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def set_armed(node: Any, executor: Any, arm: bool, wanted: str | None, discovery_timeout_s: float,
               timeout_s: float) -> tuple[str, bool, str]:
     """Arm (``arm`` True) or disarm the vehicle found by
-    :func:`~hindrax_tools.commands.vehicle.find_vehicle`.
+    :func:`~hindrax_onboard.commands.vehicle.find_vehicle`.
     Returns (vehicle name, success, message). Raises :class:`CommandError` when no vehicle or no answer."""
     from hindrax_msgs.srv import SetArmed
 

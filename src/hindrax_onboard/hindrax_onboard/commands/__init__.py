@@ -1,0 +1,1 @@
+"""The ``hindrax`` subcommands: one module per command, each with ``add_arguments`` and ``run``."""
