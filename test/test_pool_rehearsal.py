@@ -3,7 +3,9 @@
 From the colcon install (test/conftest.py), as the README says to run it: the command starts the live pool and the
 installed pool_test launch on this worker's domain (the internal one) with the gateway on another (the topside one),
 and prints the two shells' environments. Then, as the README's pool day does: ``hindrax health`` in the vehicle's
-shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, the pool's operator attaches
+shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, a heave campaign starts and
+a second ``ident start`` is refused while it runs, ``hindrax disarm`` ends it and ``hindrax reset`` + ``hindrax arm``
+bring the vehicle back from the topside, the pool's operator attaches
 and removes the ballast through the command's input, and ``quit`` stops everything cleanly. Before, a newcomer had to
 piece this together from the live pool module, a hand-edited vehicle file and a test.
 """
@@ -97,6 +99,36 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             print(f"ident continue while disarmed answered in {time.monotonic() - t0:.1f} s")
             assert cont.returncode == 1 and cont.stdout.strip() == "not continued: no identification goal is running", \
                 cont
+            # issue 74 "done when", in part: a campaign, a second start and a continue during it, a disarm during
+            # it and the way back from the topside (hindrax reset, hindrax arm)
+            name = shells["topside"]["HINDRAX_VEHICLE"]
+            hindrax = lambda *a: subprocess.run(["hindrax", *a], env=topside_env, capture_output=True,  # noqa: E731
+                                                text=True, timeout=WAIT_S)
+            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm before the campaign")
+            campaign = subprocess.Popen(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"],
+                                        env=topside_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                        bufsize=1)
+            try:
+                lines = _Lines(campaign)
+                lines.until("campaign started: heave", WAIT_S)
+                second = hindrax("ident", "start", "--dofs", "heave", "--levels", "2")
+                assert second.returncode == 1 and "a campaign is already running" in second.stderr, second
+                t0 = time.monotonic()
+                cont = hindrax("ident", "continue")
+                print(f"ident continue during the campaign answered in {time.monotonic() - t0:.1f} s")
+                assert cont.returncode == 1 and cont.stdout.startswith("not continued: "), cont
+                assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
+                result = lines.until("result: ", WAIT_S)
+                assert result.startswith("result: not complete: ") and "disarmed" in result, result
+                assert campaign.wait(60) == 1
+            finally:
+                if campaign.poll() is None:
+                    campaign.send_signal(signal.SIGINT)
+                    campaign.wait(60)
+            reset = hindrax("reset")
+            assert reset.returncode == 0 and reset.stdout.startswith(f"{name}: "), reset
+            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm after the reset")
+            assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
             # issue 74.5: the README's read-out of the supervisor's status, without the ros2 CLI
             status_topic = f"/{shells['topside']['HINDRAX_VEHICLE']}/supervisor/status"
             echo = subprocess.run(["hindrax", "topic", "echo", status_topic, "--count", "1", "--timeout", str(WAIT_S)],
