@@ -5,7 +5,7 @@ installed pool_test launch on this worker's domain (the internal one) with the g
 and prints the two shells' environments. Then, as the README's pool day does: ``hindrax health`` in the vehicle's
 shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, a heave campaign starts and
 a second ``ident start`` is refused while it runs, ``hindrax disarm`` ends it and ``hindrax reset`` + ``hindrax arm``
-bring the vehicle back from the topside, the pool's operator attaches
+bring the vehicle back from the topside, ``control hold`` prints the altitude held, the pool's operator attaches
 and removes the ballast through the command's input, and ``quit`` stops everything cleanly. Before, a newcomer had to
 piece this together from the live pool module, a hand-edited vehicle file and a test.
 """
@@ -128,6 +128,12 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             reset = hindrax("reset")
             assert reset.returncode == 0 and reset.stdout.startswith(f"{name}: "), reset
             wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm after the reset")
+            # the README's hold (on the vehicle file's model here) and its printed result
+            hold = hindrax("control", "hold", "--altitude-m", "0.9", "--watch-s", "5")
+            print(hold.stdout.strip())
+            assert hold.returncode == 0 and f"{name}: over the last 5 s (" in hold.stdout and \
+                "altitude 0.900 m held: measured " in hold.stdout, hold
+            assert hindrax("control", "release").returncode == 0
             assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
             # issue 74.5: the README's read-out of the supervisor's status, without the ros2 CLI
             status_topic = f"/{shells['topside']['HINDRAX_VEHICLE']}/supervisor/status"
