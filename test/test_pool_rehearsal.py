@@ -3,7 +3,9 @@
 From the colcon install (test/conftest.py), as the README says to run it: the command starts the live pool and the
 installed pool_test launch on this worker's domain (the internal one) with the gateway on another (the topside one),
 and prints the two shells' environments. Then, as the README's pool day does: ``hindrax health`` in the vehicle's
-shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, the pool's operator attaches
+shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, a heave campaign starts and
+a second ``ident start`` is refused while it runs, ``hindrax disarm`` ends it and ``hindrax reset`` + ``hindrax arm``
+bring the vehicle back from the topside, ``control hold`` prints the altitude held, the pool's operator attaches
 and removes the ballast through the command's input, and ``quit`` stops everything cleanly. Before, a newcomer had to
 piece this together from the live pool module, a hand-edited vehicle file and a test.
 """
@@ -23,9 +25,10 @@ from domain_coordinator import domain_id
 
 from hindrax_drivers.testing import wait_until
 
-pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(2400)]
 
 WAIT_S = 180.0  # a loaded two-core machine starts ten Python processes
+CAMPAIGN_S = 900.0  # a heave campaign of two levels, or its bag's identification, on a loaded two-core machine
 
 
 def _exports(path: str) -> dict[str, str]:
@@ -97,6 +100,50 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             print(f"ident continue while disarmed answered in {time.monotonic() - t0:.1f} s")
             assert cont.returncode == 1 and cont.stdout.strip() == "not continued: no identification goal is running", \
                 cont
+            # issue 74 "done when", in part: a campaign, a second start and a continue during it, a disarm during
+            # it and the way back from the topside (hindrax reset, hindrax arm)
+            name = shells["topside"]["HINDRAX_VEHICLE"]
+            hindrax = lambda *a: subprocess.run(["hindrax", *a], env=topside_env, capture_output=True,  # noqa: E731
+                                                text=True, timeout=WAIT_S)
+            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm before the campaign")
+            campaign = subprocess.Popen(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"],
+                                        env=topside_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                        bufsize=1)
+            try:
+                lines = _Lines(campaign)
+                lines.until("campaign started: heave", WAIT_S)
+                second = hindrax("ident", "start", "--dofs", "heave", "--levels", "2")
+                assert second.returncode == 1 and "a campaign is already running" in second.stderr, second
+                t0 = time.monotonic()
+                cont = hindrax("ident", "continue")
+                print(f"ident continue during the campaign answered in {time.monotonic() - t0:.1f} s")
+                assert cont.returncode == 1 and cont.stdout.startswith("not continued: "), cont
+                assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
+                result = lines.until("result: ", WAIT_S)
+                assert result.startswith("result: not complete: ") and "disarmed" in result, result
+                assert campaign.wait(60) == 1
+            finally:
+                if campaign.poll() is None:
+                    campaign.send_signal(signal.SIGINT)
+                    campaign.wait(60)
+            reset = hindrax("reset")
+            assert reset.returncode == 0 and reset.stdout.startswith(f"{name}: "), reset
+            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm after the reset")
+            # the README's hold (on the vehicle file's model here) and its printed result
+            hold = hindrax("control", "hold", "--altitude-m", "0.9", "--watch-s", "5")
+            print(hold.stdout.strip())
+            assert hold.returncode == 0 and f"{name}: over the last 5 s (" in hold.stdout and \
+                "altitude 0.900 m held: measured " in hold.stdout, hold
+            assert hindrax("control", "release").returncode == 0
+            assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
+            # a whole heave campaign for the README's offline steps below
+            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm for the campaign")
+            t0 = time.monotonic()
+            full = subprocess.run(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"], env=topside_env,
+                                  capture_output=True, text=True, timeout=CAMPAIGN_S)
+            print(f"heave campaign: {time.monotonic() - t0:.0f} s; {full.stdout.strip().splitlines()[-1]}")
+            assert full.returncode == 0 and "result: complete" in full.stdout, full.stdout[-3000:] + full.stderr
+            assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
             # issue 74.5: the README's read-out of the supervisor's status, without the ros2 CLI
             status_topic = f"/{shells['topside']['HINDRAX_VEHICLE']}/supervisor/status"
             echo = subprocess.run(["hindrax", "topic", "echo", status_topic, "--count", "1", "--timeout", str(WAIT_S)],
@@ -126,5 +173,45 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     proc.wait()
+        # the README's day goes on: ident bag, control model, the second launch with the model, the hold
+        (bag,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]
+        t0 = time.monotonic()
+        fit = subprocess.run(["hindrax", "ident", "bag", str(bag)], env=vehicle_env, capture_output=True, text=True,
+                             timeout=CAMPAIGN_S)
+        print(f"ident bag: {time.monotonic() - t0:.0f} s")
+        assert fit.returncode == 0, fit.stdout[-3000:] + fit.stderr
+        (made,) = [p for p in (tmp_path / "runs").iterdir() if p.name.startswith(bag.name + "_ident_")]
+        model = made / "identification.yaml"
+        shown = subprocess.run(["hindrax", "control", "model", "--model", str(model)], env=vehicle_env,
+                               capture_output=True, text=True, timeout=WAIT_S)
+        assert shown.returncode == 0 and "heave" in shown.stdout, shown
+        day2 = subprocess.Popen(["hindrax", "pool", "rehearse", "--topside-domain", str(topside), "--dir",
+                                 str(tmp_path / "day2"), f"model_file:={model}"], env=install.env,
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                bufsize=1)
+        out2 = _Lines(day2)
+        try:
+            out2.until("rehearsal: ", 120)
+            topside_env = {**install.env, **_exports(str(tmp_path / "day2" / "topside.env"))}  # its own key
+            tries.clear()
+            wait_until(lambda: tries.append(hindrax("arm")) or tries[-1].returncode == 0, WAIT_S, None,
+                       "hindrax arm with the model")
+            hold = hindrax("control", "hold", "--altitude-m", "0.9", "--watch-s", "5")
+            print(hold.stdout.strip())
+            assert hold.returncode == 0 and "altitude 0.900 m held: measured " in hold.stdout, hold
+            assert hindrax("control", "release").returncode == 0
+            assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
+            day2.stdin.write("quit\n")
+            day2.stdin.flush()
+            out2.until("rehearsal: stopped", 120)
+            assert day2.wait(60) == 0
+        finally:
+            if day2.poll() is None:
+                day2.send_signal(signal.SIGINT)
+                try:
+                    day2.wait(90)
+                except subprocess.TimeoutExpired:
+                    day2.kill()
+                    day2.wait()
     assert any((tmp_path / "runs").iterdir()), "the launch's recorder wrote no bag"
     assert sorted(p.name for p in (tmp_path / "logs").iterdir()), os.listdir(tmp_path)

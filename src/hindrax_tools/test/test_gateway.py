@@ -131,20 +131,27 @@ class StandIns:
         from hindrax_msgs.action import RunIdentification
         from rclpy.action import ActionServer
 
+        # the identification node on a node and thread of its own: a test holds a campaign (campaign_gate)
+        self.ident = rclpy.create_node("identification_stand_in", context=ctx)
+        self.campaign_gate, self.campaign_entered = threading.Event(), threading.Event()
+        self.campaign_gate.set()
+
         def campaign(goal_handle):
             self.calls.append(("run_identification", list(goal_handle.request.dofs)))
+            self.campaign_entered.set()
+            self.campaign_gate.wait(60.0)
             goal_handle.publish_feedback(RunIdentification.Feedback(dof="surge", level_index=0, level_count=1,
                                                                     level_command=5.0, progress=0.5))
             goal_handle.succeed()
             return RunIdentification.Result(success=True, message="stand-in campaign done")
 
-        self.action = ActionServer(self.node, RunIdentification, "run_identification", campaign)
+        self.action = ActionServer(self.ident, RunIdentification, "run_identification", campaign)
         status = self.node.create_publisher(DiagnosticStatus, "supervisor/status", 10)
         self.node.create_timer(0.2, lambda: status.publish(DiagnosticStatus(level=DiagnosticStatus.OK,
                                                                            name="supervisor", message="ok")))
-        self.executors = [SingleThreadedExecutor(context=ctx), SingleThreadedExecutor(context=ctx)]
-        self.executors[0].add_node(self.node)
-        self.executors[1].add_node(self.esc)
+        self.executors = [SingleThreadedExecutor(context=ctx) for _ in range(3)]
+        for executor, node in zip(self.executors, (self.node, self.esc, self.ident)):
+            executor.add_node(node)
         self.threads = [threading.Thread(target=self._spin, args=(ex,), daemon=True) for ex in self.executors]
         for thread in self.threads:
             thread.start()
@@ -158,11 +165,12 @@ class StandIns:
 
     def close(self) -> None:
         self.arm_gate.set()
+        self.campaign_gate.set()
         for executor, thread in zip(self.executors, self.threads):
             executor.shutdown(timeout_sec=2.0)
             thread.join(timeout=5.0)
-        self.node.destroy_node()
-        self.esc.destroy_node()
+        for node in (self.node, self.esc, self.ident):
+            node.destroy_node()
 
 
 def vehicle_file(tmp: Path, name: str) -> Path:
@@ -385,6 +393,55 @@ def test_a_goal_or_setpoint_beyond_the_vehicle_is_refused_before_it_goes_inside(
     status = topside.status("alpha", lambda s: "depth_m = 1e+30" in counts(s)["last_refusal"] or
                             int(counts(s)["out_of_bounds"]) >= 2)
     assert int(counts(status)["out_of_bounds"]) >= 2, counts(status)  # the goal and the setpoint
+
+
+def test_a_second_goal_during_a_campaign_is_rejected_at_once_and_never_runs(pool, topside):
+    """Issue 74.4: the gateway's campaign relay blocked its executor for the whole campaign, so a second goal went
+    unanswered (the CLI: "no answer to the goal within 10 s"), sat in DDS and could start a second campaign once the
+    first ended; a cancel of the running goal was not answered either."""
+    import time
+
+    from hindrax_msgs.action import RunIdentification
+    from rclpy.action import ActionClient
+
+    alpha = pool["vehicles"]["alpha"]
+    signer = Signer(topside.key, "alpha")
+    goal = lambda *dofs: signer.sign_message("run_identification", RunIdentification.Goal(dofs=list(dofs)))  # noqa
+    spin = lambda: topside.executor.spin_once(timeout_sec=0.05)  # noqa: E731
+    client = ActionClient(topside.node, RunIdentification, "/alpha/run_identification")
+    wait_until(client.server_is_ready, WAIT_S, spin, "the gateway's run_identification")
+    before = len(alpha.calls)
+    alpha.campaign_entered.clear()
+    alpha.campaign_gate.clear()  # the stand-in campaign runs until the gate opens
+    try:
+        first = client.send_goal_async(goal("surge"))
+        wait_until(lambda: first.done() and alpha.campaign_entered.is_set(), WAIT_S, spin, "the first campaign runs")
+        assert first.result().accepted
+        t0 = time.monotonic()
+        second = client.send_goal_async(goal("sway"))
+        wait_until(second.done, 10.0, spin, "an answer to the second goal")
+        assert not second.result().accepted and time.monotonic() - t0 < 5.0
+        status = topside.status("alpha", lambda s: "already running" in counts(s)["last_refusal"])
+        assert counts(status)["last_refusal"] == "run_identification: refused: a campaign is already running"
+        r = hindrax(pool, "ident", "start", "--vehicle", "alpha", "--dofs", "sway", "--server-timeout", "30")
+        assert r.returncode == 1 and "goal rejected: a campaign is already running" in r.stderr, r.stdout + r.stderr
+        cancel = first.result().cancel_goal_async()
+        wait_until(cancel.done, 10.0, spin, "the gateway's answer to a cancel")
+        assert len(cancel.result().goals_canceling) == 1
+        assert alpha.calls[before:] == [("run_identification", ["surge"])]
+    finally:
+        alpha.campaign_gate.set()
+    result = first.result().get_result_async()
+    wait_until(result.done, WAIT_S, spin, "the first campaign's result")
+    # a goal sent after the first ended runs; had the second waited in DDS, it would have run before this one
+    third = client.send_goal_async(goal("heave"))
+    wait_until(third.done, WAIT_S, spin, "the third goal's answer")
+    assert third.result().accepted
+    result = third.result().get_result_async()
+    wait_until(result.done, WAIT_S, spin, "the third campaign's result")
+    assert result.result().result.message == "stand-in campaign done"
+    assert alpha.calls[before:] == [("run_identification", ["surge"]), ("run_identification", ["heave"])]
+    client.destroy()
 
 
 def test_an_arm_an_estop_overtook_is_refused_and_the_vehicle_disarmed(pool, topside):

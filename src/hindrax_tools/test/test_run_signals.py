@@ -13,7 +13,7 @@ import pytest
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.testing import child_process, own_domain_env, wait_until
 from hindrax_tools import cli
-from hindrax_tools.commands import decode
+from hindrax_onboard.commands import decode
 
 
 @pytest.mark.ros

@@ -23,11 +23,14 @@ answered after it is refused, and the vehicle disarmed again. A refusal is one l
 (``/<name>/gateway/status`` on the topside, ``/diagnostics`` inside; ERROR while another gateway has this name or
 another server answers one of its services).
 
-Threads: three topside nodes, each with its own SingleThreadedExecutor and thread: ``/<name>/gateway`` (``estop``,
+Threads: three topside nodes, each with its own executor and thread: ``/<name>/gateway`` (``estop``,
 telemetry, setpoints, status), ``/<name>/gateway_operator`` (the operator's services), ``/<name>/gateway_campaign``
-(the ``run_identification`` action): a slow arm or a running campaign never delays an e-stop. One thread reads the
-channel. A relay whose internal server is absent or silent (``call_timeout_s``) answers ``success: false`` with the
-reason; the action relay aborts its goal the same way, and a cancel of the topside goal cancels the internal one.
+(the ``run_identification`` action): a slow arm or a running campaign never delays an e-stop. The campaign's executor
+has :data:`CAMPAIGN_THREADS` threads: one relays the running campaign, another answers its cancel and rejects a new
+goal at once ("a campaign is already running"; a goal left unanswered would wait in DDS and could start a second
+campaign after the first). One thread reads the channel. A relay whose internal server is absent or silent
+(``call_timeout_s``) answers ``success: false`` with the reason; the action relay aborts its goal the same way, and
+a cancel of the topside goal cancels the internal one.
 
 Parameters: read by the internal side (:mod:`.internal`). Run alone: ``python -m hindrax_drivers.gateway.node
 --ros-args --params-file ros_ws/config/hindrax.yaml -p topside_domain_id:=7``.
@@ -51,8 +54,9 @@ from typing import Any, Callable, Sequence
 import rclpy
 from action_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rclpy.action import ActionServer, CancelResponse
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
@@ -70,6 +74,8 @@ __all__ = ["Gateway", "main"]
 
 #: how often a relayed campaign checks for a cancel of the topside goal, s
 CANCEL_POLL_S = 0.1
+#: threads of the campaign node's executor: the running campaign's relay, and its cancel or a new goal's rejection
+CAMPAIGN_THREADS = 2
 #: the gateway's status (and its check for another gateway with its name) period, s
 STATUS_PERIOD_S = 1.0
 #: an operator request starting less than this after the previous one ended may have waited behind it: an e-stop
@@ -117,12 +123,16 @@ class Gateway:
             self.front.create_subscription(interface_type(relay.type), relay.topside, self._topic_in(relay), reliable)
         (action,) = relays("action")
         self._action_type = interface_type(action.type)
+        self._campaign_running = threading.Lock()  # held while a campaign is relayed
+        self._closing = threading.Event()
         self._action_server = ActionServer(self.campaign, self._action_type, action.topside, self._run_goal,
+                                           callback_group=ReentrantCallbackGroup(), goal_callback=self._on_goal,
                                            cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self.front.create_timer(STATUS_PERIOD_S, self.publish_status)
         self.executors = []
         for node in self.nodes:
-            executor = SingleThreadedExecutor(context=context)
+            executor = (MultiThreadedExecutor(CAMPAIGN_THREADS, context=context) if node is self.campaign else
+                        SingleThreadedExecutor(context=context))
             executor.add_node(node)
             self.executors.append(executor)
         self._threads: list[threading.Thread] = []
@@ -246,9 +256,17 @@ class Gateway:
             return None, str(head.get("why", "failed"))
         return deserialize_message(payload, cls.Response), ""
 
+    def _on_goal(self, _goal: Any) -> GoalResponse:
+        """A new topside goal: rejected at once while a campaign is relayed (module docstring, "Threads")."""
+        if self._campaign_running.locked():
+            self._refuse("run_identification: refused: a campaign is already running")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
     def _run_goal(self, goal_handle: Any) -> Any:
         """The topside ``run_identification`` goal, checked, sent to the identification node; its feedback relayed,
-        a cancel passed on; ends as the internal goal ended."""
+        a cancel passed on; ends as the internal goal ended. Aborted when another one is relayed (two goals that
+        passed :meth:`_on_goal` together)."""
         result_type = self._action_type.Result
 
         def failed(why: str) -> Any:
@@ -256,6 +274,16 @@ class Gateway:
             return result_type(success=False, message=why if why.startswith("run_identification") else
                                f"run_identification: {why}")
 
+        if not self._campaign_running.acquire(blocking=False):
+            return failed(self._refuse("run_identification: refused: a campaign is already running"))
+        try:
+            return self._relay_goal(goal_handle, failed)
+        finally:
+            self._campaign_running.release()
+
+    def _relay_goal(self, goal_handle: Any, failed: Callable[[str], Any]) -> Any:
+        """:meth:`_run_goal`'s body, while it holds the campaign."""
+        result_type = self._action_type.Result
         why = self.verifier.check_message("run_identification", goal_handle.request)
         if why:
             return failed(self._refuse(why))
@@ -279,7 +307,7 @@ class Gateway:
                     if accepted and goal_handle.is_cancel_requested and not cancelling:
                         self.channel.send({"k": "cancel", "id": goal_id})
                         cancelling = True
-                    if not self.campaign.context.ok():
+                    if self._closing.is_set() or not self.campaign.context.ok():
                         return failed("the gateway is shutting down")
                     continue
                 kind = head.get("k")
@@ -341,6 +369,7 @@ class Gateway:
     def close(self) -> None:
         """Stop the topside executors, join their threads, destroy the topside nodes (idempotent)."""
         executors, self.executors = self.executors, []
+        self._closing.set()  # a relayed campaign ends its wait: the campaign's executor can stop
         for executor in executors:
             executor.shutdown(timeout_sec=1.0)
         for thread in self._threads:

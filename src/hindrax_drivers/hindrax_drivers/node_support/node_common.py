@@ -25,6 +25,7 @@ from ..config.node_parameters import declare_vehicle_parameters
 from ..process import ros_process
 from ..process.ros_process import RosProcess
 from ..process.scheduling import apply_realtime_priority, describe as describe_scheduling
+from .vehicle_graph import ForeignVehicleError, refuse_live_peer
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
@@ -449,7 +450,10 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     closed and destroyed in the reverse order (the last built first). executor: ``events``,
     ``single`` or None for the default (:mod:`hindrax_drivers.process.ros_process`: the EventsExecutor
     unless ``HINDRAX_EXECUTOR=single``). Returns the exit status: 0 on SIGINT/SIGTERM, 1 on an
-    invalid configuration (one line on stderr naming key, value, allowed range); an exception out
+    invalid configuration (one line on stderr naming key, value, allowed range) or when another vehicle's live ESC
+    or supervisor is on the domain of a process running one (a node class's ``START_CHECK``: one line ``refused:
+    ...``, :func:`~hindrax_drivers.node_support.vehicle_graph.refuse_live_peer`, before any node is built); an exception
+    out
     of any node's callback ends the whole process (every node's ``close()`` still runs). SIGINT
     shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
     (:class:`~hindrax_drivers.process.ros_process.RosProcess`, ``interrupt=False``). Before
@@ -467,9 +471,11 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     except ValueError as exc:
         print(f"invalid configuration: {exc}", file=sys.stderr)
         return 1
-    with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
-                    interrupt=False, shutdown_budget_s=ros_process.SHUTDOWN_BUDGET_S,
+    with RosProcess(args, errors={ConfigError: "invalid configuration", ForeignVehicleError: "refused"},
+                    executor=executor, interrupt=False, shutdown_budget_s=ros_process.SHUTDOWN_BUDGET_S,
                     exit_process=exit_process) as proc:
+        for kind in dict.fromkeys(k for f in factories if (k := getattr(f, "START_CHECK", None))):
+            refuse_live_peer(kind, "refusing to start a second vehicle on it (one ROS_DOMAIN_ID per vehicle)")
         nodes = [proc.own(factory()) for factory in factories]
         level, text = describe_scheduling(sched)
         if level and nodes:

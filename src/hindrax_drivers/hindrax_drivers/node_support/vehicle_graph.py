@@ -16,6 +16,8 @@ its ESC and supervisor into the vehicle's safety graph.
   every :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start`
   (from a bare look-out node before a tool creates anything: its heartbeat publishers, even for a
   second, would disarm the vehicle's ESC).
+- :func:`refuse_live_peer`: the same look-out for a vehicle's own ESC or supervisor process at its start: another
+  one's heartbeat arriving is a second vehicle on the domain (issue 74.2).
 """
 from __future__ import annotations
 
@@ -27,13 +29,17 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
 import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
+from hindrax_msgs.msg import Heartbeat
+
 from ..process.dds_transport import DISCOVERY_BOUND_S, UNNAMED_NODE, wait_discovered
+from .liveness import HEARTBEAT_LEASE_S, HEARTBEAT_NAMES, heartbeat_qos
 
 __all__ = ["CHECK_PERIOD_S", "DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError",
            "ForeignVehicleWatch", "GraphView", "foreign_vehicle_processes", "graph_view", "own_view",
-           "refuse_before_start", "split_vehicle_topics", "vehicle_topic_reason"]
+           "refuse_before_start", "refuse_live_peer", "split_vehicle_topics", "vehicle_topic_reason"]
 
 #: (pattern matched with ``re.search`` against the full topic name, why the topic speaks for the vehicle); the first
 #: match gives the reason
@@ -254,3 +260,42 @@ def _refuse_heartbeat_endpoint(lookout: Any, watch: ForeignVehicleWatch) -> None
             domain = lookout.context.get_domain_id()
             raise ForeignVehicleError(f"{watch.what}: ROS domain {domain} already has a publisher of {name} "
                                       f"({role}); {watch.consequence}")
+
+
+def refuse_live_peer(kind: str, consequence: str, window_s: float = DISCOVERY_WINDOW_S) -> None:
+    """At the start of a vehicle's ESC or supervisor process (``kind`` ``"esc"`` or ``"supervisor"``, a key of
+    :data:`~hindrax_drivers.node_support.liveness.HEARTBEAT_NAMES`), before its node exists: watch the default
+    context's domain from a bare look-out node with one subscription to that heartbeat, through the discovery window
+    and while discovery still changes (:func:`~hindrax_drivers.process.dds_transport.wait_discovered`), and for one
+    heartbeat lease
+    (:data:`~hindrax_drivers.node_support.liveness.HEARTBEAT_LEASE_S`) after a publisher of it appears. Raises
+    :class:`ForeignVehicleError` ``"<kind>: ROS domain N already has a live <kind> (<its node>, heartbeat on
+    <topic>); <consequence>"`` when a beat arrives: another vehicle's live one. A publisher whose beats do not arrive
+    (a killed predecessor, on the graph until its participant's lease ends) does not refuse: a respawn starts."""
+    topic = "/" + HEARTBEAT_NAMES[kind]
+    lookout = rclpy.create_node(f"{kind}_start_check", enable_rosout=False, start_parameter_services=False,
+                                use_global_arguments=False,
+                                parameter_overrides=[Parameter("start_type_description_service", value=False)])
+    executor = SingleThreadedExecutor(context=lookout.context)
+    executor.add_node(lookout)
+    beats: list = []
+    lookout.create_subscription(Heartbeat, topic, beats.append, heartbeat_qos())
+    first_seen: list[float] = []
+    try:
+        def ready(last: bool = False) -> bool:
+            if lookout.count_publishers(topic) and not first_seen:
+                first_seen.append(time.monotonic())
+            waited = bool(first_seen) and time.monotonic() - first_seen[0] >= HEARTBEAT_LEASE_S
+            if beats:  # its node's name follows its endpoint: named when it came within the lease, else "unnamed"
+                named = sorted({i.node_name for i in lookout.get_publishers_info_by_topic(topic)} - {UNNAMED_NODE})
+                if named or waited or last:
+                    raise ForeignVehicleError(f"{kind}: ROS domain {lookout.context.get_domain_id()} already has a "
+                                              f"live {kind} ({', '.join(named) or 'unnamed'}, heartbeat on {topic}); "
+                                              f"{consequence}")
+            return not first_seen or waited
+        wait_discovered(lambda: (len(lookout.get_node_names_and_namespaces()), lookout.count_publishers(topic)),
+                        ready, lambda: executor.spin_once(timeout_sec=0.05), bound_s=window_s)
+        ready(last=True)  # a beat in the last spin
+    finally:
+        executor.shutdown()
+        lookout.destroy_node()

@@ -102,6 +102,10 @@ class EscNode(VehicleNode):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default: opened by the
     worker, smbus2); ``chip_thread``: False runs the chip jobs in the executor thread (a lock-step simulation)."""
 
+    #: its process refuses to start beside another live ESC
+    #: (:func:`hindrax_drivers.node_support.vehicle_graph.refuse_live_peer`)
+    START_CHECK = "esc"
+
     def __init__(self, bus: Any = None, chip_thread: bool = True, **kwargs: Any):
         super().__init__("esc", **kwargs)
         cfg = self.cfg = load_node_config(self, ("thrusters", "esc", "lights"))

@@ -97,6 +97,10 @@ IMU_QUEUE_DEPTH = 50
 class SupervisorNode(VehicleNode):
     """The safety supervisor (see the module docstring)."""
 
+    #: its process refuses to start beside another live supervisor
+    #: (:func:`hindrax_drivers.node_support.vehicle_graph.refuse_live_peer`)
+    START_CHECK = "supervisor"
+
     def __init__(self, **kwargs: Any):
         super().__init__("supervisor", **kwargs)
         cfg = load_node_config(self, ("supervisor", "pool"))

@@ -165,8 +165,8 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
         raise CommandError(f"run_identification: {exc}; the node's status: hindrax ident status") from None
     if not handle.accepted:
         running()
-        raise CommandError("goal rejected: invalid, or the last campaign is still ending (see the identification "
-                           "node's log)")
+        raise CommandError("goal rejected: a campaign is already running or still ending, or the goal is invalid "
+                           "(hindrax ident status; the identification node's log)")
     what = "calibration only" if calibration_only else (', '.join(dofs) or 'all DOFs')
     cal = f" after calibration {', '.join(calibrate)}" if (calibrate and not calibration_only) else ""
     print_line(f"campaign started: {what}{cal}; Ctrl-C cancels")
