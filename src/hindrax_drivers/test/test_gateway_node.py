@@ -28,6 +28,7 @@ def _run_goal_against(frames):
     """Run the gateway's goal relay on a stand-in gateway whose internal side answers a goal with ``frames``
     ([(head, message or None)], ids filled in); returns (result, what the topside handle saw)."""
     import itertools
+    import threading
     from types import SimpleNamespace
 
     from rclpy.serialization import serialize_message
@@ -47,6 +48,9 @@ def _run_goal_against(frames):
                                            b"" if message is None else serialize_message(message)))
 
     gw.channel = SimpleNamespace(send=send)
+    gw._campaign_running = threading.Lock()  # one campaign at a time: held while the relay runs
+    gw._closing = threading.Event()  # the gateway is not shutting down
+    gw._relay_goal = lambda goal_handle, failed: Gateway._relay_goal(gw, goal_handle, failed)
     seen = []
     handle = SimpleNamespace(request=RunIdentification.Goal(dofs=["surge"]), is_cancel_requested=False,
                              publish_feedback=seen.append, succeed=lambda: seen.append("succeeded"),

@@ -371,7 +371,8 @@ def test_a_starved_control_tick_stops_the_goal_naming_the_starvation():
     from pathlib import Path
 
     from hindrax_onboard.identification.online.core import NEEDED_SENSORS
-    spec = importlib.util.spec_from_file_location("core_cases", Path(__file__).with_name("test_identification_core.py"))
+    spec = importlib.util.spec_from_file_location(
+        "core_cases", Path(__file__).parents[2] / "hindrax_onboard" / "test" / "test_identification_core.py")
     cases = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(cases)
     from hindrax_onboard.identification.online.node import IdentificationNode
