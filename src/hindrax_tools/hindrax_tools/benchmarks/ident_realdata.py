@@ -93,6 +93,23 @@ DATASETS: tuple[DataSet, ...] = (
              "jitter": 0.0}, seed=4800, train=4, holdout=4, runs=_RUNS,
             note="open-loop held levels, 60 s runs; delay 0.25 s; per-thruster thrust 0.7-1.3, reverse 0.75; gyro "
                  "noise 0.03 rad/s"),
+    # vehicle B as its data show it (issue 72): 22 open-loop runs of 60 s, 11 fitted; idle stretches; levels up to
+    # the saturation; a DVL at 4 Hz losing a fifth of its reports; a gyro with bias and noise; the current (and so
+    # the tether's drag) changing within a run
+    DataSet("realdata_vehicle_b", {}, {**_TRUTH, "thrusters": {"time_constant_s": 0.05, "deadband_us": 45.0},
+                                       "disturbances": {**_TRUTH["disturbances"], "thrust": {
+                                           "per_thruster": [1.25, 0.8, 1.2, 0.75, 1.3, 0.85, 0.7, 1.15],
+                                           "negative": 0.75},
+                                           "current": {"velocity_ned_m_s": [0.02, 0.01, 0.0],
+                                                       "amplitude_ned_m_s": [0.04, 0.03, 0.0], "period_s": 50.0},
+                                           "imu": {"gyro_bias_walk_rad_s_sqrt_s": 0.002}},
+                                       "simulation": {"sensors": {
+                                           "icm20948_gyro": {"noise_std_rad_s": 0.03, "bias_rad_s": 0.01},
+                                           "dvl75": {"rate_hz": 4.0, "dropout_probability": 0.2}}}},
+            {"actuation": "thrusters", "sensors": "dvl", "pilot": "openloop", "duration_s": 60.0, "delay_s": 0.25,
+             "jitter": 0.0, "level_top": 1.0, "idle_fraction": 0.35}, seed=5000, train=11, holdout=11, runs=_RUNS,
+            note="as realdata_openloop, 22 runs (11 fitted); idle stretches 4-12 s; levels up to the saturation; "
+                 "DVL 4 Hz with 20 % dropouts; gyro bias 0.01 rad/s and its walk; current changing within a run"),
 )
 
 
