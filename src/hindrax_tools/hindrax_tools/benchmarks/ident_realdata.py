@@ -1,13 +1,15 @@
 """Real-like data to tune ``hindrax ident fit`` on, and the figures it gives: piloted and closed-loop
 virtual-pool bags with what real pool days have and the vehicle file does not.
 
-Three data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_sim.piloted_bag`, the
+Four data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_sim.piloted_bag`, the
 command through the thrust allocation to the simulated thrusters and sensors), all on Hindrax:
 
 * ``realdata_piloted``: the setpoint pilot; ``realdata_closedloop``: the survey autopilot (integral action against
   the tether and the current, little excitation); ``realdata_openloop``: few long open-loop runs (held levels), a
   0.25 s transport delay, per-thruster thrust 0.7-1.3 of the curve and a gyro ten times noisier (issue 72's
-  vehicle B, four bags fitted and four predicted);
+  vehicle B, four bags fitted and four predicted); ``realdata_vehicle_b``: as vehicle B's data show it, 22 runs of
+  60 s (11 fitted) with idle stretches, levels up to the saturation, a DVL at 4 Hz losing a fifth of its reports, a
+  gyro bias and the current changing within a run;
 * tether drift: a tether whose pull changes from run to run (anchor and tension) under a current that drifts over
   four minutes; per-run bias: each bag gets its own tether lay and current offset (``DataSet.runs``), so the force
   that moves a vehicle at rest differs between runs;
