@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_config_argument
+from hindrax_onboard.commands.common import add_config_argument
 
 #: printed on stderr by ``hindrax bringup`` without ``--sim``
 VEHICLE_NOTICE = ("bringup: this is the single-process graph of the virtual pool and the tests; the vehicle runs the "

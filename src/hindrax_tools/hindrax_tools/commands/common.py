@@ -1,16 +1,12 @@
-"""What the topside commands share beyond the vehicle's helpers (:mod:`hindrax_onboard.commands.common`, re-exported
-here): result folders and a wall-clock progress printer."""
+"""What the topside commands share beyond the vehicle's helpers (:mod:`hindrax_onboard.commands.common`): result
+folders and a wall-clock progress printer."""
 from __future__ import annotations
 
 import contextlib
 import time
 from pathlib import Path
 
-from hindrax_onboard.commands.common import (CommandError, add_config_argument, choices, load_vehicle,
-                                             update_vehicle_file, yaml_float)
-
-__all__ = ["CommandError", "WallProgress", "add_config_argument", "choices", "load_vehicle",
-           "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
+from hindrax_onboard.commands.common import CommandError
 
 
 def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:

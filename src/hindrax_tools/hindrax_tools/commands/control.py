@@ -25,7 +25,8 @@ import math
 from pathlib import Path
 
 from .. import results_doc
-from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
+from hindrax_onboard.commands.common import CommandError, add_config_argument, choices, load_vehicle
+from .common import WallProgress
 
 __all__ = ["add_arguments", "run"]
 

@@ -21,7 +21,7 @@ import math
 import time
 from typing import Any
 
-from .common import CommandError
+from hindrax_onboard.commands.common import CommandError
 from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service, find_vehicle, wait_for,
                                               with_ros)
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from hindrax_drivers.config import ConfigError
 
-from .common import CommandError, update_vehicle_file
+from hindrax_onboard.commands.common import CommandError, update_vehicle_file
 
 __all__ = ["add_arguments", "run", "read_two_columns"]
 

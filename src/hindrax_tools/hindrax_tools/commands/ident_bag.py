@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError, add_config_argument, load_vehicle, remove_if_empty, result_dir
+from hindrax_onboard.commands.common import CommandError, add_config_argument, load_vehicle
+from .common import remove_if_empty, result_dir
 
 __all__ = ["add_arguments", "run", "identify_campaign_bag", "result_dir_for_bag"]
 

@@ -16,7 +16,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError, load_vehicle, remove_if_empty
+from hindrax_onboard.commands.common import CommandError, load_vehicle
+from .common import remove_if_empty
 
 __all__ = ["add_arguments", "run", "format_table"]
 

@@ -26,7 +26,7 @@ import signal
 import time
 from typing import Any, Callable
 
-from .common import CommandError, choices
+from hindrax_onboard.commands.common import CommandError, choices
 from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service, find_vehicle, wait_for,
                                               with_ros)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError, load_vehicle
+from hindrax_onboard.commands.common import CommandError, load_vehicle
 from .ident_fit import _num
 
 __all__ = ["add_arguments", "run"]

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from .common import CommandError, load_vehicle
+from hindrax_onboard.commands.common import CommandError, load_vehicle
 
 __all__ = ["add_arguments", "run"]
 

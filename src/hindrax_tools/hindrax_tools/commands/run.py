@@ -26,8 +26,8 @@ import os
 from pathlib import Path
 
 from .. import results_doc
-from .common import (CommandError, WallProgress, add_config_argument, choices, load_vehicle,
-                     remove_if_empty, result_dir)
+from hindrax_onboard.commands.common import CommandError, add_config_argument, choices, load_vehicle
+from .common import WallProgress, remove_if_empty, result_dir
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
 

@@ -33,7 +33,8 @@ from pathlib import Path
 from typing import Sequence
 
 from .. import results_doc
-from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
+from hindrax_onboard.commands.common import CommandError, add_config_argument, choices, load_vehicle
+from .common import WallProgress
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
            "format_excitation_table"]
