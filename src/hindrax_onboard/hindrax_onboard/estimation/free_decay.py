@@ -469,9 +469,8 @@ DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
 class QuadraticDecayFit:
     """Result of :func:`fit_quadratic_free_decay`.
 
-    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV]
-    eq. 12 with the restoring term of [Hindrax-AM] eq. 1 (a spring of stiffness k, or a
-    hydrostatic restoring moment C for roll/pitch):
+    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV] eq. 12 with the restoring term
+    of [Hindrax-AM] eq. 1 (a spring of stiffness k, or a hydrostatic restoring moment C for roll/pitch):
 
         M x'' + b1 x' + b2 |x'| x' + k x = 0,   M = m_b + m_ad   (rigid + added inertia)
 
@@ -687,11 +686,10 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
 def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) -> dict:
     """The keys ``hindrax ident free-decay --model quadratic`` adds to the linear analysis' JSON.
 
-    Fits :func:`fit_quadratic_free_decay` to the acceleration from the release found by the linear
-    analysis ``res`` (its ``release_index``), started from its added mass (eq. 5) and damping (eq. 6).
-    Returns ``linear_damping_n_s_per_m``, ``quadratic_damping_n_s2_per_m2``, the ODE fit's
-    ``added_mass_ode_kg`` (rigid mass ``res.mass_kg`` subtracted), each with its ``_std``, and
-    ``ode_rms_residual_m_s2``.
+    Fits :func:`fit_quadratic_free_decay` to the acceleration from the release found by the linear analysis ``res``
+    (its ``release_index``), started from its added mass (eq. 5) and damping (eq. 6). Returns
+    ``linear_damping_n_s_per_m``, ``quadratic_damping_n_s2_per_m2``, the ODE fit's ``added_mass_ode_kg`` (rigid mass
+    ``res.mass_kg`` subtracted), each with its ``_std``, and ``ode_rms_residual_m_s2``.
     """
     t = np.asarray(t_s, dtype=float)[res.release_index:]
     a = np.asarray(acceleration_m_s2, dtype=float)[res.release_index:]
@@ -713,10 +711,9 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
 class IncliningResult:
     """Result of :func:`restoring_from_inclining`.
 
-    ``restoring_n_m_per_rad`` (C, N m/rad) and its ``_std`` (NaN with only two points); ``offset_n_m``
-    (the moment that holds the vehicle's own static list, from the intercept); ``bg_m`` (C / (m g), when
-    the vehicle mass was given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass);
-    ``n_points``; ``residual_rms_n_m``.
+    ``restoring_n_m_per_rad`` (C, N m/rad) and its ``_std`` (NaN with only two points); ``offset_n_m`` (the moment
+    that holds the vehicle's own static list, from the intercept); ``bg_m`` (C / (m g), when the vehicle mass was
+    given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass); ``n_points``; ``residual_rms_n_m``.
     """
 
     restoring_n_m_per_rad: float

@@ -256,9 +256,8 @@ class PriorInputs:
 def empirical_priors(g: Geometry, rigid: PriorInputs = PriorInputs()) -> dict[str, Any]:
     """The three 6-element prior vectors with their inputs, as one JSON-friendly dict.
 
-    Returns ``{"added_mass": [6], "linear_damping": [6] (None where it cannot be computed),
-    "quadratic_damping": [6], "units": UNITS, "inputs": {...}, "notes": [...]}``.
-    Raises :class:`EstimationError` on invalid inputs.
+    Returns ``{"added_mass": [6], "linear_damping": [6] (None where it cannot be computed), "quadratic_damping": [6],
+    "units": UNITS, "inputs": {...}, "notes": [...]}``. Raises :class:`EstimationError` on invalid inputs.
     """
     notes: list = []
     A = added_mass_priors(g, notes)

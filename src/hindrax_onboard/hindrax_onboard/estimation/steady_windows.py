@@ -24,11 +24,10 @@ Algorithm (all thresholds are arguments; defaults in brackets):
    the duration test is repeated after trimming. So every sample at a window's edges is within
    ``EDGE_FACTOR * max_std`` of the window mean.
 
-Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise
-(DVL ~ 0.01 m/s, filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient
-accelerations (force / inertia). [Hindrax-Drag]'s heave runs never became steady for lack of depth
-(section 5); expect no windows there and use the transient fit (the fit core,
-:mod:`..identification.fit.fit_core`).
+Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise (DVL ~ 0.01 m/s,
+filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient accelerations (force / inertia).
+[Hindrax-Drag]'s heave runs never became steady for lack of depth (section 5); expect no windows there and use the
+transient fit (the fit core, :mod:`..identification.fit.fit_core`).
 """
 
 from __future__ import annotations

@@ -135,8 +135,7 @@ class CubicFit:
         return float(np.sqrt(np.sum(np.asarray(self.predict_std(P)) ** 2) / f2))
 
     def to_dict(self) -> dict:
-        """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us,
-        pulse_width_max_us}."""
+        """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us, pulse_width_max_us}."""
         keys = ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std")
         return {**{k: float(getattr(self, k)) for k in keys}, "n": int(self.n),
                 "residual_std_n": float(self.residual_std_n),

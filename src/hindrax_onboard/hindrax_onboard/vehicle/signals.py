@@ -101,8 +101,7 @@ def sample_from_range(msg) -> tuple[str, Any]:
 
 
 def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[float]) -> np.ndarray:
-    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote
-    (``thrusters/pulse_width``); (k, n) of (k, n).
+    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote (``thrusters/pulse_width``); (k, n) of (k, n).
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation
     (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve

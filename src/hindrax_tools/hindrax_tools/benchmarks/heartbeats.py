@@ -110,9 +110,8 @@ def cycle_rows(n: int) -> list[dict]:
 
 
 def _cpu_rows(what: str, per: dict[str, list[float]], n: int, note: str) -> list[dict]:
-    """Rows ``heartbeat_<what>_cpu_us_<kind>`` (the median of the blocks ``per[kind]``, us per
-    beat; ``note`` with ``{k}`` the kind, ``{blocks}`` their number) and
-    ``heartbeat_<what>_cpu_ratio``."""
+    """Rows ``heartbeat_<what>_cpu_us_<kind>`` (the median of the blocks ``per[kind]``, us per beat; ``note`` with
+    ``{k}`` the kind, ``{blocks}`` their number) and ``heartbeat_<what>_cpu_ratio``."""
     med = {k: statistics.median(v) for k, v in per.items()}
     name = f"heartbeat_{what}_cpu"
     return [*({"name": f"{name}_us_{k}", "value": med[k], "unit": "us", "n": n * BLOCKS,

@@ -1,12 +1,10 @@
-"""One node process of the stack benchmark's launch layout: a console script's function, as
-installed.
+"""One node process of the stack benchmark's launch layout: a console script's function, as installed.
 
-``python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs
-``MODULE.FUNCTION()`` (default ``main``, e.g. ``hindrax_drivers.layout.composition:i2c_sensors_main``) as
-the installed console script does. The I2C drivers reach the virtual pool's emulated bus through
-their own ``open_smbus`` (:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so
-nothing of the node is replaced. This module imports no simulator, emulator or benchmark code, so a
-benchmarked process holds the modules and memory the vehicle's holds
+``python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs ``MODULE.FUNCTION()``
+(default ``main``, e.g. ``hindrax_drivers.layout.composition:i2c_sensors_main``) as the installed console script
+does. The I2C drivers reach the virtual pool's emulated bus through their own ``open_smbus``
+(:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so nothing of the node is replaced. This module imports no
+simulator, emulator or benchmark code, so a benchmarked process holds the modules and memory the vehicle's holds
 (``test_bench_launch_layout.py`` checks it).
 
 ``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`): cProfile, ``DIR/<module>.prof`` written on

@@ -106,10 +106,9 @@ def hardware_priority() -> Iterator[str]:
 
 
 class _VehicleLayout(_Layout):
-    """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
-    is refused, as ``vehicle.launch.xml`` starts them
-    (:func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`), each in a session of its own as a
-    launched process is."""
+    """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that is
+    refused, as ``vehicle.launch.xml`` starts them (:func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`),
+    each in a session of its own as a launched process is."""
 
     new_session = True
 
@@ -193,9 +192,8 @@ class _Watch:
         self.armed, self.disarms, self.active = True, 0, True
 
     def rows(self, prefix: str, what: str, target_ms: float, n: int | None = None) -> list[dict]:
-        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials),
-        ``<prefix>heartbeat_gap_max_ms`` (target ``target_ms``),
-        ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
+        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials), ``<prefix>heartbeat_gap_max_ms``
+        (target ``target_ms``), ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
         beats = sum(len(v) for v in self.arrivals.values())
         rows = [{"name": prefix + "disarms", "value": self.disarms, "unit": "disarms", "target": 0,
                  **({} if n is None else {"n": n}), "note": what}]
@@ -248,10 +246,9 @@ def churn_rows(quick: bool = False) -> list[dict]:
 
 @contextmanager
 def cpu_bound_neighbours(n: int = NEIGHBOURS) -> Iterator[list[subprocess.Popen]]:
-    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of
-    its own (another service or a terminal on the Pi), for the block; killed on the way out. Raises
-    RuntimeError if one inherited this process's real-time priority (it would starve the vehicle's
-    processes, not stand beside them)."""
+    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of its own (another
+    service or a terminal on the Pi), for the block; killed on the way out. Raises RuntimeError if one inherited this
+    process's real-time priority (it would starve the vehicle's processes, not stand beside them)."""
     with ExitStack() as stack:
         neighbours = [stack.enter_context(child_process(
             [python_executable(), "-c", "while True: pass"], start_new_session=True,

@@ -215,8 +215,7 @@ def _close(r) -> None:
 
 
 def _ms_row(name: str, seconds, **extra) -> dict:
-    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus
-    ``extra`` keys."""
+    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus ``extra`` keys."""
     ms = np.asarray(seconds, dtype=float) * 1e3
     return {"name": name, "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
             "n": int(ms.size), **extra}
@@ -372,9 +371,8 @@ WATCHDOG_TIMEOUT_S = 0.33
 
 
 class _Hardware:
-    """The emulated PCA9685 with /OE and the hardware watchdog on it (docs/watchdog.md), served to the node
-    processes; records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer
-    holds it)."""
+    """The emulated PCA9685 with /OE and the hardware watchdog on it (docs/watchdog.md), served to the node processes;
+    records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer holds it)."""
 
     def __init__(self, sock: str, feed: bool = True) -> None:
         hw = self

@@ -63,10 +63,9 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
 @contextmanager
 def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
     """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
-    (:func:`~hindrax_tools.benchmarks.safety.running_layout`), on its internal domain and the
-    topside domain ``topside`` (LOCALHOST, the shipped file's range), with operator keys from
-    ``keys_dir`` (none: every operator request refused); yields its process once its internal
-    participant has sockets, and stops it on the way out."""
+    (:func:`~hindrax_tools.benchmarks.safety.running_layout`), on its internal domain and the topside domain
+    ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
+    request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
     env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
     argv = [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config,
             "-p", f"topside_domain_id:={topside}"]

@@ -45,9 +45,8 @@ PING_INTERVAL_S = 0.025
 
 
 class _TimedEmulator:
-    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``;
-    :attr:`written` maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its
-    bytes."""
+    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``; :attr:`written`
+    maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its bytes."""
 
     def __init__(self, make, truth, modulus: int) -> None:
         self.written: dict[int, int] = {}

@@ -1,30 +1,27 @@
-"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process
-and in the launch layout, messages per second per topic, and the cost of a skeleton sending the same
-topics at the same rates.
+"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process and in the launch
+layout, messages per second per topic, and the cost of a skeleton sending the same topics at the same rates.
 
-CPU is process (or thread) CPU time over wall time. It still grows with the load of a shared machine
-(by 20-40 % between a quiet and a loaded run here), so compare layouts in runs close in time, and
-repeat.
+CPU is process (or thread) CPU time over wall time. It still grows with the load of a shared machine (by 20-40 %
+between a quiet and a loaded run here), so compare layouts in runs close in time, and repeat.
 
-The graph: the sensor drivers, the ESC, the allocation, the identification node, the supervisor and
-the recorder (every topic except ``sim/*`` and ``/clock``), devices emulated and excluded from the
-stack's CPU. Two phases of ``duration_s`` each: ``running`` (the identification node runs a surge
-goal) and ``idle`` (goal cancelled, a 50 Hz ``wrench`` stream from the benchmark).
+The graph: the sensor drivers, the ESC, the allocation, the identification node, the supervisor and the recorder
+(every topic except ``sim/*`` and ``/clock``), devices emulated and excluded from the stack's CPU. Two phases of
+``duration_s`` each: ``running`` (the identification node runs a surge goal) and ``idle`` (goal cancelled, a 50 Hz
+``wrench`` stream from the benchmark).
 
-``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`,
-``drive_clocks``) in one executor; per node the CPU of its callbacks less the emulators' time in
-them, plus its own threads; the rest is ``executor+dds``. ``launch``: the processes of
-:data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the virtual pool in another process;
-CPU per process from ``/proc/<pid>/stat``; the running phase in :data:`RUNNING_WINDOWS` windows,
-each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the launch layout's
-bag.
+``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`, ``drive_clocks``) in one
+executor; per node the CPU of its callbacks less the emulators' time in them, plus its own threads; the rest is
+``executor+dds``. ``launch``: the processes of :data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the
+virtual pool in another process; CPU per process from ``/proc/<pid>/stat``; the running phase in
+:data:`RUNNING_WINDOWS` windows, each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the
+launch layout's bag.
 
-Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at
-the reference machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`.
-Wake-ups per process and the DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process
-costs. ``--baseline GIT_REF`` measures that commit's launch layout first (:func:`baseline_launch`,
-rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``): the launch layout alone in a Pi-sized CPU rig of F
-cores here (:func:`rig_rows`, :mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
+Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at the reference
+machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`. Wake-ups per process and the
+DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process costs. ``--baseline GIT_REF`` measures that
+commit's launch layout first (:func:`baseline_launch`, rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``):
+the launch layout alone in a Pi-sized CPU rig of F cores here (:func:`rig_rows`,
+:mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
 
 Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
 with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
@@ -145,9 +142,8 @@ def _wrench_msg(stamp: Any) -> Any:
 
 
 def _wrench_stream(probe: Any) -> Callable[[bool], None]:
-    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on (the returned
-    ``switch(on)``): its timer runs only while it is on, so the bench wakes no 50 Hz timer in the
-    running phase."""
+    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on (the returned ``switch(on)``): its timer
+    runs only while it is on, so the bench wakes no 50 Hz timer in the running phase."""
     wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
     timer = probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
         _wrench_msg(probe.get_clock().now().to_msg())), autostart=False)
@@ -157,13 +153,12 @@ def _wrench_stream(probe: Any) -> Callable[[bool], None]:
 def _running_then_idle(probe: Any, action: Any, switch: Callable[[bool], None], window: Any,
                        spin: Any, spin_idle: Any, what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
-    :class:`~hindrax_drivers.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s
-    of warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
+    :class:`~hindrax_drivers.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3
+    s of warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
-    switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one
-    executor spin while running / while idle. Raises
-    RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
-    have measured a running campaign)."""
+    switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one executor spin
+    while running / while idle. Raises RuntimeError when the goal is rejected, or when it ended before the running
+    window did (the window would not have measured a running campaign)."""
     goals = GoalSender(probe, action, "run_identification")
     switch(False)
     handle = goals.send(RunIdentification.Goal(dofs=["surge"], levels_per_dof=3), spin, 30)
@@ -943,11 +938,10 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
         duration_s: float | None = None, baselines: bool = True,
         baseline: str | None = None) -> list[dict]:
-    """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
-    windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
-    s; baselines: bare rclpy and the launch's skeleton; baseline: a git ref whose
-    launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
-    the baseline's (``..._vs_baseline``)."""
+    """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running windows of
+    the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length, s; baselines:
+    bare rclpy and the launch's skeleton; baseline: a git ref whose launch layout is measured first in the same run
+    (:func:`baseline_launch`), for the rows of today's cost over the baseline's (``..._vs_baseline``)."""
     # windows: 10 s per phase and layout (the launch layout's running phase: 3 of them, medians), 8 s per baseline
     duration_s = duration_s or (8.0 if quick else 10.0)
     windows = windows or (1 if quick else RUNNING_WINDOWS)

@@ -10,10 +10,9 @@ from hindrax_onboard.commands.common import CommandError
 
 
 def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:
-    """The folder of one result (:mod:`hindrax_tools.output_dirs`): ``out`` when given (new or
-    empty), else a new ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was
-    taken). Raises CommandError: ``out`` unusable, or ``unwritable`` (its ``{why}`` filled in) when
-    ``root`` is not writable."""
+    """The folder of one result (:mod:`hindrax_tools.output_dirs`): ``out`` when given (new or empty), else a new
+    ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was taken). Raises CommandError: ``out``
+    unusable, or ``unwritable`` (its ``{why}`` filled in) when ``root`` is not writable."""
     from ..output_dirs import OutputDirError, explicit_result_dir, new_result_dir
 
     try:

@@ -1,22 +1,20 @@
 """``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--in-process]``: the main job.
 
-Default: the campaign through the whole ROS graph in one process
-(:mod:`hindrax_sim.graph.graph_campaign`: virtual pool, device emulators, drivers, ESC, allocation,
-identification node and recorder; armed through ``esc/set_armed``, one ``run_identification``
-goal, disarmed, then identified from the bag), in lock-step with the identification node's control
-tick, so CPU load slows the run but does not change it.
+Default: the campaign through the whole ROS graph in one process (:mod:`hindrax_sim.graph.graph_campaign`: virtual
+pool, device emulators, drivers, ESC, allocation, identification node and recorder; armed through ``esc/set_armed``,
+one ``run_identification`` goal, disarmed, then identified from the bag), in lock-step with the identification node's
+control tick, so CPU load slows the run but does not change it.
 
-``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the
-simulator (:mod:`hindrax_sim.campaign`: no drivers, no ROS graph, no bag), about four times
-faster; for quick studies of the method.
+``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
+(:mod:`hindrax_sim.campaign`: no drivers, no ROS graph, no bag), about four times faster; for quick studies of the
+method.
 
-Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
-``--in-process``), with a ``latest`` link beside it moved once the run has completed
-(:mod:`hindrax_tools.output_dirs`), or ``--out``, which must be new or empty. It holds
-``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
-``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF
-and parameter the identified value with its std, the configured value ("truth" in simulation) and
-the relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
+Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for ``--in-process``),
+with a ``latest`` link beside it moved once the run has completed (:mod:`hindrax_tools.output_dirs`), or ``--out``,
+which must be new or empty. It holds ``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
+``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF and parameter the
+identified value with its std, the configured value ("truth" in simulation) and the relative error. Exit 0, or 1 when
+the campaign aborted or produced no estimate.
 """
 from __future__ import annotations
 
@@ -120,8 +118,7 @@ def format_summary(identifications: dict) -> str:
 
 
 def summary_markdown(identifications: dict) -> str:
-    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth,
-    error, verdict)."""
+    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
     header = ["DOF", "parameter", "identified", "std", "unit", "configured (truth)", "rel. error",
               "verdict"]
     return results_doc.markdown_table(header, [

@@ -8,17 +8,16 @@ running on the scenario's truth, every estimator on the vehicle file), the offli
 error, z = (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
 
 Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
-table) and prints the table. A scenario *meets the target* when every parameter's interval covers the
-truth in at least 90 % of the seeds or the parameter is suspect in every case where it does not; the
-no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
+table) and prints the table. A scenario *meets the target* when every parameter's interval covers the truth in at
+least 90 % of the seeds or the parameter is suspect in every case where it does not; the no-disturbance scenario also
+needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
 
 ``--excitation ladder,multisine,prbs`` runs every case once per force input
-(:mod:`hindrax_onboard.identification.online.excitation`); the label becomes
-``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
-(:func:`format_excitation_table`). ``--calibrate thrust`` (or other reference steps) runs them
-before the manoeuvres of every case and identifies as ``hindrax ident campaign --calibrate`` does
-(:func:`run_case`); the label gains ``[calibrate <steps>]``. Without it the cases are identified on
-the curve's force.
+(:mod:`hindrax_onboard.identification.online.excitation`); the label becomes ``<scenario> [<excitation>]`` for the
+other excitations, and a second table compares them (:func:`format_excitation_table`). ``--calibrate thrust`` (or
+other reference steps) runs them before the manoeuvres of every case and identifies as ``hindrax ident campaign
+--calibrate`` does (:func:`run_case`); the label gains ``[calibrate <steps>]``. Without it the cases are identified
+on the curve's force.
 """
 from __future__ import annotations
 
