@@ -53,8 +53,7 @@ from hindrax_drivers.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
 from .maneuvers import HoldController, dof_authority
-from ..vehicle.signals import (sample_from_pressure, sample_from_range, samples_from_dvl,
-                               samples_from_imu)
+from ..vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from .law import ControlSettings
 from .loop import HoldLoop
 from .model import ModelFileError, load_model, model_from_config
@@ -134,8 +133,7 @@ class ControllerNode(VehicleNode):
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
         self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
-                                 esc_state_qos())
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10)

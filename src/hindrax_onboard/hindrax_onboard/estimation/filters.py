@@ -193,8 +193,7 @@ class KinematicKalmanFilter:
         return np.array(self._kf.P, copy=True)
 
 
-def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
-                      measurement_std: float = 0.01):
+def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0, measurement_std: float = 0.01):
     """Offline position, velocity and acceleration from a whole record (Kalman + RTS smoother).
 
     Runs filterpy's ``KalmanFilter.batch_filter`` with per-interval F(dt), Q(dt) (non-uniform

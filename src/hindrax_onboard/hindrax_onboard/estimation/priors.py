@@ -312,8 +312,7 @@ def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m
     rect = {"frontal": W * H, "side": L * H, "top": L * W}
     given = {"frontal": frontal_area_m2, "side": side_area_m2, "top": top_area_m2}
     areas = {k: (rect[k] if v is None else float(v)) for k, v in given.items()}
-    g = Geometry(L, W, H, float(cfg.environment.water_density_kg_m3), areas["frontal"], areas["side"],
-                 areas["top"])
+    g = Geometry(L, W, H, float(cfg.environment.water_density_kg_m3), areas["frontal"], areas["side"], areas["top"])
     inertia = list(v.inertia_kg_m2)
     zg = float(v.centre_of_gravity_frd_m[2])
     zb = float(v.centre_of_buoyancy_frd_m[2])

@@ -101,8 +101,7 @@ def _window_stats(t: np.ndarray, v: np.ndarray, i: np.ndarray, j: np.ndarray):
     """Slope and std of v over windows [i, j) using cumulative sums (t centred per call)."""
     tc = t - t[0]
     # running sums from 0 of t, t^2, v, v^2 and t v
-    c1, c2, cv, cv2, ctv = (np.concatenate([[0.0], np.cumsum(x)])
-                            for x in (tc, tc * tc, v, v * v, tc * v))
+    c1, c2, cv, cv2, ctv = (np.concatenate([[0.0], np.cumsum(x)]) for x in (tc, tc * tc, v, v * v, tc * v))
     m = (j - i).astype(float)
     st, stt = c1[j] - c1[i], c2[j] - c2[i]
     sv, svv, stv = cv[j] - cv[i], cv2[j] - cv2[i], ctv[j] - ctv[i]

@@ -49,11 +49,9 @@ from typing import Tuple
 import numpy as np
 from numpy.polynomial import Polynomial
 
-from .least_squares import (EstimationError, LsResult, as_float_array, check_same_length,
-                            fit_linear_model)
+from .least_squares import EstimationError, LsResult, as_float_array, check_same_length, fit_linear_model
 
-__all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve",
-           "point_reflection", "NEUTRAL_US"]
+__all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve", "point_reflection", "NEUTRAL_US"]
 
 #: ESC stop pulse width ([Hindrax-Drag] section 2.2.1).
 NEUTRAL_US = 1500.0
@@ -193,8 +191,7 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US) -> CubicF
     if np.unique(P).size < 4:
         raise EstimationError("a cubic needs at least 4 distinct pulse widths")
     s = (P - centre_us) / _SCALE_US
-    ls = fit_linear_model(np.column_stack([s**3, s**2, s, np.ones_like(s)]), F,
-                          names=("a3", "a2", "a1", "a0"))
+    ls = fit_linear_model(np.column_stack([s**3, s**2, s, np.ones_like(s)]), F, names=("a3", "a2", "a1", "a0"))
     # ascending order for the transform
     a_asc = ls.theta[::-1]
     cov_asc = ls.covariance[::-1, ::-1]
@@ -248,8 +245,7 @@ def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
             fits[name] = fit_cubic(P[mask], F[mask], centre_us=float(neutral_us))
         except EstimationError as exc:
             raise EstimationError(f"{name} direction: {exc}") from None
-    return ThrusterCurveFit(negative=fits["negative"], positive=fits["positive"],
-                            neutral_us=float(neutral_us))
+    return ThrusterCurveFit(negative=fits["negative"], positive=fits["positive"], neutral_us=float(neutral_us))
 
 
 def point_reflection(c4: float, c3: float, c2: float, c1: float,

@@ -82,8 +82,7 @@ def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> li
     t = _stamp_s(msg.header)
     r = np.eye(3) if mounting_frd_from_flu is None else mounting_frd_from_flu
     w = r @ np.array([msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z], dtype=float)
-    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z],
-                     dtype=float)
+    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z], dtype=float)
     return [("icm20948_gyro", SimpleNamespace(stamp_s=t, angular_rate_rad_s=w)),
             ("icm20948_accel", SimpleNamespace(stamp_s=t, specific_force_m_s2=a))]
 

@@ -67,8 +67,7 @@ def codec_rows(n: int) -> list[dict]:
             for i in range(1, n + 1):
                 one(i)
             per[kind].append((time.thread_time_ns() - t0) / n / 1e3)
-    return _cpu_rows("codec", per, n,
-                     "one ESC beat built as bytes and read back ({k}), median of {blocks} blocks")
+    return _cpu_rows("codec", per, n, "one ESC beat built as bytes and read back ({k}), median of {blocks} blocks")
 
 
 def cycle_rows(n: int) -> list[dict]:
@@ -87,12 +86,10 @@ def cycle_rows(n: int) -> list[dict]:
         pubs = {"status": tx.create_publisher(DiagnosticStatus, "status_beat", heartbeat_qos()),
                 "heartbeat": tx.create_publisher(Heartbeat, "heartbeat_beat", heartbeat_qos())}
         rx.create_subscription(DiagnosticStatus, "status_beat", count(_read_status), heartbeat_qos())
-        rx.create_subscription(Heartbeat, "heartbeat_beat", count(read_heartbeat), heartbeat_qos(),
-                               raw=True)
+        rx.create_subscription(Heartbeat, "heartbeat_beat", count(read_heartbeat), heartbeat_qos(), raw=True)
         build = {"status": _status_bytes, "heartbeat": _heartbeat_bytes}
         with spinning(rx_ctx, rx, events=True, timeout_s=0.05) as (ex, spin):
-            wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30, spin,
-                       "matched")
+            wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30, spin, "matched")
             for _ in range(BLOCKS):
                 for kind, pub in pubs.items():
                     got["n"] = 0

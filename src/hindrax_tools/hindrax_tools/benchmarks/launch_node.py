@@ -68,10 +68,8 @@ def _endpoint(e: Any, kind: str) -> dict:
     out: dict = {"topic": getattr(e, "topic_name", None) or e.srv_name,
                  "type": _type(getattr(e, "msg_type", None) or e.srv_type)}
     if kind in ("publishers", "subscriptions"):
-        out["qos"] = {k: int(getattr(v, "nanoseconds", v))
-                      for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
-        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]]
-                               for h in e.event_handlers)
+        out["qos"] = {k: int(getattr(v, "nanoseconds", v)) for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
+        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]] for h in e.event_handlers)
     if kind == "subscriptions":
         out["raw"] = bool(e.raw)
     return out

@@ -226,8 +226,7 @@ def churn_rows(quick: bool = False) -> list[dict]:
                     if k % 2 == 0:
                         argv = subscriber_argv(str(k), 3.0)
                     else:
-                        argv = [python_executable(), "-m", "hindrax_tools.cli", "health",
-                                "--quiet", "--timeout", "3"]
+                        argv = [python_executable(), "-m", "hindrax_tools.cli", "health", "--quiet", "--timeout", "3"]
                     started.append(stack.enter_context(child_process(
                         argv, env=lay.env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)))
                     k += 1
@@ -302,8 +301,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
             domain_id() as topside:
         watch = _Watch(lay.probe)
         lay.ensure()
-        internal_default = ({k: v for k, v in lay.env.items() if k != PROFILE_ENV}
-                            | {RANGE_ENV: "LOCALHOST"})
+        internal_default = {k: v for k, v in lay.env.items() if k != PROFILE_ENV} | {RANGE_ENV: "LOCALHOST"}
         topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
         health = [lay.py, "-m", "hindrax_tools.cli", "health", "--quiet", "--timeout", "3"]
         topics = topside_topics(lay.vehicle)
@@ -317,8 +315,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
                              (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env),
                              (health, lay.env))
                     with ExitStack() as stack:
-                        procs = [stack.enter_context(child_process(argv, env=env, **quiet))
-                                 for argv, env in specs]
+                        procs = [stack.enter_context(child_process(argv, env=env, **quiet)) for argv, env in specs]
                         exits += [p.wait(TRIAL_TIMEOUT_S) for p in procs]
                 watch.active = False
                 load = os.getloadavg()[0]
@@ -334,8 +331,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
 def run(quick: bool = False) -> list[dict]:
     """This module's rows of the ``safety`` section (``make bench``,
     :mod:`hindrax_tools.bench`), in the order of the module docstring."""
-    return (churn_rows(quick) + busy_rows(quick) + busy_rows(quick, realtime=False)
-            + pool_day_rows(quick))
+    return churn_rows(quick) + busy_rows(quick) + busy_rows(quick, realtime=False) + pool_day_rows(quick)
 
 
 if __name__ == "__main__":

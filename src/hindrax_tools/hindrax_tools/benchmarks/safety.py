@@ -193,8 +193,7 @@ def _rig(ctx, sim_time: bool = False):
         res = call(r["arm"], SetArmed.Request(arm=True), spin)
         if not res.success:
             raise RuntimeError(f"arming refused: {res.message}")
-        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding,
-                   "1700 us on the wire")
+        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding, "1700 us on the wire")
         emu.watch = True
 
     def until_neutral(timeout_s: float = 10.0, poll=None) -> float:
@@ -266,8 +265,7 @@ def run(quick: bool = False) -> list[dict]:
             t0 = time.monotonic()
             emu.reset()
             emu.watch, emu.neutral_at = True, None
-            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"],
-                       "chip reset detected")
+            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"], "chip reset detected")
             times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
             times["chip_reset_recover"].append(r["until_neutral"](poll=r["commanding"]) - t0)
         _close(r)
@@ -535,8 +533,7 @@ class _Layout:
         # docs/deployment.md §1): on a machine shared with other jobs a 0.33 s gap in the guard's feed would be the
         # machine's load, not the failure measured
         prefix, env = vehicle_scheduling()[name]
-        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config,
-                *extra]
+        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config, *extra]
         self.procs[name] = start_logged(self.tmp / f"{name}.log", argv, "a",
                                         env=dict(self.env, **(env if self.realtime else {})),
                                         start_new_session=self.new_session)
@@ -1021,5 +1018,4 @@ def run_processes(quick: bool = False) -> list[dict]:
              "note": f"of {5 * repeats + 1} arm requests, the ESC disarmed itself before 1700 us "
                      "reached the wire (the bench armed again)"
                      + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")}]
-    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name])
-                   for name, values in times.items()]
+    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name]) for name, values in times.items()]

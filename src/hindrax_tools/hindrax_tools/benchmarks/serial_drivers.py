@@ -69,8 +69,7 @@ class _TimedEmulator:
         return out
 
 
-def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str,
-             rate: str) -> list[dict]:
+def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str, rate: str) -> list[dict]:
     """Run node + probe for ``duration_s`` after a warm-up; the rows of :func:`_rows`."""
     latencies: dict[str, list[int]] = {topic: [] for topic, _, _ in subscriptions}
     dev = PtyDevice(emulator)

@@ -237,8 +237,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
         sim_node.advance_clock_period = _timed(advance, emu, lambda: "(simulator)")
         for device in (hw.emulators[n] for n in ("ms5837", "icm20948", "pca9685")):
             for meth in ("i2c_read", "i2c_write"):
-                setattr(device, meth, _timed(getattr(device, meth), emu,
-                                             lambda: current[0] or "(outside callbacks)"))
+                setattr(device, meth, _timed(getattr(device, meth), emu, lambda: current[0] or "(outside callbacks)"))
 
         recorder = graph.nodes["recorder"]
         recorder.stop_recording()
@@ -283,8 +282,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             threads1 = thread_cpu_s()
             counts1 = writer.topic_counts()
             thr = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
-            per = {name: cpu.get(name, 0.0) - emu.get(name, 0.0)
-                   for name in NODES if name in graph.nodes}
+            per = {name: cpu.get(name, 0.0) - emu.get(name, 0.0) for name in NODES if name in graph.nodes}
             for name, port in hw.ports.items():
                 per[name] += thr.get(f"SerialTransport({port})", 0.0)
             per["recorder"] += sum(v for k, v in thr.items() if k.startswith("bag-writer"))
@@ -295,8 +293,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
                                     "stack": stack / wall, "rates": rates,
                                     "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
 
-        _running_then_idle(probe, action, lambda on: stream.update(on=on), window, spin,
-                           spin_with_wrench, "in-process")
+        _running_then_idle(probe, action, lambda on: stream.update(on=on), window, spin, spin_with_wrench, "in-process")
         out["types"] = {pub.topic_name: type_name_of(pub.msg_type) for n in graph.nodes.values()
                         for pub in n.publishers}
         out["dropped"] = recorder._writer.dropped
@@ -306,8 +303,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- launch layout
-def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = None,
-            tally: dict | None = None) -> dict:
+def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = None, tally: dict | None = None) -> dict:
     """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in
     another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle
     phase); per window the CPU of every process and its wall-clock span (the rates come from the
@@ -597,14 +593,12 @@ PARTICIPANT_PROBES = {
 
 
 # ---------------------------------------------------------------------------------------- skeletons
-def skeleton_spec(topology: dict, rates: list[dict[str, float]],
-                  payloads: dict[str, str] | None = None) -> dict:
+def skeleton_spec(topology: dict, rates: list[dict[str, float]], payloads: dict[str, str] | None = None) -> dict:
     """The processes of a skeleton (:func:`~.launch_node.skeleton_main`): ``topology`` (label ->
     :func:`~.launch_node.topology` of that process) with, on every publisher, ``rates`` (one per
     phase: that phase's messages/s of its topic, shared equally by the topic's publishers) and
     ``payload`` (``payloads``: topic -> CDR bytes, hex; else a default-constructed message)."""
-    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"]
-                                for p in n["publishers"])
+    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"] for p in n["publishers"])
     out = json.loads(json.dumps(topology))
     for n in (n for t in out.values() for n in t["nodes"]):
         for p in n["publishers"]:
@@ -635,8 +629,7 @@ def read_topologies(procs: dict[str, subprocess.Popen], directory: Path) -> dict
         (directory / f"{p.pid}.json").unlink(missing_ok=True)
         p.send_signal(signal.SIGUSR1)
     paths = {label: directory / f"{p.pid}.json" for label, p in procs.items()}
-    wait_until(lambda: all(f.is_file() for f in paths.values()), 30, None,
-               "every process's topology")
+    wait_until(lambda: all(f.is_file() for f in paths.values()), 30, None, "every process's topology")
     return {label: json.loads(f.read_text()) for label, f in paths.items()}
 
 
@@ -663,13 +656,11 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                 switch = _wrench_stream(probe)
                 settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S,
                                        min_nodes=sum(len(t["nodes"]) for t in spec.values()))
-                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin,
-                           "the skeleton's graph settled")
+                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin, "the skeleton's graph settled")
                 out["topology"] = read_topologies(procs, tmp)
                 wrong = topology_differences(check, out["topology"]) if check is not None else []
                 if wrong:
-                    raise RuntimeError("the skeleton's topology is not the launch's:\n"
-                                       + "\n".join(wrong[:20]))
+                    raise RuntimeError("the skeleton's topology is not the launch's:\n" + "\n".join(wrong[:20]))
                 for k, (phase, n) in enumerate(phases):
                     if k:
                         for p in procs.values():
@@ -698,8 +689,7 @@ def _endpoint(topic: str, type_name: str, raw: bool | None = None) -> dict:
     """A skeleton's topic endpoint: depth 10, reliable, volatile, no QoS event handler."""
     qos = dict(history=1, depth=10, reliability=1, durability=2, liveliness=0, deadline=0,
                lifespan=0, liveliness_lease_duration=0)
-    return {"topic": topic, "type": type_name, "qos": qos, "events": [],
-            **({} if raw is None else {"raw": raw})}
+    return {"topic": topic, "type": type_name, "qos": qos, "events": [], **({} if raw is None else {"raw": raw})}
 
 
 def _one_node(name: str, pubs: list, subs: list) -> dict:
@@ -862,8 +852,7 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                                                  for k, v in threads.most_common(6))})
             rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
                          "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
-            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items()
-                       if k.startswith("dds.")) for w in wins]
+            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items() if k.startswith("dds.")) for w in wins]
             rows.append({"name": f"launch_{phase}_cpu_dds_threads", "unit": "% of a core",
                          "value": 100 * _median(dds),
                          "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, "
@@ -1083,8 +1072,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description="The Pi budget: CPU of the vehicle graph in the launch layout "
                                                  "(one process per <node> of pool_test.launch.xml) and in one "
                                                  "process. CPU = process CPU time / wall time.")
-    parser.add_argument("--layouts", nargs="+", choices=("inproc", "launch"),
-                        default=("inproc", "launch"))
+    parser.add_argument("--layouts", nargs="+", choices=("inproc", "launch"), default=("inproc", "launch"))
     parser.add_argument("--windows", type=int, default=None,
                         help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
     parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")

@@ -89,8 +89,7 @@ def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Name
             pub.publish(target.sign("controller/setpoint", msg))
             sent[0] = time.monotonic()
         return False
-    wait_for(executor, arrived, args.timeout,
-             f"{target.name}: the controller did not take the setpoint")
+    wait_for(executor, arrived, args.timeout, f"{target.name}: the controller did not take the setpoint")
 
 
 def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple[str, bool, str]:

@@ -200,8 +200,7 @@ def _priors(args) -> int:
         else:
             missing = ["--" + n.replace("_", "-") for n, _ in _GEOMETRY if getattr(args, n) is None]
             if missing:
-                raise CommandError("priors: give --config FILE or all of the geometry; missing "
-                                   + " ".join(missing))
+                raise CommandError("priors: give --config FILE or all of the geometry; missing " + " ".join(missing))
             g = Geometry(args.length_m, args.width_m, args.height_m, args.density_kg_m3, args.frontal_area_m2,
                          args.side_area_m2, args.top_area_m2)
             out = empirical_priors(g, PriorInputs(mass_kg=args.mass_kg, bg_m=args.bg_m,

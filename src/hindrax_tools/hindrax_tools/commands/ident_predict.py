@@ -39,8 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.reader import BagError
 
     from hindrax_fit.bag_input.reader import FitInputError, TopicChoice
-    from hindrax_fit.assessment.predict import (ModelError, dofs_of, load_model, predict_bag,
-                                                      rule_text, write_csv)
+    from hindrax_fit.assessment.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv
 
     if args.segment_s is not None and not 0.5 <= args.segment_s <= 3600.0:
         raise CommandError(f"ident predict: --segment-s {args.segment_s:g}: must be in [0.5, 3600] s")

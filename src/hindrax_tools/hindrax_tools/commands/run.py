@@ -119,8 +119,7 @@ def format_summary(identifications: dict) -> str:
 
 def summary_markdown(identifications: dict) -> str:
     """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
-    header = ["DOF", "parameter", "identified", "std", "unit", "configured (truth)", "rel. error",
-              "verdict"]
+    header = ["DOF", "parameter", "identified", "std", "unit", "configured (truth)", "rel. error", "verdict"]
     return results_doc.markdown_table(header, [
         [r["dof"], r["parameter"], f"{r['value']:.5g}", f"{r['std']:.3g}", r["unit"], tr, err, why]
         for r, err, tr, why in _summary(identifications)])
@@ -288,5 +287,4 @@ def run_in_process(args: argparse.Namespace) -> int:
         write_outputs(out, idents, cfg, None, note, source="simulation", seed=record.seed,
                       calibration=record.calibration, sections=lambda doc: reference_sections(
                           doc, record, cfg, args.restoring_n_m_per_rad, args.restoring_std, progress))
-    return _finish(args, progress, out, idents, errors, not record.aborted,
-                   "in-process (no ROS graph)")
+    return _finish(args, progress, out, idents, errors, not record.aborted, "in-process (no ROS graph)")

@@ -252,8 +252,7 @@ def summarise(results: Sequence[dict]) -> dict:
                           "max_abs_z": max(zs) if zs else None,
                           "meets": cov >= 0.9 * len(rows) or ok == len(rows),
                           "reasons": sorted({x for r in rows for x in r["reasons"]})[:4]})
-        n_cases, n_cov, n_sus, n_ok = (sum(p[k] for p in table)
-                                       for k in ("n", "covered", "suspect", "ok"))
+        n_cases, n_cov, n_sus, n_ok = (sum(p[k] for p in table) for k in ("n", "covered", "suspect", "ok"))
         meets = all(p["meets"] for p in table) and not (sc == "none" and n_sus > 0.1 * n_cases)
         all_rows = [r for rows in params.values() for r in rows]
         pub = [r for r in all_rows if r.get("rls_std") is not None]
