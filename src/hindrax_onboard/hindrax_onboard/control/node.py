@@ -159,8 +159,7 @@ class ControllerNode(VehicleNode):
         sub, qos = self.create_subscription, sensor_input_qos(20)
         self._streams = [
             sub(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), qos),
-            sub(FluidPressure, "pressure/fluid_pressure",
-                lambda m: self._add([sample_from_pressure(m)]), qos),
+            sub(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]), qos),
             sub(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
             sub(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), qos)]
 

@@ -50,10 +50,9 @@ import numpy as np
 from .drag_coefficient import characteristic_length_from_volume, reynolds_number
 from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector, positive
 
-__all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_acceleration",
-           "find_release_index", "log_decrement", "damping_ratio_from_log_decrement",
-           "natural_frequency", "added_mass_exact", "added_mass_simplified",
-           "added_mass_error_percent", "damping_coefficient", "inertia_coefficient",
+__all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_acceleration", "find_release_index",
+           "log_decrement", "damping_ratio_from_log_decrement", "natural_frequency", "added_mass_exact",
+           "added_mass_simplified", "added_mass_error_percent", "damping_coefficient", "inertia_coefficient",
            "keulegan_carpenter", "DECAY_OUTPUTS", "QuadraticDecayFit", "fit_quadratic_free_decay",
            "quadratic_free_decay_keys", "IncliningResult", "restoring_from_inclining"]
 
@@ -644,8 +643,7 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
         th0[2] *= scale_b2
         try:
             res = optimize.least_squares(lambda th: model(th)[0] - yy, th0, jac=lambda th: model(th)[1],
-                                         bounds=(lower, np.full(6, np.inf)), x_scale="jac",
-                                         method="trf", max_nfev=100)
+                                         bounds=(lower, np.full(6, np.inf)), x_scale="jac", method="trf", max_nfev=100)
         except (ValueError, EstimationError) as exc:
             last_exc = exc
             continue
@@ -685,8 +683,7 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
     """
     t = np.asarray(t_s, dtype=float)[res.release_index:]
     a = np.asarray(acceleration_m_s2, dtype=float)[res.release_index:]
-    fit = fit_quadratic_free_decay(t, a, res.stiffness_n_per_m, rigid_inertia=res.mass_kg,
-                                   output="acceleration",
+    fit = fit_quadratic_free_decay(t, a, res.stiffness_n_per_m, rigid_inertia=res.mass_kg, output="acceleration",
                                    initial_total_inertia=res.mass_kg + res.added_mass_kg,
                                    initial_linear_damping=res.damping_n_s_per_m)
     out = {}

@@ -45,10 +45,9 @@ import numpy as np
 
 from .least_squares import EstimationError
 
-__all__ = ["Geometry", "PriorInputs", "not_a_knot_spline", "added_mass_priors",
-           "quadratic_damping_priors", "linear_damping_priors", "empirical_priors",
-           "priors_from_config", "ADDED_MASS_3D", "ADDED_MASS_2D", "DRAG_2D", "DRAG_3D",
-           "ZETA_ROLL_PITCH", "LINEAR_TO_QUADRATIC_TRANSLATION", "UNITS"]
+__all__ = ["Geometry", "PriorInputs", "not_a_knot_spline", "added_mass_priors", "quadratic_damping_priors",
+           "linear_damping_priors", "empirical_priors", "priors_from_config", "ADDED_MASS_3D", "ADDED_MASS_2D",
+           "DRAG_2D", "DRAG_3D", "ZETA_ROLL_PITCH", "LINEAR_TO_QUADRATIC_TRANSLATION", "UNITS"]
 
 #: [NTNU-Thesis] App. A.1 ``EMP3D``: (B/A, C_a) of the DNV rectangular prism (two sides equal).
 ADDED_MASS_3D = ((1.0, 0.68), (2.0, 0.36), (3.0, 0.24), (4.0, 0.19), (5.0, 0.15), (6.0, 0.14), (7.0, 0.11))

@@ -152,8 +152,7 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)
     check_same_length(t_s=t, velocity=v, force=f)
-    for name, val in (("min_duration_s", min_duration_s), ("max_slope", max_slope),
-                      ("max_std", max_std)):
+    for name, val in (("min_duration_s", min_duration_s), ("max_slope", max_slope), ("max_std", max_std)):
         if not (np.isfinite(val) and val > 0):
             raise EstimationError(f"{name} must be > 0, got {val}")
     windows: List[SteadyWindow] = []

@@ -136,8 +136,7 @@ class CubicFit:
         """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us, pulse_width_max_us}."""
         keys = ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std")
         return {**{k: float(getattr(self, k)) for k in keys}, "n": int(self.n),
-                "residual_std_n": float(self.residual_std_n),
-                "thrust_relative_std": self.relative_std(),
+                "residual_std_n": float(self.residual_std_n), "thrust_relative_std": self.relative_std(),
                 "pulse_width_min_us": float(self.pulse_width_min_us),
                 "pulse_width_max_us": float(self.pulse_width_max_us)}
 
@@ -201,12 +200,10 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US) -> CubicF
     c_desc = c_asc[::-1]                    # (c4, c3, c2, c1)
     cov_desc = cov_c_asc[::-1, ::-1]
     std = np.sqrt(np.clip(np.diag(cov_desc), 0.0, None))
-    return CubicFit(c4=float(c_desc[0]), c3=float(c_desc[1]), c2=float(c_desc[2]),
-                    c1=float(c_desc[3]), c4_std=float(std[0]), c3_std=float(std[1]),
-                    c2_std=float(std[2]), c1_std=float(std[3]), covariance=cov_desc,
-                    n=ls.n, residual_std_n=ls.residual_std, centre_us=float(centre_us),
-                    scale_us=_SCALE_US, pulse_width_min_us=float(P.min()),
-                    pulse_width_max_us=float(P.max()), ls=ls)
+    return CubicFit(c4=float(c_desc[0]), c3=float(c_desc[1]), c2=float(c_desc[2]), c1=float(c_desc[3]),
+                    c4_std=float(std[0]), c3_std=float(std[1]), c2_std=float(std[2]), c1_std=float(std[3]),
+                    covariance=cov_desc, n=ls.n, residual_std_n=ls.residual_std, centre_us=float(centre_us),
+                    scale_us=_SCALE_US, pulse_width_min_us=float(P.min()), pulse_width_max_us=float(P.max()), ls=ls)
 
 
 def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,

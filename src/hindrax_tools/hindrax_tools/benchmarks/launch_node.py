@@ -54,9 +54,8 @@ _QOS_KEYS = ("history", "depth", "reliability", "durability", "liveliness", "dea
 #: an event type (``RCL_SUBSCRIPTION_LIVELINESS_CHANGED``...) less its prefix -> the callbacks' key
 _EVENT_KEYS = {"REQUESTED_DEADLINE_MISSED": "deadline", "OFFERED_DEADLINE_MISSED": "deadline",
                "LIVELINESS_CHANGED": "liveliness", "LIVELINESS_LOST": "liveliness",
-               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos",
-               "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos", "MESSAGE_LOST": "message_lost",
-               "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
+               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos", "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos",
+               "MESSAGE_LOST": "message_lost", "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
 
 
 def _type(cls: Any) -> str:
@@ -151,9 +150,8 @@ def skeleton_main() -> int:
             timer = node.create_timer(1.0 / rate, partial(_call_all, sends), autostart=k == 0)
             timers.append((k, timer))
         for s in nd["subscriptions"]:
-            node.create_subscription(interface_type(s["type"]), s["topic"], lambda _m: None,
-                                     _profile(s["qos"]), raw=s["raw"],
-                                     event_callbacks=_events("subscriptions", s["events"]))
+            node.create_subscription(interface_type(s["type"]), s["topic"], lambda _m: None, _profile(s["qos"]),
+                                     raw=s["raw"], event_callbacks=_events("subscriptions", s["events"]))
         for s in nd["services"]:
             if s["topic"] not in have:
                 node.create_service(interface_type(s["type"]), s["topic"], lambda _q, r: r)

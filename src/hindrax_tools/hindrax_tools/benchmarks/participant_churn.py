@@ -289,16 +289,14 @@ def topside_topics(vehicle: str) -> tuple[str, ...]:
     """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics
     and odometry."""
     return (f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/supervisor/status",
-            f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status",
-            f"nav_msgs.msg:Odometry=/{vehicle}/odom")
+            f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status", f"nav_msgs.msg:Odometry=/{vehicle}/odom")
 
 
 def pool_day_rows(quick: bool = False) -> list[dict]:
     """The ``pool_day_churn_*`` rows (module docstring); ``quick``: :data:`QUICK_TRIALS` trials."""
     trials = QUICK_TRIALS if quick else TRIALS
     exits: list[int] = []
-    with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, \
-            domain_id() as topside:
+    with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, domain_id() as topside:
         watch = _Watch(lay.probe)
         lay.ensure()
         internal_default = {k: v for k, v in lay.env.items() if k != PROFILE_ENV} | {RANGE_ENV: "LOCALHOST"}
@@ -312,8 +310,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
                 watch.start()
                 for k in range(trials):
                     specs = ((subscriber_argv(f"internal_{k}", SUBSCRIBER_S), internal_default),
-                             (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env),
-                             (health, lay.env))
+                             (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env), (health, lay.env))
                     with ExitStack() as stack:
                         procs = [stack.enter_context(child_process(argv, env=env, **quiet)) for argv, env in specs]
                         exits += [p.wait(TRIAL_TIMEOUT_S) for p in procs]

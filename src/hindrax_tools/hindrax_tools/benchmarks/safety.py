@@ -156,11 +156,10 @@ def _rig(ctx, sim_time: bool = False):
     for n in (esc, sup, probe):
         ex.add_node(n)
     allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
-    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation,
-             cmd=allocation.pub,
+    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation, cmd=allocation.pub,
              depth=probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
-             clock=probe.create_publisher(Clock, "/clock", 10),
-             arm=probe.create_client(SetArmed, "esc/set_armed"), estop=probe.create_client(Trigger, "supervisor/estop"),
+             clock=probe.create_publisher(Clock, "/clock", 10), arm=probe.create_client(SetArmed, "esc/set_armed"),
+             estop=probe.create_client(Trigger, "supervisor/estop"),
              reset=probe.create_client(Trigger, "supervisor/reset"), ns=1_000_000_000)
 
     def spin(timeout_s: float = 0.002) -> None:
@@ -799,9 +798,8 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
     each topic as it discovers it): replayed from there, every pass carries them without a gap until its end."""
     bag = tmp / "vehicle_bag"
     lay.armed_at_1700()
-    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file",
-            lay.config, "-p", "all_topics:=true", "-p", "autostart:=true", "-p",
-            f"output_dir:={bag}"]
+    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file", lay.config,
+            "-p", "all_topics:=true", "-p", "autostart:=true", "-p", f"output_dir:={bag}"]
     rec = start_logged(tmp / "recorder.log", argv, env=lay.env)
     try:
         wait_until(lambda: (bag / "metadata.yaml").exists() or any(bag.glob("*.mcap")), 30, None, "recorder started")

@@ -105,8 +105,7 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
     """Reports, CPU per report and load, and per topic the latency from the device's bytes."""
     n = max(reports, 1)
     rows = [
-        {"name": f"{device} reports published", "value": reports, "unit": "msgs",
-         "note": f"{rate} for {wall_s:.1f} s"},
+        {"name": f"{device} reports published", "value": reports, "unit": "msgs", "note": f"{rate} for {wall_s:.1f} s"},
         {"name": f"{device} reader-thread CPU per report", "value": reader_s / n * 1e3, "unit": "ms",
          "target": "< 2", "note": "decode + convert + publish all topics of one report"},
         {"name": f"{device} node+probe+DDS CPU per report", "value": (reader_s + other_s) / n * 1e3, "unit": "ms",

@@ -463,8 +463,7 @@ def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, window
     :class:`~hindrax_tools.benchmarks.rig.RigError` where no cgroup cpu controller is writable."""
     tally: dict = {"armed": None, "disarms": 0, "stale": 0, "why": [], "rig": []}
     error = ""
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-rig-") as tmpdir, \
-            Rig(cores, busy_loops=busy_loops) as rig:
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-rig-") as tmpdir, Rig(cores, busy_loops=busy_loops) as rig:
         try:
             _launch(duration_s, Path(tmpdir), windows, rig=rig, tally=tally)
         except (RuntimeError, ConditionTimeout) as exc:
@@ -641,8 +640,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
     stream on in ``stream_phase``; ``check``: topology to match (else RuntimeError). Returns
     ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology"}``."""
     out: dict = {"phases": {}}
-    with (tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir,
-          domain_id() as did):
+    with (tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir, domain_id() as did):
         tmp = Path(tmpdir)
         env = child_env(ROS_DOMAIN_ID=str(did), **{TOPOLOGY_ENV: tmpdir})
         (tmp / "spec.json").write_text(json.dumps({"processes": spec}))
@@ -971,8 +969,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                              "note": "one process, identification running surge, recorder on"})
         if baselines:
             # the topics' types: the launch layout's bag, the graph's publishers, and two of rcl's
-            types = {"/rosout": "rcl_interfaces/msg/Log",
-                     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+            types = {"/rosout": "rcl_interfaces/msg/Log", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
                      **(launch["types"] if launch else {}), **inproc["types"]}
             idle_rates = sorted(inproc["phases"]["idle"]["rates"].items())
             idle_spec = [(t, types[t], r) for t, r in idle_rates if r > 0.05 and t in types]

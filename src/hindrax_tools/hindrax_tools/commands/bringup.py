@@ -46,6 +46,5 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.sim:
         print(VEHICLE_NOTICE, file=sys.stderr, flush=True)
-    return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record,
-                     record_dir=args.record_dir, seed=args.seed, real_time_factor=args.rtf,
-                     controller=args.controller, model_file=args.model)
+    return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record, record_dir=args.record_dir,
+                     seed=args.seed, real_time_factor=args.rtf, controller=args.controller, model_file=args.model)

@@ -56,10 +56,8 @@ from hindrax_onboard.commands.common import CommandError, load_vehicle, update_v
 __all__ = ["add_arguments", "run", "read_two_columns"]
 
 _GEOMETRY = (("length_m", "length (x), m"), ("width_m", "width (y), m"), ("height_m", "height (z), m"),
-             ("density_kg_m3", "fluid density, kg/m^3"),
-             ("frontal_area_m2", "projected area normal to x, m^2"),
-             ("side_area_m2", "projected area normal to y, m^2"),
-             ("top_area_m2", "projected area normal to z, m^2"))
+             ("density_kg_m3", "fluid density, kg/m^3"), ("frontal_area_m2", "projected area normal to x, m^2"),
+             ("side_area_m2", "projected area normal to y, m^2"), ("top_area_m2", "projected area normal to z, m^2"))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

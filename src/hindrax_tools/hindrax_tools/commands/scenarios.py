@@ -220,8 +220,7 @@ def _case_star(args):
     try:
         return run_case(*args)
     except Exception as exc:  # noqa: BLE001 - reported per case, the suite goes on
-        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True,
-                "abort_reason": "",
+        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True, "abort_reason": "",
                 "error": f"{type(exc).__name__}: {exc}", "errors": {}, "cases": [], "dofs": {}}
 
 
