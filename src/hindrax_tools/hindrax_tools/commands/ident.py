@@ -28,7 +28,7 @@ import sys
 
 import numpy as np
 
-from hindrax_drivers.config import ConfigError
+from hindrax_common.config import ConfigError
 
 from .common import CommandError, update_vehicle_file
 
