@@ -11,8 +11,8 @@ import pytest
 from hindrax_drivers.pca9685.chip import EscChip
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.worker import CONFIGURE, NEUTRAL, READBACK, WRITE, ChipJob, ChipWorker
-from hindrax_drivers.testing import wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 
 COUNT_US = 1.24  # prescale 30 at 25 MHz (datasheet §7.3.5)
 NEUTRAL_US = np.full(8, 1500.0)

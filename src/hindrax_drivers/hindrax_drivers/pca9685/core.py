@@ -46,7 +46,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..process.dds_transport import UNNAMED_NODE
+from hindrax_common.process.dds_transport import UNNAMED_NODE
 
 __all__ = ["OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING", "RETRY_MIN_S", "RETRY_MAX_S", "GUARD_CONFIRM_S",
            "COMMAND_NODE", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "EscOutput", "EscCore", "EscDecision",

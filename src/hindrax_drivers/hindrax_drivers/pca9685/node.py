@@ -31,14 +31,14 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest
   guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign
   of life and release condition), ``esc/output_state`` (the same state, latched: on a change of
-  armed or output state and every 1 s, :mod:`hindrax_drivers.node_support.esc_state`; for nodes that need only
+  armed or output state and every 1 s, :mod:`hindrax_common.node_support.esc_state`; for nodes that need only
   "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on disarm,
   on an exception in the output path and on shutdown (:meth:`EscNode.close`; SIGINT/SIGTERM).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
   ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`, default ``esc.watchdog_timeout_s``).
 
 The bus: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, or injected (an
-:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding a
+:class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` holding a
 :class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation).
 """
 from __future__ import annotations
@@ -55,18 +55,18 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from ..config import Spec
-from ..config.sections.esc import board_id, oscillator_problem
-from ..node_support.esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
-from ..cdr.lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
-from ..node_support.liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
-from ..node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config,
-                                        run_node)
-from ..config.node_parameters import declare_node_parameter
-from ..transport.i2c import open_smbus
-from ..transport.shared_emulation import SOCKET_ENV, open_shared_bus
+from hindrax_common.config import Spec
+from hindrax_common.config.sections.esc import board_id, oscillator_problem
+from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
+from hindrax_common.cdr.lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
+from hindrax_common.node_support.liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
+from hindrax_common.node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
+    load_node_config, run_node)
+from hindrax_common.config.node_parameters import declare_node_parameter
+from hindrax_common.transport.i2c import open_smbus
+from hindrax_common.transport.shared_emulation import SOCKET_ENV, open_shared_bus
 from . import protocol as p
-from ..node_support.vehicle_node import VehicleNode
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from .chip import EscChip
 from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, WRITE, EscCore, EscOutput, SteadyWatchdog
 from .peers import COMMAND_TOPIC, EscPeers
@@ -103,7 +103,7 @@ class EscNode(VehicleNode):
     worker, smbus2); ``chip_thread``: False runs the chip jobs in the executor thread (a lock-step simulation)."""
 
     #: its process refuses to start beside another live ESC
-    #: (:func:`hindrax_drivers.node_support.vehicle_graph.refuse_live_peer`)
+    #: (:func:`hindrax_common.node_support.vehicle_graph.refuse_live_peer`)
     START_CHECK = "esc"
 
     def __init__(self, bus: Any = None, chip_thread: bool = True, **kwargs: Any):
@@ -393,7 +393,7 @@ class EscNode(VehicleNode):
                                self.peers.guard_ack)
 
     def _publish_state(self) -> None:
-        """``esc/output_state`` when :class:`~hindrax_drivers.node_support.esc_state.EscStateLatch` says so: a change of
+        """``esc/output_state`` when :class:`~hindrax_common.node_support.esc_state.EscStateLatch` says so: a change of
         (armed, output state), or a second without one."""
         unknown = self.output_state == _UNKNOWN
         armed = self.armed and not unknown

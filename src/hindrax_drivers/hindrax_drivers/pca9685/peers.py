@@ -14,11 +14,11 @@ from __future__ import annotations
 import time
 from typing import Any, Callable
 
-from ..config import Spec
-from ..cdr.lean_cdr import Beat
-from ..node_support.liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames, heartbeat_ok,
-                                     simulated_now_s)
-from ..config.node_parameters import declare_node_parameter
+from hindrax_common.config import Spec
+from hindrax_common.cdr.lean_cdr import Beat
+from hindrax_common.node_support.liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames,
+    heartbeat_ok, simulated_now_s)
+from hindrax_common.config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
 __all__ = ["EscPeers", "HEARTBEAT_TIMEOUT", "COMMAND_TOPIC"]
@@ -66,7 +66,7 @@ class EscPeers:
     def tick(self) -> None:
         """Advance both ages to now (the safety tick and an arm request; the beats arrive by
         callbacks, a stale one's
-        waiting beats are taken first: :meth:`~hindrax_drivers.node_support.liveness.HeartbeatWatch.fresh`)."""
+        waiting beats are taken first: :meth:`~hindrax_common.node_support.liveness.HeartbeatWatch.fresh`)."""
         for kind, age in (("supervisor", self.supervisor_age), ("guard", self.guard_age)):
             age.tick()
             self.watches[kind].fresh(age, self.timeout_s)
@@ -104,7 +104,7 @@ class EscPeers:
     def on_guard_heartbeat(self, msg: Beat) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low). Once handled (a beat that is
         not OK has disarmed), the beat is what :attr:`guard_ack` acknowledges: the guard releases its outputs only
-        on an ESC beat at neutral that acknowledges one of its ERROR beats (:mod:`hindrax_drivers.guard.core`)."""
+        on an ESC beat at neutral that acknowledges one of its ERROR beats (:mod:`hindrax_bringup.guard.core`)."""
         self.guard_age.heard()
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
