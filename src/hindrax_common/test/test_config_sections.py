@@ -137,6 +137,36 @@ def test_no_configuration_lookup_by_string_outside_config():
     assert not offenders, "\n".join(offenders)
 
 
+def test_the_safety_timeouts_nodes_widen_are_declared_in_the_configuration():
+    """The four node parameters that widen a safety timeout (the ESC's and the guard's heartbeat timeouts, the ESC's
+    steady-clock watchdog, the supervisor's clock stall) take their range from a section module of the configuration,
+    not from a node module (issue 75): each ``declare_node_parameter(node, "..._timeout_s", SPEC, default)`` names a
+    Spec imported from ``hindrax_common.config.sections``, and those ranges hold the vehicle's own keys."""
+    import ast
+
+    found = {}
+    for path in sorted((ROOT / "src").glob("hindrax_*/hindrax_*/**/*.py")):
+        tree = ast.parse(path.read_text())
+        source = {a.asname or a.name: n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                  for a in n.names}
+        for n in ast.walk(tree):
+            if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "declare_node_parameter" and \
+                    isinstance(n.args[1], ast.Constant) and n.args[1].value.endswith("_timeout_s"):
+                found[f"{path.parent.name}/{path.stem}: {n.args[1].value}"] = source.get(getattr(n.args[2], "id", ""))
+    sections = "hindrax_common.config.sections"
+    assert found == {"pca9685/peers: heartbeat_timeout_s": f"{sections}.esc",
+                     "pca9685/node: steady_watchdog_timeout_s": f"{sections}.esc",
+                     "guard/node: heartbeat_timeout_s": f"{sections}.esc",
+                     "supervisor/node: clock_stall_timeout_s": f"{sections}.supervisor"}
+    from hindrax_common.config.sections import esc, supervisor
+
+    for spec, key in ((esc.ESC_HEARTBEAT_TIMEOUT, "esc.heartbeat_timeout_s"),
+                      (esc.STEADY_WATCHDOG_TIMEOUT, "esc.watchdog_timeout_s"),
+                      (esc.GUARD_HEARTBEAT_TIMEOUT, "esc.guard_heartbeat_timeout_s"),
+                      (supervisor.CLOCK_STALL_TIMEOUT, "supervisor.rate_window_s")):
+        assert spec.lo <= SCHEMA[key].lo and SCHEMA[key].hi <= spec.hi and key in spec.doc, key  # default fits
+
+
 def test_the_lookup_guard_sees_each_form():
     for line in ('cfg.flat["esc.output_latency_s"]', "cfg.flat.get('recording.topics')", 'cfg.section("esc")',
                  'cfg.get("simulation.seed")', 'cfg.flat[f"thrusters.{n}.trim_us"]', 'cfg.get(f"vehicle.{k}")',

@@ -385,11 +385,15 @@ def test_sigterm_path_writes_neutral():
     def factory():
         node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0,
                                                                        "esc.oscillator_calibrated": True}))
-        node.armed = True
-        node.command = np.full(8, 1700.0)
-        node.core.command_t_s = node.get_clock().now().nanoseconds * 1e-9
-        node.watchdog_s = 1e9
         node._peer_verdicts = lambda: ("", "")  # this test is about the shutdown path only
+
+        def drive():  # in the executor, through the node's inputs: arm once allowed, then 1700 us every 20 ms
+            if node.armed:
+                node.on_command(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+            elif not node.arm_refusal():
+                node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+
+        node.create_timer(0.02, drive)
         holder["node"] = node
         return node
 
@@ -801,6 +805,10 @@ def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
             fake["t"] += PERIOD_S
             node.steady_check()
         assert node.steady_watchdog_trips == 1 and node.command is None
+        assert node.core.reason == "steady-clock watchdog: no command for 0.2 s"  # the core's decision
+        for name in ("armed", "output_state", "command", "watchdog_s", "steady_watchdog_s"):
+            with pytest.raises(AttributeError):  # the node only wires ROS: the core's state is not settable here
+                setattr(node, name, 1)
         node.destroy_node()
 
 

@@ -201,7 +201,8 @@ def _armed_link(call_timeout_s=0.15):
 
     worker, emu, bus = _worker(call_timeout_s=call_timeout_s)
     core = EscCore(EscOutput(range(8), [False] * 8, [0.0] * 8, 1100, 1500, 1900), arming_time_s=0.0,
-                   watchdog_timeout_s=1.0, oscillator_calibrated=True, clock=worker.clock, guard_confirm_s=0.0)
+                   watchdog_timeout_s=1.0, oscillator_calibrated=True, clock=worker.clock, period_s=0.02,
+                   guard_confirm_s=0.0)
     link = ChipLink(core, worker, _Diag(), lambda text: None, lambda: 1100.0, readback_interval_s=1e9)
     link.configure()
     assert worker.wait_idle(5)

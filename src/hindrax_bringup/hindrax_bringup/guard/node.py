@@ -53,7 +53,8 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 
-from hindrax_common.config import Spec, output_enable_gpio
+from hindrax_common.config import output_enable_gpio
+from hindrax_common.config.sections.esc import GUARD_HEARTBEAT_TIMEOUT
 from hindrax_common.cdr.lean_cdr import Beat
 from hindrax_common.node_support.liveness import (AliveAge, HeartbeatPublisher, HeartbeatWatch, TickGaps, heartbeat_ok,
                                      simulated_now_s)
@@ -68,12 +69,8 @@ from hindrax_common.node_support.vehicle_node import VehicleNode
 from .core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 from .outputs_off import open_output_enable, silence_chip
 
-__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
+__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "open_watchdog_feed", "main"]
 
-#: node parameter ``heartbeat_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
-HEARTBEAT_TIMEOUT = Spec("float", "the ESC's and the supervisor's heartbeats count as silent when older than this "
-                         "(steady clock), s; default esc.guard_heartbeat_timeout_s, widened only where the three "
-                         "safety nodes share one executor thread (hindrax bringup: none can stall alone)", 0.05, 10.0)
 #: the guard's tick (decision, /OE, heartbeat), Hz
 GUARD_RATE_HZ = 20.0
 #: while asserted without /OE, the sleep registers are written again at most this often when the ESC commands, s
@@ -100,8 +97,8 @@ class OutputGuardNode(VehicleNode):
         super().__init__("output_guard", **kwargs)
         cfg = load_node_config(self, ("esc",))
         esc = cfg.esc
-        #: the heartbeats' timeout, s: parameter ``heartbeat_timeout_s`` (:data:`HEARTBEAT_TIMEOUT`)
-        self.timeout_s = float(declare_node_parameter(self, "heartbeat_timeout_s", HEARTBEAT_TIMEOUT,
+        #: the heartbeats' timeout, s: parameter ``heartbeat_timeout_s`` (config.sections.esc.GUARD_HEARTBEAT_TIMEOUT)
+        self.timeout_s = float(declare_node_parameter(self, "heartbeat_timeout_s", GUARD_HEARTBEAT_TIMEOUT,
                                                       esc.guard_heartbeat_timeout_s))
         self.core = GuardCore(self.timeout_s)
         period = 1.0 / GUARD_RATE_HZ

@@ -74,7 +74,7 @@ from hindrax_common.node_support.esc_state import (ESC_STATE_TOPIC, OUTPUT_UNKNO
 from hindrax_common.cdr.lean_cdr import cdr_decoder, read_heartbeat
 from hindrax_common.node_support.liveness import (HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, TickGaps,
     heartbeat_ok, heartbeat_qos)
-from hindrax_common.config import Spec
+from hindrax_common.config.sections.supervisor import CLOCK_STALL_TIMEOUT
 from hindrax_common.node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, load_node_config,
     run_node, sensor_input_qos)
 from hindrax_common.config.node_parameters import declare_node_parameter
@@ -84,10 +84,6 @@ from .disarm_cause import DisarmCauses
 
 __all__ = ["SupervisorNode", "main"]
 
-#: node parameter ``clock_stall_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
-CLOCK_STALL_TIMEOUT = Spec("float", "armed, ROS time standing still this long (steady clock) trips, s; default "
-                           "supervisor.rate_window_s, widened only by an in-process simulator that holds simulated "
-                           "time on purpose (hindrax bringup with the virtual pool)", 0.2, 120.0)
 #: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
 DISARM_RETRY_S = 0.2
 #: QoS depth of ``imu/data_raw``: 0.5 s at 102 Hz, room for an executor held up on a loaded machine (a sample lost

@@ -60,6 +60,20 @@ SCHEMA, OPTIONAL = section("esc", {
 #: keys whose YAML value may be null, meaning "absent" (their sub-keys are optional)
 NULLABLE: tuple[str, ...] = ("esc.output_enable_gpio", "esc.output_enable_feed_gpio")
 
+# The safety timeouts a node parameter outside the vehicle file widens (read-only, validated like the keys above:
+# config.node_parameters.declare_node_parameter); each defaults to the key it names, and only the graph in one process
+# sets them (hindrax bringup: the three safety nodes share one executor thread, its simulator holds time on purpose).
+#: the ESC's ``heartbeat_timeout_s``
+ESC_HEARTBEAT_TIMEOUT = real("the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat is "
+                             "older than this (steady clock), s; default esc.heartbeat_timeout_s", 0.05, 10.0)
+#: the ESC's ``steady_watchdog_timeout_s``: it covers a ROS clock that stops (use_sim_time with a dead /clock), where
+#: the ROS-time watchdog stands still
+STEADY_WATCHDOG_TIMEOUT = real("no command for this long of steady-clock time (the executor running) -> all "
+                               "neutral, s; default esc.watchdog_timeout_s", 0.02, 60.0)
+#: the output guard's ``heartbeat_timeout_s``
+GUARD_HEARTBEAT_TIMEOUT = real("the ESC's and the supervisor's heartbeats count as silent when older than this "
+                               "(steady clock), s; default esc.guard_heartbeat_timeout_s", 0.05, 10.0)
+
 
 def output_enable_gpio(cfg: Any, key: str = "esc.output_enable_gpio") -> tuple[str, int] | None:
     """``(chip, line)`` of the PCA9685 /OE line from ``esc.output_enable_gpio`` (or of another GPIO key, e.g.

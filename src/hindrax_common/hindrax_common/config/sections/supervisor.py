@@ -42,6 +42,11 @@ SCHEMA, OPTIONAL = section("supervisor", {
                           "wall (pool.* box), m", 0.0, 10.0),
     "max_run_time_s": real("disarm after this long armed, s", 1.0, 86400.0),
 }, optional=("rate_check_disabled.",))
+#: the supervisor's node parameter ``clock_stall_timeout_s`` (read-only, outside the vehicle file, validated like the
+#: keys: config.node_parameters.declare_node_parameter), widened only by an in-process simulator that holds simulated
+#: time on purpose (hindrax bringup with the virtual pool)
+CLOCK_STALL_TIMEOUT = real("armed, ROS time standing still this long (steady clock) trips, s; default "
+                           "supervisor.rate_window_s", 0.2, 120.0)
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
