@@ -73,8 +73,7 @@ class AllocationCore:
         self.max_excess_ratio = float(cfg.thrusters.max_wrench_excess_ratio)
         lower, upper = self.allocator.force_limits_n()
         b = self.allocator.matrix
-        self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1),
-                          np.maximum(b * lower, b * upper).sum(axis=1))
+        self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1), np.maximum(b * lower, b * upper).sum(axis=1))
 
     def wrench_capacity_frd(self) -> tuple[np.ndarray, np.ndarray]:
         """``(lowest, highest)`` (6,) each axis of the body FRD wrench can reach, N and N m: for axis k the extremes

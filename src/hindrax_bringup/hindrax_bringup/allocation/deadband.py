@@ -82,8 +82,7 @@ class DeadbandSearch:
     n > :data:`MAX_THRUSTERS`.
     """
 
-    def __init__(self, matrix, weights, effort_weight: float, lower, upper, smallest_forward,
-                 smallest_reverse) -> None:
+    def __init__(self, matrix, weights, effort_weight: float, lower, upper, smallest_forward, smallest_reverse) -> None:
         b = np.array(matrix, dtype=float)
         if b.ndim != 2 or b.shape[0] != 6 or not 1 <= b.shape[1] <= MAX_THRUSTERS or not np.all(np.isfinite(b)):
             raise ValueError(f"matrix must be a finite (6, n) array with 1 <= n <= {MAX_THRUSTERS}, got {b.shape}")

@@ -155,8 +155,7 @@ def topside_policy(vehicle_name: str) -> str:
     ns = f"/{vehicle_name}"
 
     def names(kind: str, who: tuple[str, ...] | None = None) -> list[str]:
-        return [f"{ns}/{r.topside}" for r in INTERFACE
-                if r.kind == kind and (who is None or r.who in who)]
+        return [f"{ns}/{r.topside}" for r in INTERFACE if r.kind == kind and (who is None or r.who in who)]
 
     roles = topside_enclaves(vehicle_name)
     gateway = _node_rules() + [

@@ -125,8 +125,7 @@ class SupervisorNode(VehicleNode):
         self.create_subscription(Imu, "imu/data_raw", self.on_imu, sensor_input_qos(IMU_QUEUE_DEPTH), raw=True)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos())
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
-        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard,
-                                 heartbeat_qos(), raw=True)
+        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), raw=True)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")

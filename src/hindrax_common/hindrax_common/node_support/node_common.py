@@ -202,8 +202,7 @@ class RawDataPublisher:
     so the order on the wire is kept.
     """
 
-    def __init__(self, node: Any, device_name: str, topic: str | None = None,
-                 i2c_period_s: float = RAW_I2C_PERIOD_S):
+    def __init__(self, node: Any, device_name: str, topic: str | None = None, i2c_period_s: float = RAW_I2C_PERIOD_S):
         self._node = node
         self.device_name = device_name
         self.publisher = node.create_publisher(RawDeviceData, topic or f"raw/{device_name}", 100)
@@ -269,15 +268,13 @@ class RawDataPublisher:
             if end_batch:
                 self._batching = False
         if serial:
-            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
-                                             serial))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST, serial))
         if len(i2c) == 1:
             d, address, reg, data = i2c[0]
             self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
         elif i2c:
             packed = b"".join(_RAW_RECORD.pack(d, a, r, len(data)) + data for d, a, r, data in i2c)
-            self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1],
-                                             RAW_BATCH_REGISTER))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1], RAW_BATCH_REGISTER))
 
     def serial_tap(self, direction: str, data: bytes, _t: float | None = None) -> None:
         if direction == "rx":
@@ -285,8 +282,7 @@ class RawDataPublisher:
                 if self._batching:
                     self._serial += data
                     return
-            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
-                                             data))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST, data))
             return
         self.flush(end_batch=False)  # received bytes first: one direction per message, in wire order
         self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_HOST_TO_DEVICE, data))

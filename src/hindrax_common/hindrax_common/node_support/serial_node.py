@@ -161,8 +161,7 @@ class SerialDeviceNode(VehicleNode):
         self.device_name = device_name
         self.port = str(self.settings.port)
         self.baud_rate = int(self.settings.baud_rate)
-        self.stuck_limit_samples = declare_node_parameter(self, "stuck_limit_samples",
-                                                          STUCK_LIMIT_SAMPLES, 50)
+        self.stuck_limit_samples = declare_node_parameter(self, "stuck_limit_samples", STUCK_LIMIT_SAMPLES, 50)
         self._closed = False
         self._ever_connected = False
         self._no_data = False

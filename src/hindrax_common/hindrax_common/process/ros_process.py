@@ -229,8 +229,7 @@ class RosProcess:
         for sig in _STOP_SIGNALS:  # signal.signal runs the handlers of signals already received (absorbed here)
             signal.signal(sig, self._on_signal)
         for sig, previous in self._previous.items():
-            signal.signal(sig, signal.SIG_IGN if self.signals else
-                          previous if previous is not None else signal.SIG_DFL)
+            signal.signal(sig, signal.SIG_IGN if self.signals else previous if previous is not None else signal.SIG_DFL)
         self._previous = {}
 
     @property

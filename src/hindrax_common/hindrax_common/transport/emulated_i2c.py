@@ -296,9 +296,7 @@ class EmulatedI2CBus:
             raise ValueError("Data length cannot exceed 32 bytes")
         self._call(i2c_addr, bytes([register]) + payload)
 
-    def read_i2c_block_data(
-        self, i2c_addr: int, register: int, length: int, force: bool | None = None
-    ) -> list[int]:
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int, force: bool | None = None) -> list[int]:
         """I2C block read: write ``[register]``, repeated start, read ``length`` (1..32) bytes."""
         check_byte("register", register)
         if not isinstance(length, int) or length < 0 or length > I2C_SMBUS_BLOCK_MAX:

@@ -131,8 +131,7 @@ class StreamFaults:
             self._held, self._has_held = value, True
             return value
 
-    def transmit(self, messages: Iterable[bytes],
-                 corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
+    def transmit(self, messages: Iterable[bytes], corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
         """The bytes a device sends at one poll: the queued garbage, then each of ``messages``
         through :meth:`apply`; b"" while disconnected (the garbage is taken all the same)."""
         with self._lock:

@@ -139,8 +139,7 @@ class SerialTransport:
         if self._closed:
             raise SerialTransportError("transport is closed")
         if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name=f"SerialTransport({self.port})",
-                                            daemon=True)
+            self._thread = threading.Thread(target=self._run, name=f"SerialTransport({self.port})", daemon=True)
             self._thread.start()
 
     @property

@@ -34,8 +34,7 @@ from smbus2 import i2c_msg
 from ..process.scheduling import set_this_thread
 from .emulated_i2c import I2C_M_RD
 
-__all__ = ["SOCKET_ENV", "SMBUS_METHODS", "I2CSocketServer", "SocketI2CBus",
-           "forward_smbus_methods"]
+__all__ = ["SOCKET_ENV", "SMBUS_METHODS", "I2CSocketServer", "SocketI2CBus", "forward_smbus_methods"]
 
 #: environment variable: path of an :class:`I2CSocketServer` socket that ``open_smbus`` connects to instead of
 #: opening ``/dev/i2c-N`` (tests and benchmarks only)
@@ -107,8 +106,7 @@ class SocketI2CBus:
 def _rdwr(bus: Any, spec: list) -> list[bytes]:
     """Run a :meth:`SocketI2CBus.i2c_rdwr` request on ``bus``: its messages as ``smbus2.i2c_msg``;
     returns what the read messages read, in order."""
-    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data)
-            for addr, flags, data in spec]
+    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data) for addr, flags, data in spec]
     bus.i2c_rdwr(*msgs)
     return [bytes(m) for m in msgs if m.flags & I2C_M_RD]
 

@@ -288,9 +288,7 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
         expected = int(raw[-2:].decode("ascii"), 16)
         computed = nmea_checksum(body)
         if computed != expected:
-            raise DvlParseError(
-                f"checksum mismatch: line says {expected:02X}, computed {computed:02X}: {raw[:60]!r}"
-            )
+            raise DvlParseError(f"checksum mismatch: line says {expected:02X}, computed {computed:02X}: {raw[:60]!r}")
         checksum_ok = True
     text = body.decode("utf-8", errors="replace")
     parts = text.split(",")
@@ -376,8 +374,7 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
               record.delta_x_m, record.delta_y_m, record.delta_z_m)
     if not all(math.isfinite(v) for v in values):
         raise ValueError("non-finite delta")
-    body = "DVPDL,%d,%d,%.6f,%.6f,%.6f,%.3f,%.3f,%.3f,%d" % (
-        tu, dtu, *values, int(record.confidence_pct))
+    body = "DVPDL,%d,%d,%.6f,%.6f,%.6f,%.3f,%.3f,%.3f,%d" % (tu, dtu, *values, int(record.confidence_pct))
     return format_sentence(body)
 
 
@@ -595,8 +592,7 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     for prefix in ("IMU:", "GPS:"):
         if text.startswith(prefix):
             rest = text[len(prefix):]
-            return DvlUnknown(sentence_id=prefix[:-1], fields=tuple(rest.split(",")), line=text,
-                              checksum_ok=None)
+            return DvlUnknown(sentence_id=prefix[:-1], fields=tuple(rest.split(",")), line=text, checksum_ok=None)
     return DvlText(text=text, sentence_id="", checksum_ok=None)
 
 

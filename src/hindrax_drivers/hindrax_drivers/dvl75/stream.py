@@ -29,8 +29,7 @@ import collections
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Union
 
-from .protocol import (DvlLineFramer, DvlParseError, DvlRecord, DvlUnknown, nmea_checksum,
-                       parse_line)
+from .protocol import DvlLineFramer, DvlParseError, DvlRecord, DvlUnknown, nmea_checksum, parse_line
 
 __all__ = ["DvlStreamDecoder", "DvlStreamError", "ERROR_KINDS", "classify_line_error"]
 

@@ -389,8 +389,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
         addr = self._get(p.I2C_SLV4_ADDR)
         status = p.I2C_MST_STATUS_SLV4_DONE
         try:
-            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl,
-                                  self._get(p.I2C_SLV4_DO), 1)
+            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl, self._get(p.I2C_SLV4_DO), 1)
             if addr & p.I2C_SLV_ADDR_RNW:
                 self._set(p.I2C_SLV4_DI, data[0])
         except OSError:
@@ -465,8 +464,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
                     self._banks[0][p.EXT_SLV_SENS_DATA_00.address:
                                    p.EXT_SLV_SENS_DATA_00.address + p.EXT_SLV_SENS_DATA_LENGTH] = bytes(24)
                     self._set(p.I2C_MST_STATUS, 0)
-                self._set(p.USER_CTRL, value & ~(p.USER_CTRL_I2C_MST_RST | p.USER_CTRL_SRAM_RST
-                                                 | p.USER_CTRL_DMP_RST))
+                self._set(p.USER_CTRL, value & ~(p.USER_CTRL_I2C_MST_RST | p.USER_CTRL_SRAM_RST | p.USER_CTRL_DMP_RST))
                 if self.master_enabled and not was_enabled and not self.sleeping and not self._stuck:
                     gyro_odr_hz = self.config.gyro_odr_hz
                     self._last_master_t = math.floor(float(self.clock()) * gyro_odr_hz) / gyro_odr_hz

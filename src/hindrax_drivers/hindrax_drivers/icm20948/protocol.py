@@ -377,8 +377,7 @@ def slave_read_writes(slave: int, address: int, register: int, length: int) -> l
             BankedWrite(r, register & 0xFF), BankedWrite(c, I2C_SLV_CTRL_EN | length)]
 
 
-def slave_write_writes(slave: int, address: int, register: int, value: int,
-                       wait_s: float = 0.0) -> list[BankedWrite]:
+def slave_write_writes(slave: int, address: int, register: int, value: int, wait_s: float = 0.0) -> list[BankedWrite]:
     """Make the I2C master write ``value`` to ``register`` of ``address`` (docs/devices.md §4.6b step 4).
 
     SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The

@@ -470,8 +470,7 @@ def second_order(d1: int, first: Compensation, variant: Variant) -> Compensation
     off2 = first.off - offi
     sens2 = first.sens - sensi
     p2 = _pressure(d1, sens2, off2, _SHIFTS[variant][4])
-    return Compensation(dt=first.dt, temp=first.temp - ti, off=off2, sens=sens2, p=p2,
-                        ti=ti, offi=offi, sensi=sensi)
+    return Compensation(dt=first.dt, temp=first.temp - ti, off=off2, sens=sens2, p=p2, ti=ti, offi=offi, sensi=sensi)
 
 
 def pressure_counts_per_pa(variant: Variant) -> float:

@@ -125,8 +125,7 @@ class EscChip:
         self.raw.begin_batch()
         decoded: dict[int, float] = {}
         for run in channel_runs(sorted(per_channel)):
-            block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale,
-                                                       self.oscillator_hz)
+            block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale, self.oscillator_hz)
             decoded.update(zip(run, widths))
             if known_on_chip and block == b"".join(self._expected.get(c, b"") for c in run):
                 continue  # these registers already hold exactly these bytes

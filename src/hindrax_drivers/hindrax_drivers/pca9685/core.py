@@ -258,8 +258,7 @@ class EscOutput:
         mid = self.channel_neutral()
         x = widths_us / self.count_us
         outside = np.abs(widths_us - mid) >= self.deadband_us - 1e-9
-        counts = np.where(outside, np.where(widths_us > mid, np.ceil(x - 1e-9), np.floor(x + 1e-9)),
-                          np.floor(x + 0.5))
+        counts = np.where(outside, np.where(widths_us > mid, np.ceil(x - 1e-9), np.floor(x + 1e-9)), np.floor(x + 0.5))
         # never beyond the ESC's range: the nearest count inside it there
         lo, hi = self._grid_bounds
         return np.clip(counts, lo, hi) * self.count_us

@@ -100,8 +100,7 @@ def count_duration_us(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_
     return (check_prescale(prescale) + 1) / check_oscillator(oscillator_hz) * 1e6
 
 
-def pulse_width_to_counts(pulse_width_us: float, prescale: int,
-                          oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
+def pulse_width_to_counts(pulse_width_us: float, prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
     """Counts = round(pulse_us * f_osc / ((PRE_SCALE + 1) * 1e6)) (docs/devices.md §5.1 table note).
 
     Raises:
@@ -117,8 +116,7 @@ def pulse_width_to_counts(pulse_width_us: float, prescale: int,
     return counts
 
 
-def counts_to_pulse_width_us(counts: float, prescale: int,
-                             oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+def counts_to_pulse_width_us(counts: float, prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
     """High time in us of ``counts`` counts (0..4096) at the given prescale and oscillator."""
     if not 0 <= counts <= COUNTS_PER_PERIOD:
         raise Pca9685Error(f"counts must be 0..4096, got {counts}")
@@ -255,8 +253,7 @@ def startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> li
     Channel registers are not touched: at power-up every channel is full OFF (no pulses, which the
     ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel.
     """
-    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"),
-            *set_frequency_sequence(prescale, mode1)]
+    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
 
 
 def safe_startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL

@@ -140,8 +140,7 @@ class Ping1dNode(SerialDeviceNode):
                 if not self.firmware_version:
                     self.firmware_version = f"{p.firmware_version_major}.{p.firmware_version_minor}"
             elif isinstance(p, SpeedOfSound):
-                self._check("speed_of_sound_m_s", p.speed_of_sound_m_s, self.speed_of_sound_m_s,
-                            _SPEED_TOLERANCE_M_S)
+                self._check("speed_of_sound_m_s", p.speed_of_sound_m_s, self.speed_of_sound_m_s, _SPEED_TOLERANCE_M_S)
             elif isinstance(p, FirmwareVersion):
                 self.firmware_version = f"{p.firmware_version_major}.{p.firmware_version_minor}"
             elif isinstance(p, Ack):

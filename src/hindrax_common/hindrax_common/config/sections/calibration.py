@@ -45,8 +45,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             limit = c[mass] / rho
             ok = c[volume] > limit if side == "above" else c[volume] < limit
             if not ok:
-                issues.append(ConfigIssue(volume, c[volume],
-                                          f"{side} {mass} / water density = {limit:.4g} ({why})"))
+                issues.append(ConfigIssue(volume, c[volume], f"{side} {mass} / water density = {limit:.4g} ({why})"))
     return issues
 
 

@@ -28,10 +28,8 @@ for _dof in TRANSLATIONAL_DOFS:
         _KEYS[f"{_dof}.quadratic_damping_kg_m"] = real(f"{_dof} quadratic damping, kg/m", 0.0, 1e4)
 for _dof in ROTATIONAL_DOFS:
     _KEYS[f"{_dof}.added_mass_kg_m2"] = real(f"{_dof} added moment of inertia, kg m^2", 0.0, 1e3)
-    _KEYS[f"{_dof}.linear_damping_kg_m2_s"] = real(
-          f"{_dof} linear damping, N m/(rad/s) = kg m^2/s", 0.0, 1e3)
-    _KEYS[f"{_dof}.quadratic_damping_kg_m2"] = real(
-          f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
+    _KEYS[f"{_dof}.linear_damping_kg_m2_s"] = real(f"{_dof} linear damping, N m/(rad/s) = kg m^2/s", 0.0, 1e3)
+    _KEYS[f"{_dof}.quadratic_damping_kg_m2"] = real(f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
 SCHEMA, OPTIONAL = section("hydrodynamics", _KEYS)
 
 

@@ -86,8 +86,7 @@ _KEYS: dict[str, Spec] = {
 # Declared (datasheet / bench) noise of the sensors: what the vehicle's estimators assume. The virtual pool's own
 # noise lives in the truth file (ros_ws/config/truth/*.yaml, ``simulation.sensors.*``), never read by a node.
 _KEYS["dvl75.noise_std_m_s"] = real("declared DVL velocity white noise 1-sigma per axis, m/s", 0.0, 1.0)
-_KEYS["dvl75.scale_error_fraction"] = real("declared DVL 1-sigma multiplicative velocity error per report",
-                                           0.0, 0.5)
+_KEYS["dvl75.scale_error_fraction"] = real("declared DVL 1-sigma multiplicative velocity error per report", 0.0, 0.5)
 _KEYS["dvl75.attitude_noise_std_rad"] = real("declared DVL attitude white noise 1-sigma, rad", 0.0, 1.0)
 _KEYS["ms5837.noise_std_pa"] = real("declared pressure white noise 1-sigma, Pa", 0.0, 1e4)
 _KEYS["icm20948.accel_noise_std_m_s2"] = real("declared accelerometer white noise 1-sigma, m/s^2", 0.0, 10.0)

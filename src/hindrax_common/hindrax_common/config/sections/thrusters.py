@@ -184,15 +184,13 @@ def thrusters_config(f: Mapping[str, Any]) -> ThrustersConfig:
         return np.asarray(v, dtype=float) / np.linalg.norm(v)
 
     def build(cls: Any, prefix: str, convert: Mapping[str, Any], **given: Any) -> Any:
-        values = {k.name: get(f"{prefix}.{k.name}", convert.get(k.name))
-                  for k in fields(cls) if k.name not in given}
+        values = {k.name: get(f"{prefix}.{k.name}", convert.get(k.name)) for k in fields(cls) if k.name not in given}
         return cls.build({**values, **given}, prefix=prefix)
 
     per_thruster = {"position_frd_m": lambda v: np.asarray(v, dtype=float), "direction_frd": unit}
     shared = {"curve_negative": tuple, "curve_positive": tuple, "priority_dofs": tuple,
               "thrust_uncertainty_rel": _float_tuple, "thrust_fit_uncertainty_rel": _float_tuple}
-    ts = tuple(build(ThrusterConfig, f"thrusters.{n}", per_thruster, name=n)
-               for n in f["thrusters.names"])
+    ts = tuple(build(ThrusterConfig, f"thrusters.{n}", per_thruster, name=n) for n in f["thrusters.names"])
     return build(ThrustersConfig, "thrusters", shared, thrusters=ts)
 
 
