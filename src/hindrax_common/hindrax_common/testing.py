@@ -1,9 +1,8 @@
 """Helpers for tests and benchmarks: waiting on conditions, isolated rclpy contexts (both from
 :mod:`hindrax_common.process.conditions`, which production code uses), child processes, configuration parameters.
 
-Tests wait on conditions with a deadline, never on fixed sleeps (README, "Tests"). Every helper here
-keeps ROS 2 traffic on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and in the ROS_DOMAIN_ID the
-test session reserved (conftest.py).
+Tests wait on conditions with a deadline, never on fixed sleeps (README, "Tests"). Every helper here keeps ROS 2 traffic
+on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and in the ROS_DOMAIN_ID the test session reserved (conftest.py).
 """
 from __future__ import annotations
 

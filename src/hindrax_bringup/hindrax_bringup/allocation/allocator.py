@@ -1,9 +1,8 @@
 """Thrust allocation: body wrench (FRD) -> thruster forces -> ESC pulse widths, pure numpy.
 
-Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z
-K M N] in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster
-([Hindrax-Drag] eq. 1), :class:`ThrustAllocator` turns a requested wrench into forces and pulse
-widths:
+Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z K M N] in N and N
+m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hindrax-Drag] eq. 1),
+:class:`ThrustAllocator` turns a requested wrench into forces and pulse widths:
 
 1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``, ``W
    = diag(weights)``: of the least-squares forces, the one minimising ``sum w_i F_i^2``, computed
@@ -207,10 +206,9 @@ class ThrustAllocator:
         so a pair of thrusters is run against each other only to remove more than about one step's worth of
         wrench error; :data:`DEFAULT_EFFORT_WEIGHT` without a step.
 
-    Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n),
-    ``pseudo_inverse`` (n, 6), ``curves`` (n ThrustCurve), ``mode``,
-    ``priority_groups`` (tuples of axis indices, final group included), ``zero_authority_axes`` (6,)
-    bool, ``n_thrusters``.
+    Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n), ``pseudo_inverse`` (n, 6),
+    ``curves`` (n ThrustCurve), ``mode``, ``priority_groups`` (tuples of axis indices, final group included),
+    ``zero_authority_axes`` (6,) bool, ``n_thrusters``.
     """
 
     # Set by reconfigure() (which __init__ calls); declared here for the type checker.

@@ -2,10 +2,9 @@
 
 This is the whole topside interface (docs/architecture.md §8.2): the gateway (:mod:`hindrax_bringup.gateway.node`)
 relays these and nothing else between the vehicle's internal graph (loopback) and the topside domain, under the
-namespace ``/<vehicle.name>/``. Heartbeats, ``thrusters/*``, ``esc/*``, ``pressure/zero_depth`` and
-``supervisor/abort`` have no entry: they do not exist on the topside. ``who`` is the access the SROS2 permissions
-policy grants on the Pi: ``anyone`` (every topside participant), ``operator`` (the operator enclave only),
-``read`` (telemetry, subscribe only).
+namespace ``/<vehicle.name>/``. Heartbeats, ``thrusters/*``, ``esc/*``, ``pressure/zero_depth`` and ``supervisor/abort``
+have no entry: they do not exist on the topside. ``who`` is the access the SROS2 permissions policy grants on the Pi:
+``anyone`` (every topside participant), ``operator`` (the operator enclave only), ``read`` (telemetry, subscribe only).
 
 Pure: no rclpy import (the CLI, the policy generator and the tests read it).
 """

@@ -76,9 +76,8 @@ def replay_path(vehicle: str) -> Path:
 
 
 def create_key(path: Path, force: bool = False) -> Path:
-    """Write a new random 32-byte key (:func:`secrets.token_bytes`) to ``path`` as hex, mode 0600 from creation;
-    the folder is made (mode 0700) if missing. Raises :class:`OperatorKeyError` when the file exists and not
-    ``force``."""
+    """Write a new random 32-byte key (:func:`secrets.token_bytes`) to ``path`` as hex, mode 0600 from creation; the
+    folder is made (mode 0700) if missing. Raises :class:`OperatorKeyError` when the file exists and not ``force``."""
     path = Path(path)
     if path.exists() and not force:
         raise OperatorKeyError(f"{path} exists (a new key means copying it to the topside again): use --force to "

@@ -5,11 +5,10 @@ permissions document per *enclave*; a process joins the graph with its enclave's
 its permissions grant (default deny). This module writes the policy that matches docs/architecture.md §8.2:
 
 - **internal domain** (the vehicle's loopback graph): one enclave per process of the launch layout, named by the
-  ``--enclave`` its ``<node>`` passes (``/vehicle/<process>``, :func:`launch_enclaves`), plus ``/vehicle/gateway``
-  (the gateway's internal side) and ``/vehicle/tools`` (the ``hindrax`` commands run on the vehicle). Each may
-  use every topic, service and action of the internal graph
-  (:data:`INTERNAL_TOPICS`, :data:`INTERNAL_SERVICES`, :data:`INTERNAL_ACTIONS`): the vehicle trusts its own
-  processes; what it keeps from the topside is the domain itself.
+  ``--enclave`` its ``<node>`` passes (``/vehicle/<process>``, :func:`launch_enclaves`), plus ``/vehicle/gateway`` (the
+  gateway's internal side) and ``/vehicle/tools`` (the ``hindrax`` commands run on the vehicle). Each may use every
+  topic, service and action of the internal graph (:data:`INTERNAL_TOPICS`, :data:`INTERNAL_SERVICES`,
+  :data:`INTERNAL_ACTIONS`): the vehicle trusts its own processes; what it keeps from the topside is the domain itself.
 - **topside domain**, under ``/<vehicle.name>/``: ``/<name>/gateway`` serves the gateway's interface
   (:data:`hindrax_bringup.gateway.interface.INTERFACE`); ``/<name>/operator`` may call all of it (arm, disarm,
   reset, setpoints, campaign, recorder); ``/<name>/topside`` (every other topside participant) may call ``estop``

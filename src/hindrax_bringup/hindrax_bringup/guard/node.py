@@ -27,14 +27,13 @@ later without any software alive. A feed line that cannot be requested or driven
 heartbeat). When no edge went out for longer than the timeout while the ESC was armed (this process was frozen or
 starved), the guard asserts and latches: thrust comes back only through a new arm request.
 
-Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed
-flag and the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold)
-and ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
-unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_common.process.sd_notify`):
-a frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
-``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled,
-ERROR = silenced with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics``
-(``hindrax/output_guard``).
+Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed flag and
+the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
+``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the unit's READY=1
+and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_common.process.sd_notify`): a frozen ESC,
+supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes ``guard/heartbeat``
+(hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled, ERROR = silenced with
+the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_common.node_support.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so

@@ -1,10 +1,9 @@
 """Safety supervisor node: disarms the ESC output when the vehicle leaves its safe envelope.
 
-Thin rclpy wrapper of :class:`~hindrax_bringup.supervisor.core.SupervisorCore` (the checks and their keys are
-documented there). On a breach it calls ``esc/set_armed`` with ``arm=False`` (the ESC node writes neutral on
-every channel in that service callback, i.e. at once, well within one output period), latches the reason, says
-why on ``supervisor/status`` and in ``/diagnostics`` (level ERROR), and disarms again whenever the ESC reports
-armed while the breach is latched.
+Thin rclpy wrapper of :class:`~hindrax_bringup.supervisor.core.SupervisorCore` (the checks and their keys are documented
+there). On a breach it calls ``esc/set_armed`` with ``arm=False`` (the ESC node writes neutral on every channel in that
+service callback, i.e. at once, well within one output period), latches the reason, says why on ``supervisor/status``
+and in ``/diagnostics`` (level ERROR), and disarms again whenever the ESC reports armed while the breach is latched.
 
 Subscribes (ROS time of arrival is used for rates and run time, the header stamps for freshness; ``use_sim_time``
 supported)

@@ -64,8 +64,7 @@ def check_prescale(prescale: int) -> int:
 def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
     """PRE_SCALE = round(f_osc / (4096 f)) - 1 (docs/devices.md §5.1 [Q1 §7.3.5]).
 
-    Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not
-    Python's banker's rounding.
+    Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not Python's banker's rounding.
 
     Raises:
         Pca9685Error: non-finite/non-positive inputs, or a result outside 3..255

@@ -5,15 +5,13 @@ the ESC pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, one cubic for
 (1100-1500 us) and one for positive (1500-1900 us); 1500 us stops the motor. Coefficient tuples are
 ordered ``(c4, c3, c2, c1)``, highest power first (``numpy.polyval`` order).
 
-[Hindrax-Drag]'s Table 2 negative row gives -15.53 N at 1100 us and is monotone only up to 1495.8
-us; its positive row as printed is negative and decreasing on the forward side, which
-``ThrustCurve`` rejects (``test/test_thrust_curve.py`` asserts both). Until a bollard-pull fit
-replaces it, the default positive curve is the point reflection of the negative one about (1500 us,
-0 N) (docs/architecture.md §4, :func:`point_reflection`).
+[Hindrax-Drag]'s Table 2 negative row gives -15.53 N at 1100 us and is monotone only up to 1495.8 us; its positive row
+as printed is negative and decreasing on the forward side, which ``ThrustCurve`` rejects (``test/test_thrust_curve.py``
+asserts both). Until a bollard-pull fit replaces it, the default positive curve is the point reflection of the negative
+one about (1500 us, 0 N) (docs/architecture.md §4, :func:`point_reflection`).
 
-ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop,
-1900 us full forward, deadband 1500 +- 25 us (UNVERIFIED there). The forward model returns 0 N
-inside the deadband.
+ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop, 1900 us full
+forward, deadband 1500 +- 25 us (UNVERIFIED there). The forward model returns 0 N inside the deadband.
 
 Inverse: on each side only the monotone branch from the range end towards neutral is used, ending at
 the cubic's first extremum, its first zero or the deadband edge, whichever comes first (1100-1475 us
@@ -138,13 +136,12 @@ def forward_thrust(pulse_width_us, negative, positive, pulse_width_min_us, pulse
                    positive_edge_us, max_reverse_n, max_forward_n):
     """Forward thrust model (N) of :meth:`ThrustCurve.thrust_n` at ``voltage_scale = 1``, vectorised.
 
-    Every parameter broadcasts against ``pulse_width_us``: ``negative`` and ``positive`` are
-    ``(c4, c3, c2, c1)`` of [Hindrax-Drag] eq. 1 with shape (4,) or (4, n) (one column per thruster), the others
-    scalars or (n,). Pulse widths are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative
-    cubic (clipped to <= 0) applies at ``P <= negative_edge_us``, the positive one (clipped to >= 0) at
-    ``P >= positive_edge_us``, 0 N between (deadband, docs/devices.md §5.2); the result is clipped to
-    ``[max_reverse_n, max_forward_n]``. Inputs are not validated: use :meth:`ThrustCurve.thrust_n`
-    unless the values come from :attr:`ThrustCurve.forward_parameters`.
+    Every parameter broadcasts against ``pulse_width_us``: ``negative`` and ``positive`` are ``(c4, c3, c2, c1)`` of
+    [Hindrax-Drag] eq. 1 with shape (4,) or (4, n) (one column per thruster), the others scalars or (n,). Pulse widths
+    are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative cubic (clipped to <= 0) applies at
+    ``P <= negative_edge_us``, the positive one (clipped to >= 0) at ``P >= positive_edge_us``, 0 N between (deadband,
+    docs/devices.md §5.2); the result is clipped to ``[max_reverse_n, max_forward_n]``. Inputs are not validated: use
+    :meth:`ThrustCurve.thrust_n` unless the values come from :attr:`ThrustCurve.forward_parameters`.
     """
     p = np.minimum(np.maximum(pulse_width_us, pulse_width_min_us), pulse_width_max_us)
     thrust = np.where(p <= negative_edge_us, np.minimum(_cubic(negative, p), 0.0),

@@ -128,9 +128,8 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
 
 
 def _descriptor(name: str, spec: Spec, read_only: bool) -> ParameterDescriptor:
-    """``rcl_interfaces/ParameterDescriptor`` of a parameter from its Spec: description,
-    additional_constraints "allowed <range>", ranges for scalar numbers with both bounds; the
-    type is left to the caller."""
+    """``rcl_interfaces/ParameterDescriptor`` of a parameter from its Spec: description, additional_constraints "allowed
+    <range>", ranges for scalar numbers with both bounds; the type is left to the caller."""
     d = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                             read_only=read_only)
     if spec.kind == "float" and spec.lo is not None and spec.hi is not None:

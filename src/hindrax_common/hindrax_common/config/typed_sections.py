@@ -19,9 +19,8 @@ ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 
 @dataclass_transform(frozen_default=True, eq_default=False)
 class Section:
-    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is
-    the dotted path (the ``prefix`` class keyword of a subclass,
-    ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
+    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is the dotted path (the
+    ``prefix`` class keyword of a subclass, ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
     read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`.

@@ -441,27 +441,22 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
               executor: str | None = None, exit_process: bool = True) -> int:
-    """Process entry point of nodes composed in one process (:mod:`hindrax_bringup.layout.composition`):
-    the nodes are built in order after ``rclpy.init`` and spun by one executor; on exit they are
-    closed and destroyed in the reverse order (the last built first). executor: ``events``,
-    ``single`` or None for the default (:mod:`hindrax_common.process.ros_process`: the EventsExecutor
-    unless ``HINDRAX_EXECUTOR=single``). Returns the exit status: 0 on SIGINT/SIGTERM, 1 on an
-    invalid configuration (one line on stderr naming key, value, allowed range) or when another vehicle's live ESC
-    or supervisor is on the domain of a process running one (a node class's ``START_CHECK``: one line ``refused:
-    ...``, :func:`~hindrax_common.node_support.vehicle_graph.refuse_live_peer`, before any node is built); an exception
-    out
-    of any node's callback ends the whole process (every node's ``close()`` still runs). SIGINT
-    shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
-    (:class:`~hindrax_common.process.ros_process.RosProcess`, ``interrupt=False``). Before
-    ``rclpy.init`` the process takes the real-time priority its environment asks for
-    (:mod:`hindrax_common.process.scheduling`; a bad value of ``HINDRAX_REALTIME_PRIORITY`` is an
-    invalid configuration), and logs the outcome once its nodes are built. A shutdown that takes
-    longer than :data:`~hindrax_common.process.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
-    thread's traceback to stderr and exits with status 1
-    (:class:`~hindrax_common.process.ros_process.RosProcess`). exit_process: in the main thread the
-    process ends on return, without the DDS participant's teardown
-    (:mod:`hindrax_common.process.ros_process`): the exit status becomes the process's; False returns
-    it."""
+    """Process entry point of nodes composed in one process (:mod:`hindrax_bringup.layout.composition`): the nodes are
+    built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the reverse
+    order (the last built first). executor: ``events``, ``single`` or None for the default
+    (:mod:`hindrax_common.process.ros_process`: the EventsExecutor unless ``HINDRAX_EXECUTOR=single``). Returns the exit
+    status: 0 on SIGINT/SIGTERM, 1 on an invalid configuration (one line on stderr naming key, value, allowed range) or
+    when another vehicle's live ESC or supervisor is on the domain of a process running one (a node class's
+    ``START_CHECK``: one line ``refused: ...``, :func:`~hindrax_common.node_support.vehicle_graph.refuse_live_peer`,
+    before any node is built); an exception out of any node's callback ends the whole process (every node's ``close()``
+    still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
+    (:class:`~hindrax_common.process.ros_process.RosProcess`, ``interrupt=False``). Before ``rclpy.init`` the process
+    takes the real-time priority its environment asks for (:mod:`hindrax_common.process.scheduling`; a bad value of
+    ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built. A
+    shutdown that takes longer than :data:`~hindrax_common.process.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
+    thread's traceback to stderr and exits with status 1 (:class:`~hindrax_common.process.ros_process.RosProcess`).
+    exit_process: in the main thread the process ends on return, without the DDS participant's teardown
+    (:mod:`hindrax_common.process.ros_process`): the exit status becomes the process's; False returns it."""
     try:
         sched = apply_realtime_priority()
     except ValueError as exc:

@@ -1,5 +1,4 @@
-"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one
-tap.
+"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one tap.
 
 - configuration ``<section>.port`` (device path or pyserial URL) and ``<section>.baud_rate``
   (:func:`hindrax_common.node_support.node_common.load_node_config`: invalid -> one line, exit 1);
@@ -183,8 +182,7 @@ class SerialDeviceNode(VehicleNode):
 
     # -- helpers for subclasses
     def count_decoder_events(self, counts: dict[str, int]) -> None:
-        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total:
-        garbage bytes, bad
+        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total: garbage bytes, bad
         checksums, ...) grew by since the last call."""
         for kind, total in counts.items():
             delta = total - self._decoder_counts.get(kind, 0)

@@ -1,21 +1,17 @@
-"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the
-processes that are it.
+"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the processes that are it.
 
-The project's tools must never speak for a vehicle they were not started as (docs/architecture.md,
-"Authority"): a replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed
-``wrench`` would drive the thrusters, a second ``bringup --sim`` on the vehicle's domain would mix
-its ESC and supervisor into the vehicle's safety graph.
+The project's tools must never speak for a vehicle they were not started as (docs/architecture.md, "Authority"): a
+replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed ``wrench`` would drive the thrusters, a
+second ``bringup --sim`` on the vehicle's domain would mix its ESC and supervisor into the vehicle's safety graph.
 
-- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics` (pure): the safety and actuation
-  topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``output_guard/*``,
-  ``wrench``, ``setpoint``, action and service topics) in any namespace; ``hindrax bag play``
-  withholds them unless asked with ``--safety-topics``.
+- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics` (pure): the safety and actuation topics (heartbeats,
+  ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``output_guard/*``, ``wrench``, ``setpoint``, action and
+  service topics) in any namespace; ``hindrax bag play`` withholds them unless asked with ``--safety-topics``.
 - :func:`foreign_vehicle_processes` (pure): the ESCs and supervisors a graph shows beyond the
   caller's own, each as one phrase naming the node.
-- :func:`graph_view`, :func:`own_view`, :class:`ForeignVehicleWatch` (over a discovery window, then
-  every :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start`
-  (from a bare look-out node before a tool creates anything: its heartbeat publishers, even for a
-  second, would disarm the vehicle's ESC).
+- :func:`graph_view`, :func:`own_view`, :class:`ForeignVehicleWatch` (over a discovery window, then every
+  :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start` (from a bare look-out
+  node before a tool creates anything: its heartbeat publishers, even for a second, would disarm the vehicle's ESC).
 - :func:`refuse_live_peer`: the same look-out for a vehicle's own ESC or supervisor process at its start: another
   one's heartbeat arriving is a second vehicle on the domain (issue 74.2).
 """

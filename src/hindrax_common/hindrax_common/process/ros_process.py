@@ -308,8 +308,7 @@ class RosProcess:
             self._holder = _participant_holder()
 
     def _end_process(self, failure: BaseException | None) -> None:
-        """End the process now (module docstring): the traceback of
-        ``failure`` and status 1, or :attr:`status`."""
+        """End the process now (module docstring): the traceback of ``failure`` and status 1, or :attr:`status`."""
         status = self.status
         if failure is not None:
             traceback.print_exception(failure)
@@ -325,8 +324,7 @@ class RosProcess:
         os._exit(status)
 
     def _shut_down(self, exc_type: type | None, exc: BaseException | None) -> bool:
-        """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is
-        handled."""
+        """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is handled."""
         shutting_down = not rclpy.ok()  # before the clean-up: SIGINT/SIGTERM already shut the context down
         failed: list[Exception] = []
         while self._cleanups:

@@ -5,12 +5,11 @@ Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an
 :class:`EmulatedI2CBus` holding register- or command-exact device emulators (MS5837, ICM-20948,
 AK09916, PCA9685).
 
-Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the
-Linux i2c-dev driver does on the wire, so that the real driver code paths run unchanged: every SMBus
-call is broken into the I2C transactions the kernel issues (``read_i2c_block_data(addr, reg, n)`` is
-a 1-byte write of ``reg``, then, after a repeated start, an ``n``-byte read), each device emulator
-sees exactly what a real slave sees (:class:`I2CDeviceEmulator`), and an address nobody acknowledges
-fails with errno 121 as on Linux.
+Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the Linux i2c-dev driver
+does on the wire, so that the real driver code paths run unchanged: every SMBus call is broken into the I2C transactions
+the kernel issues (``read_i2c_block_data(addr, reg, n)`` is a 1-byte write of ``reg``, then, after a repeated start, an
+``n``-byte read), each device emulator sees exactly what a real slave sees (:class:`I2CDeviceEmulator`), and an address
+nobody acknowledges fails with errno 121 as on Linux.
 
 The module also provides :class:`RegisterPointerEmulator`, the shared base of every register-file
 device emulator (write = set pointer then data with auto-increment; read = continue from pointer).
@@ -93,9 +92,8 @@ class EmulatedI2CBus:
     ``OSError(errno.EBADF)`` after ``close()``; ``ValueError`` for out-of-range arguments
     (values not in 0..255, blocks longer than 32 bytes, as smbus2 does for block lengths).
 
-    Thread safety: every SMBus call holds one bus lock for its whole duration (a real adapter
-    serialises transfers the same way), so calls from several threads interleave only at call
-    boundaries.
+    Thread safety: every SMBus call holds one bus lock for its whole duration (a real adapter serialises transfers the
+    same way), so calls from several threads interleave only at call boundaries.
 
     Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; docs/architecture.md §2.
     """
@@ -307,9 +305,8 @@ class EmulatedI2CBus:
     def i2c_rdwr(self, *i2c_msgs: object) -> None:
         """Combined transfer of ``smbus2.i2c_msg`` messages (one ioctl, repeated starts).
 
-        Write messages (``flags & I2C_M_RD == 0``) are delivered with ``i2c_write``; read
-        messages are filled in place from ``i2c_read``. Any failure aborts the remaining messages,
-        as the kernel does.
+        Write messages (``flags & I2C_M_RD == 0``) are delivered with ``i2c_write``; read messages are filled in place
+        from ``i2c_read``. Any failure aborts the remaining messages, as the kernel does.
         """
         with self._lock:
             if not i2c_msgs:

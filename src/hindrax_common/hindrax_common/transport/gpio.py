@@ -1,8 +1,7 @@
 """Output lines through libgpiod (the ``gpiod`` Python bindings, v2 API), and their emulated stand-in.
 
 Used by the output guard (:mod:`hindrax_bringup.guard`) to drive the PCA9685 /OE pin (docs/architecture.md §8,
-docs/devices.md §5.1: /OE is active low; high = every output off, i.e. no pulses, which the Basic ESC treats as
-stop).
+docs/devices.md §5.1: /OE is active low; high = every output off, i.e. no pulses, which the Basic ESC treats as stop).
 
 Two objects with the same four methods, ``set_high(bool)``, ``is_high()``, ``release()`` and
 ``release_problem()`` ("" when a released line returns to its pull, else why not or why that is not known):

@@ -342,12 +342,11 @@ class PtyDevice:
                 self._stop.wait(self.poll_period_s)
 
     def service(self, t_s: Optional[float] = None, deliver: bool = True) -> int:
-        """One service cycle, synchronously and without waiting, for a caller that drives the device
-        itself instead of the thread (``start=False``; e.g. a simulator at every clock tick, so the
-        bytes go out at the simulated instant they are due): take the bytes the host wrote, then
-        write ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``). ``deliver=False`` discards the
-        output (counted in :attr:`bytes_dropped`), as a UART nobody listens to. Returns the number
-        of bytes delivered.
+        """One service cycle, synchronously and without waiting, for a caller that drives the device itself instead of
+        the thread (``start=False``; e.g. a simulator at every clock tick, so the bytes go out at the simulated instant
+        they are due): take the bytes the host wrote, then write ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``).
+        ``deliver=False`` discards the output (counted in :attr:`bytes_dropped`), as a UART nobody listens to. Returns
+        the number of bytes delivered.
 
         Raises:
             RuntimeError: while the service thread runs (one driver of the emulator at a time).

@@ -4,13 +4,12 @@ docs/architecture.md §2: transports are injected; serial goes through pyserial 
 simulator use pseudo-terminals so the real pyserial code path runs).  This module owns a port, reads it
 in a background thread and hands byte chunks to a callback; drivers stay protocol-only.
 
-The port is opened with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a
-pyserial URL), 8N1 (both devices use 115200 8N1, docs/devices.md §1.1 and §2.1). When it disappears
-(read/write error, USB unplug, pty closed) the reader thread closes it and re-opens it with
-exponential backoff; ``on_connect()`` after every open lets the driver resend its start-up commands.
-Callback exceptions are caught and counted: they never kill the reader thread. The raw tap lets a
-node record the traffic (docs/architecture.md §7); :meth:`SerialTransport.pump` reads in the
-caller's thread instead (a simulator's lock-step: :mod:`hindrax_sim.hardware`).
+The port is opened with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a pyserial URL), 8N1 (both
+devices use 115200 8N1, docs/devices.md §1.1 and §2.1). When it disappears (read/write error, USB unplug, pty closed)
+the reader thread closes it and re-opens it with exponential backoff; ``on_connect()`` after every open lets the driver
+resend its start-up commands. Callback exceptions are caught and counted: they never kill the reader thread. The raw tap
+lets a node record the traffic (docs/architecture.md §7); :meth:`SerialTransport.pump` reads in the caller's thread
+instead (a simulator's lock-step: :mod:`hindrax_sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
 error and has no reconnect, state, or tap.
@@ -160,11 +159,10 @@ class SerialTransport:
         return self._connected_event.wait(timeout_s)
 
     def pump(self, n_bytes: int, timeout_s: float) -> bool:
-        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since
-        construction, as ``status().bytes_handled``) have been through the tap and ``on_data``, or
-        ``timeout_s`` of wall time passed without a byte (a read in progress may add
-        ``read_timeout_s``); True when they have. The first call takes
-        the reading over from the reader thread for good (it then sleeps until the port is lost)."""
+        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since construction, as
+        ``status().bytes_handled``) have been through the tap and ``on_data``, or ``timeout_s`` of wall time passed
+        without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call takes the
+        reading over from the reader thread for good (it then sleeps until the port is lost)."""
         if not self._caller_reads:
             self._caller_reads = True
             ser = self._ser
@@ -304,9 +302,8 @@ class SerialTransport:
                 self._stop.wait(delay)
 
     def _read_chunk(self, ser: Any) -> bool:
-        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and
-        ``on_data``; False when
-        the read failed (the port is then closed, ``on_disconnect`` told)."""
+        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and ``on_data``; False when the
+        read failed (the port is then closed, ``on_disconnect`` told)."""
         try:
             data = ser.read(max(1, ser.in_waiting))
             # the rest of a message: one chunk, one callback

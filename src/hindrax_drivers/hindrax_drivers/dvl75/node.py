@@ -5,11 +5,10 @@ Run alone: ``python -m hindrax_drivers.dvl75.node --ros-args --params-file ros_w
 (device path or pyserial URL), ``baud_rate``, ``position_frd_m`` (lever arm), ``sensor_orientation_rpy_rad``,
 ``speed_of_sound_m_s``, ``velocity_std_m_s``. Node parameter ``stuck_limit_samples`` (default 50).
 
-Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as
-the BlueOS driver does [D17], :func:`hindrax_drivers.dvl75.protocol.startup_commands` (the
-CONFIGURATION reply is logged at debug level). The sequence is sent again when the DVL reboots
-(``tu`` goes backwards) and when ``$DVEXT`` keeps arriving without ``$DVPDL`` for
-``MISSING_DVPDL_TIMEOUT_S``.
+Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as the BlueOS driver
+does [D17], :func:`hindrax_drivers.dvl75.protocol.startup_commands` (the CONFIGURATION reply is logged at debug level).
+The sequence is sent again when the DVL reboots (``tu`` goes backwards) and when ``$DVEXT`` keeps arriving without
+``$DVPDL`` for ``MISSING_DVPDL_TIMEOUT_S``.
 
 Publishes (QoS reliable, depth 10):
 
@@ -22,10 +21,9 @@ Publishes (QoS reliable, depth 10):
 - ``dvl/twist`` (geometry_msgs/TwistWithCovarianceStamped, ``base_link``): the same velocity, only when
   valid; covariance linear block ``velocity_std_m_s**2 * I``, angular block -1 on the diagonal
   (angular velocity not measured here: 0 with unknown variance), 0 elsewhere.
-- ``dvl/altitude`` (sensor_msgs/Range, frame ``dvl_link``, ULTRASOUND): one per ``$DVEXT``, the distance
-  to the bottom along the sensor axis; ``+inf`` when unlocked (REP-117 "no detection"). Limits
-  0.3..40 m and field of view :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (docs/devices.md §1.1 envelope); variance 0
-  (unknown, as Range.msg defines).
+- ``dvl/altitude`` (sensor_msgs/Range, frame ``dvl_link``, ULTRASOUND): one per ``$DVEXT``, the distance to the bottom
+  along the sensor axis; ``+inf`` when unlocked (REP-117 "no detection"). Limits 0.3..40 m and field of view
+  :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (docs/devices.md §1.1 envelope); variance 0 (unknown, as Range.msg defines).
 - ``raw/dvl75`` (hindrax_msgs/RawDeviceData): every byte in both directions, receive/send time stamps.
 - ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
   ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.malformed``,

@@ -400,9 +400,8 @@ _DVEXT_FOURS = (("orientation_wxyz", "q", _float, "%.6f".__mod__),
                 ("beam_range_m", "range", _float, "%.3f".__mod__))
 
 def parse_dvext(fields: Sequence[str]) -> DvlExtended:
-    """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty
-    field 35 that real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is
-    accepted too.
+    """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty field 35 that
+    real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is accepted too.
 
     Raises:
         DvlParseError: wrong field count, non-empty field 35, malformed number or flag.

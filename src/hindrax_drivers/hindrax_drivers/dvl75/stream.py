@@ -136,8 +136,7 @@ class DvlStreamDecoder:
         return out
 
     def reset(self) -> None:
-        """Drop a partial line (after a reconnect): a started sentence counts as truncated, other bytes
-        as garbage."""
+        """Drop a partial line (after a reconnect): a started sentence counts as truncated, other bytes as garbage."""
         discarded_before = self._framer.discarded_bytes
         self._framer.reset()
         discarded = self._framer.discarded_bytes - discarded_before

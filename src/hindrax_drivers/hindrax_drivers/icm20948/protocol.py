@@ -1,11 +1,10 @@
 """TDK InvenSense ICM-20948 (with AK09916 magnetometer): pure protocol layer (no I/O, no clocks).
 
-The registers the driver uses (the full map: docs/devices.md §4.1), identity values, the reset/wake
-and configuration sequences as data (lists of register writes), full-scale / DLPF / sample-rate
-register values from SI settings, conversion of raw burst reads to SI (accel m/s^2, gyro rad/s,
-temperature degC, magnetic field T rotated into the accel/gyro frame), the AK09916 status flags, and
-the device-side quantisation used by the emulator. Everything is from docs/devices.md §4 (datasheet
-DS-000189 [I1], SparkFun [I2], Pimoroni [I3], PX4 [I4]).
+The registers the driver uses (the full map: docs/devices.md §4.1), identity values, the reset/wake and configuration
+sequences as data (lists of register writes), full-scale / DLPF / sample-rate register values from SI settings,
+conversion of raw burst reads to SI (accel m/s^2, gyro rad/s, temperature degC, magnetic field T rotated into the
+accel/gyro frame), the AK09916 status flags, and the device-side quantisation used by the emulator. Everything is from
+docs/devices.md §4 (datasheet DS-000189 [I1], SparkFun [I2], Pimoroni [I3], PX4 [I4]).
 
 Why our own code: the available Python packages (Pimoroni ``icm20948``) do I/O inside the
 conversion code, hard-code one configuration and write a questionable I2C_MST_CTRL value
@@ -380,9 +379,8 @@ def slave_read_writes(slave: int, address: int, register: int, length: int) -> l
 def slave_write_writes(slave: int, address: int, register: int, value: int, wait_s: float = 0.0) -> list[BankedWrite]:
     """Make the I2C master write ``value`` to ``register`` of ``address`` (docs/devices.md §4.6b step 4).
 
-    SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The
-    master repeats the write every cycle until the slave is reconfigured; wait ``wait_s`` (at
-    least one master cycle) after enabling.
+    SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The master repeats the write
+    every cycle until the slave is reconfigured; wait ``wait_s`` (at least one master cycle) after enabling.
     """
     a, r, c, d = slave_registers(slave)
     return [BankedWrite(c, 0x00), BankedWrite(a, address & 0x7F), BankedWrite(r, register & 0xFF),
@@ -392,10 +390,9 @@ def slave_write_writes(slave: int, address: int, register: int, value: int, wait
 def mag_master_sequence(config: ImuConfig, mode: int = AK_MODE_CONTINUOUS_100HZ) -> list[BankedWrite]:
     """Reach the AK09916 through the ICM I2C master (docs/devices.md §4.6 (b)).
 
-    BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = I2C_MST_EN; via SLV0: CNTL3 = SRST, then
-    CNTL2 = ``mode``; finally SLV0 reads 9 bytes from ST1 (0x10) every cycle into
-    EXT_SLV_SENS_DATA_00..08. Each SLV0 write waits three master cycles (the master runs at the
-    gyro ODR, an assumption: the I2C_MST_ODR_CONFIG formula is unverified, §6).
+    BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = I2C_MST_EN; via SLV0: CNTL3 = SRST, then CNTL2 = ``mode``; finally
+    SLV0 reads 9 bytes from ST1 (0x10) every cycle into EXT_SLV_SENS_DATA_00..08. Each SLV0 write waits three master
+    cycles (the master runs at the gyro ODR, an assumption: the I2C_MST_ODR_CONFIG formula is unverified, §6).
 
     Raises:
         Icm20948Error: ``mode`` not an AK09916 CNTL2 mode.

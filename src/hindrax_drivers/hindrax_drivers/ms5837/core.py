@@ -115,12 +115,11 @@ def depth_covariance(pressure_variance_pa2: float, rho_g: float) -> list[float]:
 class DepthGate:
     """Range and rate-of-change gate on the depth after conversion (pure; see the module docstring).
 
-    ``check(t_s, depth_m)`` returns '' to publish, else the reason; ``invalid()`` tells it that a cycle gave no
-    reading (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted
-    one, accepted at most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and
-    accepted when the very next cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise
-    passes only when two consecutive garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well
-    under 1 m/s.
+    ``check(t_s, depth_m)`` returns '' to publish, else the reason; ``invalid()`` tells it that a cycle gave no reading
+    (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted one, accepted at
+    most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and accepted when the very next
+    cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise passes only when two consecutive
+    garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well under 1 m/s.
     """
 
     def __init__(self, min_depth_m: float, max_depth_m: float, max_rate_m_s: float, noise_m: float = 0.05,

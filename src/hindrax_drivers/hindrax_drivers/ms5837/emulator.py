@@ -1,7 +1,6 @@
 """TE MS5837-30BA / -02BA device emulator (command-exact, I2C address 0x76).
 
-For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device side of
-docs/devices.md §3.1 and §3.8:
+For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device side of docs/devices.md §3.1 and §3.8:
 
 * commands: reset (0x1E), PROM read (0xA0 + 2k, MSB first), D1/D2 conversions with OSR, ADC read
   (0x00, 3 bytes MSB first);
@@ -72,11 +71,10 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
     """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
 
     Implements docs/devices.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
-    ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts.
-    Instead of the closed-form estimate plus +-1 adjustment we bisect on the exact integer forward
-    model (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and
-    also covers the second-order branches. Both are clamped to 24 bits, so targets outside the
-    representable range saturate.
+    ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts. Instead of the
+    closed-form estimate plus +-1 adjustment we bisect on the exact integer forward model
+    (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and also covers the second-order
+    branches. Both are clamped to 24 bits, so targets outside the representable range saturate.
 
     Args:
         pressure_pa: absolute pressure, Pa.

@@ -1,14 +1,12 @@
 """TE MS5837-30BA / MS5837-02BA pressure sensor: pure protocol layer (no I/O, no clocks).
 
-Commands, PROM parsing and CRC-4, first- and second-order compensation, variant detection, unit
-conversion and depth, all from docs/devices.md §3 (TE datasheets [M1][M2][M3], Blue Robotics and TE
-libraries [M4][M5][M6]).
+Commands, PROM parsing and CRC-4, first- and second-order compensation, variant detection, unit conversion and depth,
+all from docs/devices.md §3 (TE datasheets [M1][M2][M3], Blue Robotics and TE libraries [M4][M5][M6]).
 
-Why our own code instead of Blue Robotics' ``ms5837-python``: that library is not in the local
-package index, needs I/O in the same class, and uses float division, which does not reproduce the
-datasheet's integer examples (docs/devices.md §0 item 5, §3.7). Here every step uses the datasheet's integer
-arithmetic with **floor** semantics (Python ``//``, equal to an arithmetic right shift), which
-reproduces both worked examples exactly.
+Why our own code instead of Blue Robotics' ``ms5837-python``: that library is not in the local package index, needs I/O
+in the same class, and uses float division, which does not reproduce the datasheet's integer examples (docs/devices.md
+§0 item 5, §3.7). Here every step uses the datasheet's integer arithmetic with **floor** semantics (Python ``//``, equal
+to an arithmetic right shift), which reproduces both worked examples exactly.
 
 Vendor-document issue handled here: the 30BA datasheet example prints OFF = 2381326464, a digit
 typo for 2381323464 (docs/devices.md §3.7); we implement the formula, and the tests check the corrected
@@ -325,10 +323,9 @@ class Calibration:
 def prom_sanity_issue(calibration: Calibration) -> str:
     """Why ``calibration`` cannot be a factory-programmed PROM, or "" when it can.
 
-    A blank (all-zero) PROM has CRC-4 0 and passes the check of docs/devices.md §3.3; an unanswered read
-    on a bus held high gives 0xFFFF words. Every coefficient C1..C6 of a real part is a non-zero 16-bit
-    value (the datasheet examples: 34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000
-    or 0xFFFF rejects the PROM.
+    A blank (all-zero) PROM has CRC-4 0 and passes the check of docs/devices.md §3.3; an unanswered read on a bus held
+    high gives 0xFFFF words. Every coefficient C1..C6 of a real part is a non-zero 16-bit value (the datasheet examples:
+    34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000 or 0xFFFF rejects the PROM.
     """
     bad = [f"C{k}" for k, c in enumerate(calibration.words[1:7], start=1) if c in (0, 0xFFFF)]
     if bad:

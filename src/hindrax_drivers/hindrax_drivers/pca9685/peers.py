@@ -60,8 +60,7 @@ class EscPeers:
                         "guard": HeartbeatWatch(node, "guard", self.on_guard_heartbeat, armed)}
 
     def tick(self) -> None:
-        """Advance both ages to now (the safety tick and an arm request; the beats arrive by
-        callbacks, a stale one's
+        """Advance both ages to now (the safety tick and an arm request; the beats arrive by callbacks, a stale one's
         waiting beats are taken first: :meth:`~hindrax_common.node_support.liveness.HeartbeatWatch.fresh`)."""
         for kind, age in (("supervisor", self.supervisor_age), ("guard", self.guard_age)):
             age.tick()

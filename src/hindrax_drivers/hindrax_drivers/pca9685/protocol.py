@@ -7,10 +7,9 @@ configuration check, are defined in :mod:`hindrax_common.base.hardware_limits` a
 Sources: docs/devices.md §5.1 (NXP datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2
 (Blue Robotics Basic ESC [E1]-[E5]).
 
-Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an
-``smbus2.SMBus`` object, hides the register arithmetic, and computes counts from the *requested*
-frequency; docs/devices.md §5.1 requires using the actual prescale and (calibrated) oscillator
-frequency, which is what every function here takes.
+Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an ``smbus2.SMBus`` object,
+hides the register arithmetic, and computes counts from the *requested* frequency; docs/devices.md §5.1 requires using
+the actual prescale and (calibrated) oscillator frequency, which is what every function here takes.
 """
 
 from __future__ import annotations

@@ -12,11 +12,10 @@ Queue rules (one test each in ``test/test_esc_worker.py``):
   posted after it run after it (a disarm reaches the chip before any later thrust);
 * a read-back or a configure already pending is not queued twice.
 
-A bus call that has not returned after ``call_timeout_s`` is a fault the node acts on (:meth:`ChipWorker.stuck_s`;
-the heartbeat then says ERROR and the output guard's /OE stops the outputs, docs/watchdog.md): the worker itself
-cannot abandon a call that hangs. ``threaded=False`` runs each job in the posting thread instead (a lock-step
-simulation, whose chip writes must land at the simulated instant of the command); the jobs, their order and their
-results are the same.
+A bus call that has not returned after ``call_timeout_s`` is a fault the node acts on (:meth:`ChipWorker.stuck_s`; the
+heartbeat then says ERROR and the output guard's /OE stops the outputs, docs/watchdog.md): the worker itself cannot
+abandon a call that hangs. ``threaded=False`` runs each job in the posting thread instead (a lock-step simulation, whose
+chip writes must land at the simulated instant of the command); the jobs, their order and their results are the same.
 """
 from __future__ import annotations
 
