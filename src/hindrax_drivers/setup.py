@@ -11,8 +11,7 @@ from setuptools import find_packages, setup
 PACKAGE = "hindrax_drivers"
 HERE = Path(__file__).resolve().parent
 
-#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch
-#: files use.
+#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch files use.
 NODES = {
     "dvl75_node": "hindrax_drivers.dvl75.node",
     "ping1d_node": "hindrax_drivers.ping1d.node",

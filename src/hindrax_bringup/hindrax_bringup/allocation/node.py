@@ -45,9 +45,8 @@ from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
 BASE_FRAME = "base_link"
-#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of
-#: state, s (5 Hz: a topside display, the controller's anti-windup; a change of saturation or
-#: rejection goes out at once)
+#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s (5 Hz: a topside
+#: display, the controller's anti-windup; a change of saturation or rejection goes out at once)
 STATUS_PERIOD_S = 0.2
 STATUS_PERIOD_NS = int(STATUS_PERIOD_S * 1e9)
 

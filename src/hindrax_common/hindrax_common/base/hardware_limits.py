@@ -29,10 +29,9 @@ PRESCALE_MIN = 3
 PRESCALE_MAX = 255
 #: Nominal internal oscillator; real parts measure 23-27 MHz: calibrate (docs/devices.md §0 item 8, §5.1).
 INTERNAL_OSCILLATOR_HZ = 25_000_000.0
-#: Range of the PCA9685's internal oscillator, Hz: 25 MHz nominal (data sheet §7.3.5, osc_clock 25 MHz);
-#: individual parts measure 23-27 MHz (docs/devices.md §5.1). A calibration outside it is a wrong reading
-#: (channel, trigger, unit), not a part: with 28.85 MHz assumed, a commanded 1500 us neutral puts 1732 us on a
-#: 25 MHz part's wire.
+#: Range of the PCA9685's internal oscillator, Hz: 25 MHz nominal (data sheet §7.3.5, osc_clock 25 MHz); individual
+#: parts measure 23-27 MHz (docs/devices.md §5.1). A calibration outside it is a wrong reading (channel, trigger, unit),
+#: not a part: with 28.85 MHz assumed, a commanded 1500 us neutral puts 1732 us on a 25 MHz part's wire.
 PCA9685_OSCILLATOR_MIN_HZ = 23e6
 PCA9685_OSCILLATOR_MAX_HZ = 27e6
 

@@ -31,10 +31,9 @@ from .socket_i2c import SOCKET_ENV, SocketI2CBus
 
 __all__ = ["BusHandle", "I2CDevice", "I2CError", "I2CStats", "RawTap", "RegisterWrite", "open_smbus"]
 
-#: Raw tap signature: ``(kind, address, register, data, t_monotonic_s)``; ``kind`` is ``"write"``
-#: or ``"read"``; ``register`` is the register/command byte that started the transaction, or
-#: ``None`` for a plain read continuing from the device pointer; ``data`` are the data bytes
-#: written after the register byte, or the bytes read.
+#: Raw tap signature: ``(kind, address, register, data, t_monotonic_s)``; ``kind`` is ``"write"`` or ``"read"``;
+#: ``register`` is the register/command byte that started the transaction, or ``None`` for a plain read continuing from
+#: the device pointer; ``data`` are the data bytes written after the register byte, or the bytes read.
 RawTap = Callable[[str, int, Optional[int], bytes, float], None]
 
 

@@ -34,10 +34,9 @@ from .core import CONFIGURE, NEUTRAL, READBACK, WRITE
 __all__ = ["BUS_CALL_TIMEOUT_S", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "ChipJob", "ChipResult", "ChipWorker"]
 
 #: the default of ``esc.bus_call_timeout_s`` (the vehicle file sets it): a bus call that has not returned after this
-#: long is a fault, s: the output guard's ESC-heartbeat timeout is 0.2 s
-#: (``esc.guard_heartbeat_timeout_s``), so the ERROR heartbeat that follows at the next 25 Hz beat (40 ms) reaches it
-#: no later than silence would; a PCA9685 block write takes 0.9 ms at 400 kHz, an emulated-bus round trip 7-10 ms on
-#: a loaded machine
+#: long is a fault, s: the output guard's ESC-heartbeat timeout is 0.2 s (``esc.guard_heartbeat_timeout_s``), so the
+#: ERROR heartbeat that follows at the next 25 Hz beat (40 ms) reaches it no later than silence would; a PCA9685 block
+#: write takes 0.9 ms at 400 kHz, an emulated-bus round trip 7-10 ms on a loaded machine
 BUS_CALL_TIMEOUT_S = 0.15
 
 
