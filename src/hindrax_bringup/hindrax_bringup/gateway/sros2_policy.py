@@ -35,10 +35,9 @@ from typing import Iterable, Mapping
 
 from .interface import GATEWAY_NODE, INTERFACE
 
-__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS",
-           "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
-           "NODE_TOPICS", "POLICY_VERSION", "enclave_of", "gateway_internal_enclave", "internal_policy",
-           "launch_enclaves", "topside_enclaves", "topside_policy"]
+__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS", "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES",
+           "INTERNAL_TOPICS", "NODE_SERVICES", "NODE_TOPICS", "POLICY_VERSION", "enclave_of",
+           "gateway_internal_enclave", "internal_policy", "launch_enclaves", "topside_enclaves", "topside_policy"]
 
 #: sros2's policy format (``policy.xsd`` fixes the attribute ``version`` to it)
 POLICY_VERSION = "0.2.0"
@@ -165,8 +164,7 @@ def topside_policy(vehicle_name: str) -> str:
     operator = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
                 ("topics", {"subscribe": "ALLOW"}, names("topic_out")),
                 ("topics", {"publish": "ALLOW"}, names("topic_in")),
-                ("services", {"request": "ALLOW"}, names("service")),
-                ("actions", {"call": "ALLOW"}, names("action"))]
+                ("services", {"request": "ALLOW"}, names("service")), ("actions", {"call": "ALLOW"}, names("action"))]
     anyone = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
               ("topics", {"subscribe": "ALLOW"}, names("topic_out", ("read", "anyone"))),
               ("services", {"request": "ALLOW"}, names("service", ("anyone",))),

@@ -379,8 +379,7 @@ class OutputGuardNode(VehicleNode):
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
                 ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
-                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values())),
-                *self.tick_gaps.report()]
+                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values())), *self.tick_gaps.report()]
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:

@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["Pca9685Error", "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX",
-           "INTERNAL_OSCILLATOR_HZ", "PCA9685_OSCILLATOR_MIN_HZ", "PCA9685_OSCILLATOR_MAX_HZ",
-           "ESC_MIN_US", "ESC_NEUTRAL_US", "ESC_MAX_US", "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ",
-           "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S", "prescale_for_frequency",
-           "frequency_for_prescale", "esc_prescale"]
+__all__ = ["Pca9685Error", "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX", "INTERNAL_OSCILLATOR_HZ",
+           "PCA9685_OSCILLATOR_MIN_HZ", "PCA9685_OSCILLATOR_MAX_HZ", "ESC_MIN_US", "ESC_NEUTRAL_US", "ESC_MAX_US",
+           "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ", "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S",
+           "prescale_for_frequency", "frequency_for_prescale", "esc_prescale"]
 
 
 class Pca9685Error(ValueError):

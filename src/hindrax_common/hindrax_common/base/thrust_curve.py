@@ -34,9 +34,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["ThrustCurveError", "HINDRAX_DRAG_NEGATIVE_COEFFS",
-           "HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED", "HINDRAX_NOMINAL_VOLTAGE_V",
-           "BASIC_ESC_DEADBAND_US", "point_reflection", "voltage_thrust_scale",
+__all__ = ["ThrustCurveError", "HINDRAX_DRAG_NEGATIVE_COEFFS", "HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED",
+           "HINDRAX_NOMINAL_VOLTAGE_V", "BASIC_ESC_DEADBAND_US", "point_reflection", "voltage_thrust_scale",
            "check_positive", "ThrustCurve", "hindrax_default_curve", "forward_thrust"]
 
 #: [Hindrax-Drag] Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).

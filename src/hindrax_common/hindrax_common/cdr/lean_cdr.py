@@ -192,9 +192,8 @@ def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, acce
     cls, vector, quaternion, no_orientation, encode = _imu_parts()
     a = [float(x) for x in accel_m_s2]
     g = [float(x) for x in gyro_rad_s]
-    return encode(cls(header=_header(stamp_ns, frame_id),
-                      orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=no_orientation,
-                      angular_velocity=vector(x=g[0], y=g[1], z=g[2]),
+    return encode(cls(header=_header(stamp_ns, frame_id), orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+                      orientation_covariance=no_orientation, angular_velocity=vector(x=g[0], y=g[1], z=g[2]),
                       angular_velocity_covariance=np.asarray(gyro_cov, dtype=np.float64).ravel(),
                       linear_acceleration=vector(x=a[0], y=a[1], z=a[2]),
                       linear_acceleration_covariance=np.asarray(accel_cov, dtype=np.float64).ravel()))

@@ -52,9 +52,8 @@ def range_message(stamp_ns: int, frame_id: str, field_of_view_rad: float, min_ra
                   max_range_m: float, range_m: float) -> Range:
     """An ULTRASOUND ``sensor_msgs/Range`` stamped ``stamp_ns`` (ns); variance 0 (unknown, as
     Range.msg defines: no accuracy is documented)."""
-    msg = Range(radiation_type=Range.ULTRASOUND, field_of_view=float(field_of_view_rad),
-                min_range=float(min_range_m), max_range=float(max_range_m), range=float(range_m),
-                variance=0.0)
+    msg = Range(radiation_type=Range.ULTRASOUND, field_of_view=float(field_of_view_rad), min_range=float(min_range_m),
+                max_range=float(max_range_m), range=float(range_m), variance=0.0)
     msg.header.stamp, msg.header.frame_id = time_from_ns(stamp_ns), frame_id
     return msg
 
@@ -173,9 +172,8 @@ class SerialDeviceNode(VehicleNode):
         self.raw.begin_batch()  # raw/<device>: one message per parsed report (see _on_data), not per read chunk
         self.diag = DeviceDiagnostics(f"hindrax/{device_name}", self.port, self.now_s)
         self.diag.set_state("disconnected", DiagnosticStatus.ERROR, f"opening {self.port}")
-        self.transport = SerialTransport(self.port, self.baud_rate, on_data=self._on_data,
-                                         on_raw=self.raw.serial_tap, on_connect=self._on_connect,
-                                         on_disconnect=self._on_disconnect, start=False)
+        self.transport = SerialTransport(self.port, self.baud_rate, on_data=self._on_data, on_raw=self.raw.serial_tap,
+                                         on_connect=self._on_connect, on_disconnect=self._on_disconnect, start=False)
         self.commands = CommandSequencer(self.transport, command_gap_s, name=f"{device_name}-commands")
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._housekeeping_timer = self.create_timer(_HOUSEKEEPING_PERIOD_S, self._housekeeping)

@@ -326,8 +326,7 @@ class I2CDevice:
             data = self._run(f"read_block(0x{register:02x}, {length})", call)
             if len(data) != length:
                 raise I2CError(None, f"{self.name}@0x{self.address:02x}: short read {len(data)}/{length}",
-                               device_name=self.name, address=self.address,
-                               operation="read_block", attempts=1)
+                               device_name=self.name, address=self.address, operation="read_block", attempts=1)
             self._tap("read", register, data)
             return data
 

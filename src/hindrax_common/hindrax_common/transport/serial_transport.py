@@ -83,13 +83,10 @@ class SerialTransport:
         ValueError: non-positive timing parameters.
     """
 
-    def __init__(self, port: str, baudrate: int = 115200, *,
-                 on_data: Optional[Callable[[bytes], None]] = None,
+    def __init__(self, port: str, baudrate: int = 115200, *, on_data: Optional[Callable[[bytes], None]] = None,
                  on_raw: Optional[Callable[[str, bytes, float], None]] = None,
-                 on_connect: Optional[Callable[[], None]] = None,
-                 on_disconnect: Optional[Callable[[str], None]] = None,
-                 reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0,
-                 read_timeout_s: float = 0.05,
+                 on_connect: Optional[Callable[[], None]] = None, on_disconnect: Optional[Callable[[str], None]] = None,
+                 reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0, read_timeout_s: float = 0.05,
                  clock: Callable[[], float] = time.monotonic, start: bool = True) -> None:
         if reconnect_initial_s <= 0 or reconnect_max_s < reconnect_initial_s:
             raise ValueError("need 0 < reconnect_initial_s <= reconnect_max_s")
@@ -149,10 +146,9 @@ class SerialTransport:
     def status(self) -> TransportStatus:
         """Consistent snapshot of counters and state."""
         with self._stats_lock:
-            return TransportStatus(self.port, self.connected, self._last_error, self._bytes_rx,
-                                   self._bytes_tx, self._reconnects, self._open_failures,
-                                   self._callback_errors, self._closed, self._bytes_handled,
-                                   self._connections)
+            return TransportStatus(self.port, self.connected, self._last_error, self._bytes_rx, self._bytes_tx,
+                                   self._reconnects, self._open_failures, self._callback_errors, self._closed,
+                                   self._bytes_handled, self._connections)
 
     def wait_connected(self, timeout_s: float) -> bool:
         """Block until connected or ``timeout_s`` passes; returns :attr:`connected`."""

@@ -173,10 +173,9 @@ class Dvl75Emulator:
         commands_received: every command line received, decoded.
     """
 
-    def __init__(self, truth_source: TruthSource, *, rate_hz: float = 10.0,
-                 flash: Optional[DvlFlash] = None, beam_tilt_rad: float = BEAM_TILT_RAD,
-                 true_speed_of_sound_m_s: Optional[float] = None, min_altitude_m: float = 0.3,
-                 max_altitude_m: float = 40.0, seed: int = 0) -> None:
+    def __init__(self, truth_source: TruthSource, *, rate_hz: float = 10.0, flash: Optional[DvlFlash] = None,
+                 beam_tilt_rad: float = BEAM_TILT_RAD, true_speed_of_sound_m_s: Optional[float] = None,
+                 min_altitude_m: float = 0.3, max_altitude_m: float = 40.0, seed: int = 0) -> None:
         if isinstance(truth_source, DvlTruth):
             constant = truth_source
             truth_source = lambda _t: constant  # noqa: E731
@@ -343,9 +342,8 @@ class Dvl75Emulator:
         self._prev_tu, self._prev_truth = tu, truth
         self._prev_velocity = velocity if locked else None
 
-    def _extended(self, truth: DvlTruth, locked: bool, dt: float, velocity: np.ndarray,
-                  v_ned: np.ndarray, r_nb: np.ndarray, range_scale: float,
-                  gps_fresh: bool) -> DvlExtended:
+    def _extended(self, truth: DvlTruth, locked: bool, dt: float, velocity: np.ndarray, v_ned: np.ndarray,
+                  r_nb: np.ndarray, range_scale: float, gps_fresh: bool) -> DvlExtended:
         alt = truth.altitude_m if truth.altitude_m is not None else 0.0
         if locked:
             along_axis = alt / (math.cos(truth.roll_rad) * math.cos(truth.pitch_rad)) * range_scale

@@ -98,10 +98,8 @@ class Dvl75Node(SerialDeviceNode):
         s = self.cfg.sensors.dvl75
         self.sensor_orientation_rpy_rad = tuple(float(a) for a in s.sensor_orientation_rpy_rad)
         self.speed_of_sound_m_s = float(s.speed_of_sound_m_s)
-        self.builder = DvlReportBuilder(position_frd_m=s.position_frd_m,
-                                        velocity_std_m_s=float(s.velocity_std_m_s),
-                                        max_speed_m_s=float(s.max_speed_m_s),
-                                        min_interval_s=float(s.min_interval_s),
+        self.builder = DvlReportBuilder(position_frd_m=s.position_frd_m, velocity_std_m_s=float(s.velocity_std_m_s),
+                                        max_speed_m_s=float(s.max_speed_m_s), min_interval_s=float(s.min_interval_s),
                                         max_interval_s=float(s.max_interval_s),
                                         max_angular_rate_rad_s=float(s.max_angular_rate_rad_s))
         self.decoder = DvlStreamDecoder()

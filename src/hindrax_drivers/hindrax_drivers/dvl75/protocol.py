@@ -33,13 +33,11 @@ from dataclasses import dataclass
 from functools import reduce
 from typing import Any, Callable, Optional, Sequence, Tuple, Union
 
-__all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown",
-           "DvlRecord", "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD",
-           "beam_directions_frd", "LINE_TERMINATOR", "KNOT_M_S", "nmea_checksum", "format_sentence",
-           "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext", "parse_gprmc",
-           "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
-           "build_command", "cmd_send", "cmd_set_sensor_orientation", "cmd_set_speed_of_sound",
-           "startup_commands"]
+__all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown", "DvlRecord",
+           "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD", "beam_directions_frd", "LINE_TERMINATOR",
+           "KNOT_M_S", "nmea_checksum", "format_sentence", "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext",
+           "parse_gprmc", "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
+           "build_command", "cmd_send", "cmd_set_sensor_orientation", "cmd_set_speed_of_sound", "startup_commands"]
 
 #: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"
@@ -757,8 +755,7 @@ def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
 
 
 def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 0.0, 0.0),
-                     speed_of_sound_m_s: Optional[float] = None,
-                     request_configuration: bool = True) -> list:
+                     speed_of_sound_m_s: Optional[float] = None, request_configuration: bool = True) -> list:
     """The command lines a driver sends at start-up, modelled on the BlueOS sequence [D17]
     (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT ON``,
     ``SEND-GPRMC OFF``, ``RETWEET-IMU OFF``, ``RETWEET-GPS OFF``, ``SET-SENSOR-ORIENTATION``,

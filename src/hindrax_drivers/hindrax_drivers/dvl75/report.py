@@ -227,8 +227,7 @@ class DvlReportBuilder:
         """``report`` with its velocity withdrawn (NaN, not valid, covariances unknown) for ``reason``
         (e.g. a stuck device): everything else (attitude, altitude, beams) is kept."""
         return replace(report, velocity_valid=False, velocity_flu_m_s=_NAN3, delta_position_flu_m=_NAN3,
-                       velocity_covariance=UNKNOWN_COVARIANCE_3X3,
-                       twist_covariance=_UNKNOWN_TWIST,
+                       velocity_covariance=UNKNOWN_COVARIANCE_3X3, twist_covariance=_UNKNOWN_TWIST,
                        rejection=report.rejection or reason)
 
     def _report(self, ext: Optional[DvlExtended], *, device_time_ns, valid, velocity, delta, delta_time_s,

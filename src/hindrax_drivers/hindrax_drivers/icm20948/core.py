@@ -114,8 +114,7 @@ class ImuSettings:
         temperature_every = max(1, round(odr / TEMPERATURE_PUBLISH_HZ))
         mag_every = max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[mag_mode], odr) / MAG_PUBLISH_HZ))
         return cls(config, odr, mag_mode, rot, a_var, g_var, (rot * a_var) @ rot.T, (rot * g_var) @ rot.T,
-                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, temperature_every, mag_every,
-                   tuple(warnings))
+                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, temperature_every, mag_every, tuple(warnings))
 
 
 def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,

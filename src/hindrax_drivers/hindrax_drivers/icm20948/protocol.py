@@ -26,10 +26,9 @@ import numpy as np
 
 from hindrax_common.transport.i2c import RegisterWrite
 
-__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
-           "flatten_writes", "reset_wake_sequence", "configure_sequence",
-           "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
-           "ak09916_direct_init_writes", "parse_sensor_block",
+__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample", "flatten_writes",
+           "reset_wake_sequence", "configure_sequence", "slave_read_writes", "slave_write_writes",
+           "mag_master_sequence", "mag_bypass_sequence", "ak09916_direct_init_writes", "parse_sensor_block",
            "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
            "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
 

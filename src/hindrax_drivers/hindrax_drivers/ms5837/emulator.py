@@ -65,9 +65,8 @@ def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int,
     return a if abs(f(a) - target) < abs(f(b) - target) else b
 
 
-def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calibration,
-                  variant: p.Variant, apply_second_order: bool = True,
-                  hint: tuple[int, int] | None = None) -> tuple[int, int]:
+def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calibration, variant: p.Variant,
+                  apply_second_order: bool = True, hint: tuple[int, int] | None = None) -> tuple[int, int]:
     """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
 
     Implements docs/devices.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
@@ -139,9 +138,8 @@ class Ms5837Emulator:
     address = p.ADDRESS
 
     def __init__(self, truth: TruthSource, clock: Callable[[], float] = time.monotonic,
-                 variant: p.Variant | str = p.Variant.MS5837_30BA,
-                 coefficients: Sequence[int] | None = None, word0: int | None = None,
-                 apply_second_order: bool = True,
+                 variant: p.Variant | str = p.Variant.MS5837_30BA, coefficients: Sequence[int] | None = None,
+                 word0: int | None = None, apply_second_order: bool = True,
                  conversion_time_s: dict[int, float] | None = None) -> None:
         self._lock = threading.RLock()
         self.truth = truth

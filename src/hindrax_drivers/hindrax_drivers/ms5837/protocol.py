@@ -21,18 +21,15 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 __all__ = ["Ms5837Error", "Variant", "ADDRESS", "CMD_RESET", "CMD_ADC_READ", "CMD_PROM_READ_BASE",
-           "CMD_CONVERT_D1_BASE", "CMD_CONVERT_D2_BASE", "OSR_VALUES", "CONVERSION_TIME_S",
-           "RESET_TIME_S", "ADC_MAX", "PRODUCT_CODE_30BA26", "EXAMPLE_COEFFICIENTS_30BA",
-           "EXAMPLE_COEFFICIENTS_02BA",
-           "EXAMPLE_WORD0_30BA", "EXAMPLE_WORD0_02BA", "EXAMPLE_D1_30BA", "EXAMPLE_D2_30BA",
-           "EXAMPLE_D1_02BA", "EXAMPLE_D2_02BA", "GRAVITY_M_S2", "FRESH_WATER_DENSITY_KG_M3",
-           "SALT_WATER_DENSITY_KG_M3", "STANDARD_SURFACE_PRESSURE_PA", "TEMPERATURE_MIN_C",
-           "TEMPERATURE_MAX_C", "Command", "parse_variant", "prom_sanity_issue",
-           "convert_d1_command", "convert_d2_command", "prom_read_command", "decode_command",
-           "conversion_time_s", "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word",
-           "crc4", "prom_with_crc", "Calibration", "detect_variant", "Compensation", "Reading",
-           "first_order", "second_order", "compensate", "pressure_pa_from_counts",
-           "pressure_counts_per_pa", "depth_m"]
+           "CMD_CONVERT_D1_BASE", "CMD_CONVERT_D2_BASE", "OSR_VALUES", "CONVERSION_TIME_S", "RESET_TIME_S", "ADC_MAX",
+           "PRODUCT_CODE_30BA26", "EXAMPLE_COEFFICIENTS_30BA", "EXAMPLE_COEFFICIENTS_02BA", "EXAMPLE_WORD0_30BA",
+           "EXAMPLE_WORD0_02BA", "EXAMPLE_D1_30BA", "EXAMPLE_D2_30BA", "EXAMPLE_D1_02BA", "EXAMPLE_D2_02BA",
+           "GRAVITY_M_S2", "FRESH_WATER_DENSITY_KG_M3", "SALT_WATER_DENSITY_KG_M3", "STANDARD_SURFACE_PRESSURE_PA",
+           "TEMPERATURE_MIN_C", "TEMPERATURE_MAX_C", "Command", "parse_variant", "prom_sanity_issue",
+           "convert_d1_command", "convert_d2_command", "prom_read_command", "decode_command", "conversion_time_s",
+           "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word", "crc4", "prom_with_crc", "Calibration",
+           "detect_variant", "Compensation", "Reading", "first_order", "second_order", "compensate",
+           "pressure_pa_from_counts", "pressure_counts_per_pa", "depth_m"]
 
 
 class Ms5837Error(ValueError):
@@ -531,8 +528,7 @@ def _check_density_gravity(fluid_density_kg_m3: float, gravity_m_s2: float) -> N
 
 
 def depth_m(pressure_pa: float, fluid_density_kg_m3: float = FRESH_WATER_DENSITY_KG_M3,
-            surface_pressure_pa: float = STANDARD_SURFACE_PRESSURE_PA,
-            gravity_m_s2: float = GRAVITY_M_S2) -> float:
+            surface_pressure_pa: float = STANDARD_SURFACE_PRESSURE_PA, gravity_m_s2: float = GRAVITY_M_S2) -> float:
     """Depth below the surface: (P - P_surface) / (rho * g), in m (positive down; docs/devices.md §3.6).
 
     Defaults: fresh water 997 kg/m^3, P_surface 101300 Pa, g = 9.80665 m/s^2. Measure the surface

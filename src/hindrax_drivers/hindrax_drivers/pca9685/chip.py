@@ -46,9 +46,8 @@ class EscChip:
     #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending
     EXPECTED_MODE1 = p.MODE1_AI | p.MODE1_ALLCALL
 
-    def __init__(self, address: int, prescale: int, oscillator_hz: float, channels: Sequence[int],
-                 lights_channel: int, raw: Any, device: I2CDevice | None = None,
-                 reference: tuple[int, float] | None = None) -> None:
+    def __init__(self, address: int, prescale: int, oscillator_hz: float, channels: Sequence[int], lights_channel: int,
+                 raw: Any, device: I2CDevice | None = None, reference: tuple[int, float] | None = None) -> None:
         self.address, self.prescale, self.oscillator_hz = int(address), int(prescale), float(oscillator_hz)
         self.channels = [int(c) for c in channels]
         self.lights_channel = int(lights_channel)

@@ -403,9 +403,8 @@ class EscCore:
             return True
         return self.clock() - self.last_attempt >= self.retry_s
 
-    def chip_result(self, kind: str, *, error: str = "", no_bus: bool = False, mismatch: str = "",
-                    wrote: bool = False, written_us: np.ndarray | None = None,
-                    output_state: int = OUTPUT_NEUTRAL) -> ChipOutcome:
+    def chip_result(self, kind: str, *, error: str = "", no_bus: bool = False, mismatch: str = "", wrote: bool = False,
+                    written_us: np.ndarray | None = None, output_state: int = OUTPUT_NEUTRAL) -> ChipOutcome:
         """A chip job done (module docstring, Chip results): ``kind`` (:data:`CONFIGURE`, :data:`WRITE`,
         :data:`NEUTRAL`, :data:`READBACK`), its ``error`` ('' or why the bus failed; ``no_bus``: it could not be
         opened), a read-back ``mismatch`` ('' or what differed), ``wrote`` and ``written_us`` (n,) what is on the chip

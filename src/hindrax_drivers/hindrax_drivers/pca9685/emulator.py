@@ -54,9 +54,8 @@ class Pca9685Emulator(RegisterPointerEmulator):
         output_enable_line: the /OE line (``is_high()``: outputs off), or None (tied low: always enabled).
     """
 
-    def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ,
-                 clock: Callable[[], float] = time.monotonic, external_clock_hz: float | None = None,
-                 output_enable_line=None) -> None:
+    def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ, clock: Callable[[], float] = time.monotonic,
+                 external_clock_hz: float | None = None, output_enable_line=None) -> None:
         super().__init__()
         self.output_enable_line = output_enable_line
         if not oscillator_hz > 0.0:

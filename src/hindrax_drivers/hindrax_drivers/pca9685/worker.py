@@ -98,8 +98,7 @@ class ChipWorker:
     ``open_bus()`` returns an SMBus-like object or raises ``OSError``/``ImportError`` (called in the worker when the
     chip has no device); ``raw_tap`` is the device's raw tap; ``clock``: steady time, s."""
 
-    def __init__(self, chip: EscChip, open_bus: Callable[[], Any], raw_tap: Any = None,
-                 *, threaded: bool = True,
+    def __init__(self, chip: EscChip, open_bus: Callable[[], Any], raw_tap: Any = None, *, threaded: bool = True,
                  call_timeout_s: float = BUS_CALL_TIMEOUT_S, clock: Callable[[], float] = time.monotonic) -> None:
         self.chip, self._open_bus, self._raw_tap = chip, open_bus, raw_tap
         self.threaded, self.call_timeout_s, self.clock = bool(threaded), float(call_timeout_s), clock

@@ -41,14 +41,12 @@ from typing import Callable, Dict, List, Optional, Union
 import numpy as np
 
 from hindrax_common.transport.pty_device import PeriodicSchedule, StreamFaults
-from .protocol import (Ack, ContinuousStart, ContinuousStop, DeviceId, DeviceInformation, Distance,
-                       DistanceSimple, FirmwareVersion, GainSetting, GeneralInfo, GeneralRequest,
-                       ModeAuto, Nack, PcbTemperature, Ping1dFramer, Ping1dId, Ping1dMessage,
-                       Ping1dParseError, Ping1dPayload, PingEnable, PingInterval,
-                       ProcessorTemperature, Profile, ProtocolVersion, Range, SetDeviceId,
-                       SetGainSetting, SetModeAuto, SetPingEnable, SetPingInterval, SetRange,
-                       SetSpeedOfSound, SpeedOfSound, TransmitDuration, Voltage5, decode_message,
-                       encode_message)
+from .protocol import (Ack, ContinuousStart, ContinuousStop, DeviceId, DeviceInformation, Distance, DistanceSimple,
+                       FirmwareVersion, GainSetting, GeneralInfo, GeneralRequest, ModeAuto, Nack, PcbTemperature,
+                       Ping1dFramer, Ping1dId, Ping1dMessage, Ping1dParseError, Ping1dPayload, PingEnable, PingInterval,
+                       ProcessorTemperature, Profile, ProtocolVersion, Range, SetDeviceId, SetGainSetting, SetModeAuto,
+                       SetPingEnable, SetPingInterval, SetRange, SetSpeedOfSound, SpeedOfSound, TransmitDuration,
+                       Voltage5, decode_message, encode_message)
 
 __all__ = ["from_config", "Ping1dTruth", "Ping1dSettings", "Ping1dMeasurement", "Ping1dEmulator"]
 
@@ -124,8 +122,7 @@ class Ping1dEmulator:
     """
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,
-                 true_speed_of_sound_m_s: float = 1500.0, protocol_version: tuple = (1, 0, 0),
-                 seed: int = 0) -> None:
+                 true_speed_of_sound_m_s: float = 1500.0, protocol_version: tuple = (1, 0, 0), seed: int = 0) -> None:
         if isinstance(truth_source, Ping1dTruth):
             constant = truth_source
             truth_source = lambda _t: constant  # noqa: E731
@@ -338,9 +335,8 @@ _GETTERS: Dict[int, Callable[[Ping1dEmulator], Ping1dPayload]] = {
     Ping1dId.PROFILE: lambda e: Profile(*_distance_fields(e), e.measurement.profile_data),
 }
 
-_SETTERS = frozenset({Ping1dId.SET_DEVICE_ID, Ping1dId.SET_RANGE, Ping1dId.SET_SPEED_OF_SOUND,
-                      Ping1dId.SET_MODE_AUTO, Ping1dId.SET_PING_INTERVAL, Ping1dId.SET_GAIN_SETTING,
-                      Ping1dId.SET_PING_ENABLE})
+_SETTERS = frozenset({Ping1dId.SET_DEVICE_ID, Ping1dId.SET_RANGE, Ping1dId.SET_SPEED_OF_SOUND, Ping1dId.SET_MODE_AUTO,
+                      Ping1dId.SET_PING_INTERVAL, Ping1dId.SET_GAIN_SETTING, Ping1dId.SET_PING_ENABLE})
 
 
 def _corrupt_checksum(frame: bytes) -> bytes:

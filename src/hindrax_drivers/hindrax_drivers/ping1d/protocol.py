@@ -22,16 +22,14 @@ from dataclasses import MISSING, dataclass, field, fields as dc_fields, make_dat
 from enum import IntEnum
 from typing import Any, ClassVar, Dict, Optional, Tuple, Type, Union
 
-__all__ = ["Ping1dParseError", "Ping1dId", "Ping1dMessage", "Ping1dFramer", "Ping1dPayload", "Ack",
-           "Nack", "AsciiText", "DeviceInformation", "ProtocolVersion", "GeneralRequest",
-           "SetDeviceId", "SetRange", "SetSpeedOfSound", "SetModeAuto", "SetPingInterval",
-           "SetGainSetting", "SetPingEnable", "GotoBootloader", "FirmwareVersion", "DeviceId",
-           "Voltage5", "SpeedOfSound", "Range", "ModeAuto", "PingInterval", "GainSetting",
-           "TransmitDuration", "GeneralInfo", "DistanceSimple", "Distance", "ProcessorTemperature",
-           "PcbTemperature", "PingEnable", "Profile", "ContinuousStart", "ContinuousStop",
-           "PAYLOAD_TYPES", "GAIN_INDEX_TO_GAIN", "HEADER_BYTES", "CHECKSUM_BYTES", "SYNC_BYTE",
-           "checksum", "encode_frame", "decode_frame", "request_frame", "encode_message",
-           "decode_message"]
+__all__ = ["Ping1dParseError", "Ping1dId", "Ping1dMessage", "Ping1dFramer", "Ping1dPayload", "Ack", "Nack", "AsciiText",
+           "DeviceInformation", "ProtocolVersion", "GeneralRequest", "SetDeviceId", "SetRange", "SetSpeedOfSound",
+           "SetModeAuto", "SetPingInterval", "SetGainSetting", "SetPingEnable", "GotoBootloader", "FirmwareVersion",
+           "DeviceId", "Voltage5", "SpeedOfSound", "Range", "ModeAuto", "PingInterval", "GainSetting",
+           "TransmitDuration", "GeneralInfo", "DistanceSimple", "Distance", "ProcessorTemperature", "PcbTemperature",
+           "PingEnable", "Profile", "ContinuousStart", "ContinuousStop", "PAYLOAD_TYPES", "GAIN_INDEX_TO_GAIN",
+           "HEADER_BYTES", "CHECKSUM_BYTES", "SYNC_BYTE", "checksum", "encode_frame", "decode_frame", "request_frame",
+           "encode_message", "decode_message"]
 
 HEADER_BYTES = 8
 CHECKSUM_BYTES = 2

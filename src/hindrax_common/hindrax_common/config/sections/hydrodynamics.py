@@ -44,8 +44,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
         elif "hydrodynamics.surge.added_mass_kg" in c:
             ma = added_mass_matrix_from_flat(c)
             if np.min(np.linalg.eigvalsh(0.5 * (ma + ma.T))) <= 0.0:
-                issues.append(ConfigIssue("hydrodynamics.added_mass_coupling",
-                                          c["hydrodynamics.added_mass_coupling"],
+                issues.append(ConfigIssue("hydrodynamics.added_mass_coupling", c["hydrodynamics.added_mass_coupling"],
                                           "couplings keeping the added-mass matrix positive definite"))
     return issues
 
