@@ -2,8 +2,7 @@
 Dependencies and metadata: package.xml (rosdep on the Pi) and requirements.txt (dev venv), not here.
 
 Installed (colcon): every device node and the static TF as a console script in ``lib/hindrax_drivers``
-(``ros2 run hindrax_drivers <node>``; setup.cfg puts scripts there).
-"""
+(``ros2 run hindrax_drivers <node>``; setup.cfg puts scripts there)."""
 from pathlib import Path
 
 from setuptools import find_packages, setup

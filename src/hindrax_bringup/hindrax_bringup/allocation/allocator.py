@@ -30,8 +30,7 @@ m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hin
    forward curve. The achieved wrench ``B @ force_n`` is what the thrusters will apply according to
    the model (for anti-windup).
 
-Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8).
-"""
+Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8)."""
 
 from __future__ import annotations
 
@@ -75,8 +74,7 @@ class AllocationResult:
     ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``) or the smallest
     group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
     the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation
-    (its force of the saturation step, or its allocated force, is at the limit).
-    """
+    (its force of the saturation step, or its allocated force, is at the limit)."""
 
     requested_wrench: np.ndarray
     allocated_force_n: np.ndarray
@@ -94,8 +92,7 @@ def weighted_pseudo_inverse(matrix, weights=None, rcond: float = 1e-10) -> np.nd
     ``F = result @ tau`` minimises ``sum w_i F_i^2`` among the least-squares solutions of ``B F = tau``
     (unconstrained weighted least-squares control allocation, Fossen 2011, Handbook of Marine Craft
     Hydrodynamics and Motion Control, control-allocation chapter). ``weights`` (n,) positive, default
-    ones. Raises ``ValueError`` for bad shapes, non-finite values or non-positive weights.
-    """
+    ones. Raises ``ValueError`` for bad shapes, non-finite values or non-positive weights."""
     b = np.asarray(matrix, dtype=float)
     if b.ndim != 2 or b.shape[0] != 6 or b.shape[1] < 1 or not np.all(np.isfinite(b)):
         raise ValueError(f"matrix must be a finite (6, n) array with n >= 1, got shape {b.shape}")
@@ -113,8 +110,7 @@ class _PulseGrid:
 
     ``smallest_forward_n`` / ``smallest_reverse_n`` (n,), magnitudes in N at ``voltage_scale = 1``: the thrust
     at the first width outside the deadband that the generator can produce (1525.20 us: 1.2038 N and
-    1474.36 us: 1.2087 N for the [Hindrax-Drag] eq. 1 curve at the PCA9685's 1.24 us).
-    """
+    1474.36 us: 1.2087 N for the [Hindrax-Drag] eq. 1 curve at the PCA9685's 1.24 us)."""
 
     def __init__(self, curves: Sequence[ThrustCurve], step: float | None) -> None:
         fwd_inner = np.array([c.forward_branch_us[0] for c in curves])
@@ -208,8 +204,7 @@ class ThrustAllocator:
 
     Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n), ``pseudo_inverse`` (n, 6),
     ``curves`` (n ThrustCurve), ``mode``, ``priority_groups`` (tuples of axis indices, final group included),
-    ``zero_authority_axes`` (6,) bool, ``n_thrusters``.
-    """
+    ``zero_authority_axes`` (6,) bool, ``n_thrusters``."""
 
     # Set by reconfigure() (which __init__ calls); declared here for the type checker.
     _matrix: np.ndarray
@@ -240,8 +235,7 @@ class ThrustAllocator:
         per-thruster lists must still match it.
 
         The new configuration is validated completely before anything is replaced; on ``ValueError`` the
-        allocator keeps its previous configuration.
-        """
+        allocator keeps its previous configuration."""
         keep = ThrustAllocator._KEEP
         b = np.array(self._matrix if matrix is keep else matrix, dtype=float)
         if b.ndim != 2 or b.shape[0] != 6 or b.shape[1] < 1 or not np.all(np.isfinite(b)):
@@ -404,8 +398,7 @@ class ThrustAllocator:
         read-only: a request equal bit for bit to the last call's, at the same scale, returns the same result object
         without allocating again (a hold or a step commands the same wrench for many ticks in a row). Raises
         :class:`InvalidWrenchError` if the wrench is not 6 finite numbers, ``ValueError`` for a bad
-        ``voltage_scale``. Source: [Hindrax-Drag] eqs. 1 and 9; module docstring for the method.
-        """
+        ``voltage_scale``. Source: [Hindrax-Drag] eqs. 1 and 9; module docstring for the method."""
         try:
             tau = np.array(wrench, dtype=float)
         except (TypeError, ValueError) as exc:

@@ -39,8 +39,7 @@ objective and is tens of ms here).
 For requests without an exact solution the search is a heuristic for the exact solve of all 3^n sign
 patterns (``test/test_allocation_deadband.py`` checks two fixed requests against it). Subsets are
 enumerated for n <= :data:`MAX_THRUSTERS`; beyond, the allocator runs without the search. Cost:
-``make bench`` (``actuation``: ``allocate_cpu_p50``, ``allocate_cpu_p99``).
-"""
+``make bench`` (``actuation``: ``allocate_cpu_p50``, ``allocate_cpu_p99``)."""
 from __future__ import annotations
 
 import itertools
@@ -75,8 +74,7 @@ class DeadbandSearch:
 
     Precomputes one weighted pseudo-inverse per subset of thrusters (2^n of shape (n, 6)) and the affine map of every
     seed. Raises ``ValueError`` for a bad shape, non-finite values, non-positive weights or upper limits, non-negative
-    lower limits, negative smallest thrusts, a negative effort weight, or n > :data:`MAX_THRUSTERS`.
-    """
+    lower limits, negative smallest thrusts, a negative effort weight, or n > :data:`MAX_THRUSTERS`."""
 
     def __init__(self, matrix, weights, effort_weight: float, lower, upper, smallest_forward, smallest_reverse) -> None:
         b = np.array(matrix, dtype=float)
@@ -167,8 +165,7 @@ class DeadbandSearch:
         ``voltage_scale`` (> 0) multiplies the limits and the smallest thrusts (battery voltage, see
         :func:`.thrust_curve.voltage_thrust_scale`). Every returned F_i is 0 or within ``[m_fwd_i, upper_i]``
         or ``[lower_i, -m_rev_i]`` (times ``voltage_scale``). Inputs are not validated (the allocator passes
-        checked values).
-        """
+        checked values)."""
         tau = np.asarray(tau, dtype=float)
         s = float(voltage_scale)
         n, seeds = self.n, self._seed_free.size

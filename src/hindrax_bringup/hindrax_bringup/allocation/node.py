@@ -25,8 +25,7 @@ The core (:class:`~hindrax_bringup.allocation.core.AllocationCore`) is built at 
 when a parameter changes, never per message. The thruster keys (geometry, curves, trims, limits, wrench timeout) are
 applied while running; a change is refused while the ESC is armed or has not reported its state
 (:class:`~hindrax_common.node_support.esc_state.ArmedWatch`), with the reason. Configuration: the vehicle file as ROS
-parameters (``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported).
-"""
+parameters (``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported)."""
 from __future__ import annotations
 
 from typing import Any

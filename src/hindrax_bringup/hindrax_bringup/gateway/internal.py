@@ -12,8 +12,7 @@ channel ends (the topside process is gone), and the topside process ends when it
 Parameters (read here, for both processes): the vehicle file (``vehicle.name``: the namespace; the sections the
 bounds need), ``topside_domain_id`` (int, 0-101), ``topside_discovery_range`` (``LOCALHOST``, ``SUBNET``,
 ``SYSTEM_DEFAULT``, ``OFF``), ``call_timeout_s`` (0.1-30 s, default 2). A bad value ends the start with one line
-naming key, value and allowed range (exit status 1).
-"""
+naming key, value and allowed range (exit status 1)."""
 from __future__ import annotations
 
 import argparse

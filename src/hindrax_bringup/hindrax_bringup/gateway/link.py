@@ -11,8 +11,7 @@ kind) and the payload: a serialized ROS message (CDR), never decoded here. The k
   ``feedback`` (``id``), ``result`` (``id``, ``status``).
 
 :class:`Channel` sends from any thread (one lock) and receives in one reader thread. Standard
-library only.
-"""
+library only."""
 from __future__ import annotations
 
 import contextlib

@@ -15,8 +15,7 @@ A refusal sent to the topside names no file of the vehicle.
 Key file: ``<keys dir>/<vehicle>.key`` (:func:`key_path`), 64 hex digits and a newline, mode 0600, on the vehicle and
 on the operator's PC. Made by :func:`create_key` (``hindrax keys``).
 
-Pure: standard library only (messages are read through their fields).
-"""
+Pure: standard library only (messages are read through their fields)."""
 from __future__ import annotations
 
 import hmac

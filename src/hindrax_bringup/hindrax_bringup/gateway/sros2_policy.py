@@ -26,8 +26,7 @@ DDS permissions name one domain per grant (sros2 writes ``ROS_DOMAIN_ID`` into e
 topside enclaves are two policies, :func:`internal_policy` and :func:`topside_policy`, turned into permissions with
 the internal and the topside domain id respectively (``hindrax sros2 keystore``).
 
-Pure: strings in, XML text out (``xml.etree``); no rclpy, no sros2.
-"""
+Pure: strings in, XML text out (``xml.etree``); no rclpy, no sros2."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET

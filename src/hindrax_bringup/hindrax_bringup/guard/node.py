@@ -41,8 +41,7 @@ a starved guard ages a dead peer at wall speed; on simulated time a peer is late
 clock), timeout: the read-only node parameter ``heartbeat_timeout_s`` (default ``esc.guard_heartbeat_timeout_s``).
 The two heartbeats are callbacks in both clock modes (the path the vehicle takes is the path the tests take). A
 small process of its own (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's
-sensor code cannot take the second stop path with it.
-"""
+sensor code cannot take the second stop path with it."""
 from __future__ import annotations
 
 import math

@@ -13,8 +13,7 @@ supervisor trip is a cause whether armed or not (it also refuses the next arming
 the supervisor sees the ESC armed: a killed ESC stops reporting, its last (armed) state stays latched, and only the
 guard's beat says that its outputs were silenced. An ESC that reports disarmed without a cause seen before is named
 with its own reason. A starvation a node reports after the stop it caused joins that cause
-(:meth:`DisarmCauses.on_starved`).
-"""
+(:meth:`DisarmCauses.on_starved`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

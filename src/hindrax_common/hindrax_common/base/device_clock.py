@@ -18,8 +18,7 @@ window (default 10 s of device time) lets the estimate follow the drift between 
   backwards needs no rule: the minimum follows it at the next sample.
 
 Everything is integer nanoseconds (a float64 of ROS time in seconds only resolves about 0.2 us).
-Pure code: no ROS, no clock reads.
-"""
+Pure code: no ROS, no clock reads."""
 from __future__ import annotations
 
 import collections
@@ -69,8 +68,7 @@ class DeviceClockSync:
     def update(self, device_ns: int, receive_ns: int) -> int:
         """Add one report: device time ``device_ns`` received at ROS time ``receive_ns`` (both ns).
 
-        Returns the offset estimate after the update (ns).
-        """
+        Returns the offset estimate after the update (ns)."""
         device_ns, receive_ns = int(device_ns), int(receive_ns)
         delta = receive_ns - device_ns
         if self._last_device_ns is not None and device_ns < self._last_device_ns:

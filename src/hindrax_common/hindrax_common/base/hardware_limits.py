@@ -6,8 +6,7 @@ nominal, 23-27 MHz measured on individual parts. Blue Robotics Basic ESC (docs/d
 1500 us stop, deadband 1500 +- 25 us, update rate 50-400 Hz, neutral held 7 s to arm.
 
 The driver (:mod:`hindrax_drivers.pca9685.protocol`) re-exports these names; the configuration
-(:mod:`hindrax_common.config`) imports them from here, so it imports no driver package.
-"""
+(:mod:`hindrax_common.config`) imports them from here, so it imports no driver package."""
 from __future__ import annotations
 
 import math

@@ -24,8 +24,7 @@ call per thruster), about 2.4 MB per distinct curve; the tests check it against 
 
 Battery voltage (docs/devices.md §5.3: full-throttle thrust roughly as V^1.2): both directions take
 ``voltage_scale``, which multiplies the forward model and divides the requested force;
-:func:`voltage_thrust_scale` gives it from a battery voltage.
-"""
+:func:`voltage_thrust_scale` gives it from a battery voltage."""
 
 from __future__ import annotations
 
@@ -74,8 +73,7 @@ def point_reflection(coeffs: Sequence[float], neutral_us: float = 1500.0) -> tup
     negative row this is the project's default positive-rotation curve (docs/architecture.md §4): it gives
     +15.53 N at 1900 us. Applying it twice returns the original coefficients.
 
-    Raises :class:`ThrustCurveError` for anything but 4 finite numbers or a non-finite ``neutral_us``.
-    """
+    Raises :class:`ThrustCurveError` for anything but 4 finite numbers or a non-finite ``neutral_us``."""
     f = np.poly1d(_coeffs(coeffs, "coeffs"))
     if not math.isfinite(neutral_us):
         raise ThrustCurveError(f"neutral_us must be finite, got {neutral_us!r}")
@@ -93,8 +91,7 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
     scales roughly with V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal
     voltage is the Hindrax battery, 14.8 V ([Hindrax-Drag] section 2.1), at which the curves are taken to be
     valid. Raises :class:`ThrustCurveError` unless both voltages are finite and positive and the
-    exponent is finite.
-    """
+    exponent is finite."""
     for name, value in (("battery_voltage_v", battery_voltage_v), ("nominal_voltage_v", nominal_voltage_v)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
             raise ThrustCurveError(f"{name} must be a finite positive number, got {value!r}")
@@ -140,8 +137,7 @@ def forward_thrust(pulse_width_us, negative, positive, pulse_width_min_us, pulse
     are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative cubic (clipped to <= 0) applies at
     ``P <= negative_edge_us``, the positive one (clipped to >= 0) at ``P >= positive_edge_us``, 0 N between (deadband,
     docs/devices.md §5.2); the result is clipped to ``[max_reverse_n, max_forward_n]``. Inputs are not validated: use
-    :meth:`ThrustCurve.thrust_n` unless the values come from :attr:`ThrustCurve.forward_parameters`.
-    """
+    :meth:`ThrustCurve.thrust_n` unless the values come from :attr:`ThrustCurve.forward_parameters`."""
     p = np.minimum(np.maximum(pulse_width_us, pulse_width_min_us), pulse_width_max_us)
     thrust = np.where(p <= negative_edge_us, np.minimum(_cubic(negative, p), 0.0),
                       np.where(p >= positive_edge_us, np.maximum(_cubic(positive, p), 0.0), 0.0))
@@ -178,8 +174,7 @@ class ThrustCurve:
     Attributes (all read-only, at ``voltage_scale = 1``): ``max_forward_n`` (> 0, thrust at
     ``pulse_width_max_us``), ``max_reverse_n`` (< 0, thrust at ``pulse_width_min_us``),
     ``smallest_forward_n`` (>= 0) and ``smallest_reverse_n`` (<= 0), the branch forces nearest zero,
-    ``forward_branch_us`` and ``reverse_branch_us``, the ``(low, high)`` pulse widths of the branches.
-    """
+    ``forward_branch_us`` and ``reverse_branch_us``, the ``(low, high)`` pulse widths of the branches."""
 
     def __init__(self, negative: Sequence[float], positive: Sequence[float], pulse_width_min_us: float = 1100.0,
                  pulse_width_neutral_us: float = 1500.0, pulse_width_max_us: float = 1900.0,
@@ -318,8 +313,7 @@ class ThrustCurve:
     def force_limits_n(self, voltage_scale: float = 1.0) -> tuple[float, float]:
         """``(max_reverse_n, max_forward_n)`` multiplied by ``voltage_scale`` (N).
 
-        Raises :class:`ThrustCurveError` for a non-finite or non-positive ``voltage_scale``.
-        """
+        Raises :class:`ThrustCurveError` for a non-finite or non-positive ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         return (s * self.max_reverse_n, s * self.max_forward_n)
 
@@ -333,8 +327,7 @@ class ThrustCurve:
         the side's sign (a thruster in reverse rotation does not push forward) and to
         ``[max_reverse_n, max_forward_n]``, times ``voltage_scale``.
         Source: [Hindrax-Drag] eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
-        input or a bad ``voltage_scale``.
-        """
+        input or a bad ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         p = _finite_array(pulse_width_us, "pulse_width_us")
         return _out(s * forward_thrust(p, *self.forward_parameters))
@@ -348,8 +341,7 @@ class ThrustCurve:
         saturate at ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the
         branch's smallest thrust go to neutral or to the branch's inner end according to
         ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] eq. 1. Raises
-        :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``.
-        """
+        :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         return _out(self._pulse_width_unchecked(_finite_array(force_n, "force_n"), s))
 
@@ -393,7 +385,6 @@ def hindrax_default_curve(deadband_us: float = BASIC_ESC_DEADBAND_US, small_forc
     """The project's default thruster curve: [Hindrax-Drag] Table 2 negative row, and its point reflection
     about (1500 us, 0 N) as positive row (docs/architecture.md §4), ESC range 1100/1500/1900 us.
 
-    Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``.
-    """
+    Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``."""
     return ThrustCurve(HINDRAX_DRAG_NEGATIVE_COEFFS, point_reflection(HINDRAX_DRAG_NEGATIVE_COEFFS, 1500.0),
                        deadband_us=deadband_us, small_force=small_force)

@@ -14,8 +14,7 @@ ones come with rosbags' Jazzy store.
 
 The safety heartbeats (``hindrax_msgs/Heartbeat``) are a fixed layout, fixed-size fields first and
 one string last: :func:`heartbeat_cdr` and :func:`read_heartbeat` pack and read it with
-:mod:`struct` at fixed offsets, tested against rclpy's own serialiser.
-"""
+:mod:`struct` at fixed offsets, tested against rclpy's own serialiser."""
 from __future__ import annotations
 
 import functools

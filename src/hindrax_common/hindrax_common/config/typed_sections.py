@@ -8,8 +8,7 @@ are ``X | None`` (None when absent) and lists are tuples. Build them through
 :class:`hindrax_common.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
 required key that a node did not declare among its parameters is absent from its configuration:
 reading it raises KeyError naming the key. Each field's unit and meaning: its key's ``Spec.doc`` in
-SCHEMA.
-"""
+SCHEMA."""
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, dataclass_transform
 
@@ -23,8 +22,7 @@ class Section:
     ``prefix`` class keyword of a subclass, ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
-    read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`.
-    """
+    read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`."""
 
     PREFIX: ClassVar[str] = ""
 

@@ -10,8 +10,7 @@ would drift, and generated at import time they would hide from mypy. Section obj
 (it is immutable). ``cfg.thrusters`` is the hand-written :class:`~.sections.thrusters.ThrustersConfig` (per-thruster
 keys); ``cfg.dof_hydrodynamics(dof)`` and ``cfg.known_forces`` are derived views over ``cfg.hydrodynamics`` and
 ``cfg.calibration``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion, overrides and
-validation; modules outside the configuration do not index it by a literal key.
-"""
+validation; modules outside the configuration do not index it by a literal key."""
 from __future__ import annotations
 
 import dataclasses
@@ -48,8 +47,7 @@ def build_section(cls: type[_S], flat: Mapping[str, Any], prefix: str | None = N
     ``prefix`` (default ``cls.PREFIX``) from validated flat keys.
 
     Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
-    held as ABSENT and raises KeyError naming the key when read.
-    """
+    held as ABSENT and raises KeyError naming the key when read."""
     prefix = cls.PREFIX if prefix is None else prefix
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
@@ -92,8 +90,7 @@ class VehicleConfig:
     ``hydrodynamics``, ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``, ``limits``,
     ``supervisor``, ``identification``, ``calibration``, ``control``, ``simulation``, ``recording`` (module docstring).
     Derived views: rigid-body and added-mass matrices, ``dof_hydrodynamics(dof)``, ``known_forces``. ``flat`` holds
-    every validated key (dotted names, SI values) for the ROS-parameter conversion and overrides.
-    """
+    every validated key (dotted names, SI values) for the ROS-parameter conversion and overrides."""
 
     flat: Mapping[str, Any]
     source: str = ""

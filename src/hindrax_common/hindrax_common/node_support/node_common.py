@@ -3,8 +3,7 @@ configuration loading and the process entry point.
 
 Keeping them here (docs/architecture.md §2: "no copy-paste between devices") means each device node only wires its
 transport to its protocol module. All time here is ROS time from the node's clock (``use_sim_time``
-supported), except rate windows, which use the same clock.
-"""
+supported), except rate windows, which use the same clock."""
 from __future__ import annotations
 
 import collections
@@ -52,8 +51,7 @@ class DeviceDiagnostics:
     name: status name, e.g. ``"hindrax/dvl75"``; hardware_id: port or I2C address; the output rate
     is counted over a sliding window of ``window_s`` seconds. Error kinds: ``"bad_checksum"``,
     ``"garbage_bytes"``, ``"i2c_error"`` ...; states: ``"connected"``, ``"disconnected"`` ...
-    Thread-safe: transports may call :meth:`count` from their own threads.
-    """
+    Thread-safe: transports may call :meth:`count` from their own threads."""
 
     def __init__(self, name: str, hardware_id: str, now_s: Callable[[], float], window_s: float = 5.0):
         self.name = name
@@ -199,8 +197,7 @@ class RawDataPublisher:
     i16, length u16 (little-endian), data>`` with ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a
     plain message for one transaction; :func:`raw_transactions` unpacks both, in wire order.
     ``flush(force=True)`` publishes what is pending; a tap outside a batch publishes it at once,
-    so the order on the wire is kept.
-    """
+    so the order on the wire is kept."""
 
     def __init__(self, node: Any, device_name: str, topic: str | None = None, i2c_period_s: float = RAW_I2C_PERIOD_S):
         self._node = node
@@ -315,8 +312,7 @@ def raw_transactions(msg: Any) -> list[tuple[int, int, int, bytes]]:
     """The I2C transactions of one RawDeviceData message: ``[(direction, address, register, data)]`` in wire
     order (one for a plain message, several for a batch, see :class:`RawDataPublisher`; ``register`` -1 = none).
 
-    Raises ValueError for a batch whose records do not add up to its data.
-    """
+    Raises ValueError for a batch whose records do not add up to its data."""
     data = bytes(msg.data)
     if int(msg.i2c_register) != RAW_BATCH_REGISTER:
         return [(int(msg.direction), int(msg.i2c_address), int(msg.i2c_register), data)]
@@ -346,8 +342,7 @@ class StuckDetector:
     """Flags a sensor whose readings stay bit-identical for ``limit`` consecutive samples.
 
     ``update(value) -> bool`` returns True while stuck. Real sensors always show noise in the last bits,
-    so identical raw readings mean a frozen device or bus (docs/devices.md emulator checklists).
-    """
+    so identical raw readings mean a frozen device or bus (docs/devices.md emulator checklists)."""
 
     def __init__(self, limit: int = 50):
         self.limit = limit
@@ -427,8 +422,7 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
     locked() gives the reason a change is refused now ('' = allowed: the ESC disarmed, ``ArmedWatch.refusal``).
     See :func:`hindrax_common.config.node_parameters.declare_vehicle_parameters` (the node must be created without
     ``automatically_declare_parameters_from_overrides``). Raises :class:`ConfigError`: :func:`run_node` prints its
-    one line once and exits with status 1.
-    """
+    one line once and exits with status 1."""
     return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change, locked=locked)
 
 

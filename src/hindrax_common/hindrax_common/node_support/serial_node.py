@@ -17,8 +17,7 @@
 Received bytes are decoded and published in the transport's reader thread; timers run in the
 executor. Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`, and may override
 :meth:`on_link_up`, :meth:`housekeeping` and :meth:`extra_diagnostics`. Node parameter
-``stuck_limit_samples`` (int >= 2, default 50): identical readings in a row that count as stuck.
-"""
+``stuck_limit_samples`` (int >= 2, default 50): identical readings in a row that count as stuck."""
 from __future__ import annotations
 
 import contextlib

@@ -13,8 +13,7 @@ second ``bringup --sim`` on the vehicle's domain would mix its ESC and superviso
   :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start` (from a bare look-out
   node before a tool creates anything: its heartbeat publishers, even for a second, would disarm the vehicle's ESC).
 - :func:`refuse_live_peer`: the same look-out for a vehicle's own ESC or supervisor process at its start: another
-  one's heartbeat arriving is a second vehicle on the domain (issue 74.2).
-"""
+  one's heartbeat arriving is a second vehicle on the domain (issue 74.2)."""
 from __future__ import annotations
 
 import re
@@ -169,8 +168,7 @@ class ForeignVehicleWatch:
     node: an rclpy node on the domain to check. own: callable returning the caller's own :class:`GraphView` (its
     nodes and heartbeat publishers; default nothing). what: the refusing tool, for the message (``hindrax run``).
     consequence: what the tool refuses to do. window_s: :data:`DISCOVERY_WINDOW_S`. period_s:
-    :data:`CHECK_PERIOD_S`. clock: monotonic seconds.
-    """
+    :data:`CHECK_PERIOD_S`. clock: monotonic seconds."""
 
     def __init__(self, node: Any, what: str, consequence: str, own: Callable[[], GraphView] = GraphView,
                  window_s: float = DISCOVERY_WINDOW_S, period_s: float = CHECK_PERIOD_S,

@@ -42,8 +42,7 @@ seconds in ``set_listener(nullptr)`` (Fast-DDS issue 6513); main thread only, co
 that a full collection cannot stall the safety ticks against their 0.2 s heartbeat timeouts
 (docs/architecture.md §8; ``make bench``: ``gc_full_collection_cpu_ms_*``).
 
-rclpy is imported when the block is entered, not when this module is.
-"""
+rclpy is imported when the block is entered, not when this module is."""
 from __future__ import annotations
 
 import contextlib
@@ -171,8 +170,7 @@ class RosProcess:
     ``ValueError`` for another value. interrupt: whether SIGINT raises ``KeyboardInterrupt`` in the block.
     shutdown_budget_s: seconds the exit may take (module docstring); None, unbounded.
     exit_process: end the process on leaving the block, without the DDS participant's teardown
-    (module docstring); only in the main thread.
-    """
+    (module docstring); only in the main thread."""
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
                  executor: str | None = None, interrupt: bool = True,

@@ -23,8 +23,7 @@ the compose file (docs/deployment.md §1). Without it the process runs on under 
 ``launch-prefix``) and says so in one warning naming the priority and the limit; it never stops a node.
 
 Own code, not a library's: the standard library's ``os.sched_setscheduler`` is the whole interface; what is here is
-the choice of threads and the report.
-"""
+the choice of threads and the report."""
 from __future__ import annotations
 
 import contextlib

@@ -12,8 +12,7 @@ the kernel issues (``read_i2c_block_data(addr, reg, n)`` is a 1-byte write of ``
 nobody acknowledges fails with errno 121 as on Linux.
 
 The module also provides :class:`RegisterPointerEmulator`, the shared base of every register-file
-device emulator (write = set pointer then data with auto-increment; read = continue from pointer).
-"""
+device emulator (write = set pointer then data with auto-increment; read = continue from pointer)."""
 
 from __future__ import annotations
 
@@ -52,8 +51,7 @@ class I2CDeviceEmulator(Protocol):
     rest are data bytes. ``i2c_read(n)``: one read transaction of ``n`` bytes continuing from the
     device's internal pointer/state; must return exactly ``n`` bytes. Either may raise
     ``OSError(errno.EREMOTEIO)`` to model a NACK. Optional: ``i2c_general_call(data)`` to react to
-    general-call (address 0x00) writes.
-    """
+    general-call (address 0x00) writes."""
 
     def i2c_write(self, data: bytes) -> None:  # pragma: no cover - protocol
         """Handle one write transaction (``data[0]`` = register/command)."""
@@ -95,8 +93,7 @@ class EmulatedI2CBus:
     Thread safety: every SMBus call holds one bus lock for its whole duration (a real adapter serialises transfers the
     same way), so calls from several threads interleave only at call boundaries.
 
-    Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; docs/architecture.md §2.
-    """
+    Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; docs/architecture.md §2."""
 
     def __init__(
         self,
@@ -279,8 +276,7 @@ class EmulatedI2CBus:
     def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read word data: write ``[register]``, read 2 bytes, return them little-endian.
 
-        Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices).
-        """
+        Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices)."""
         check_byte("register", register)
         return int.from_bytes(self._call(i2c_addr, bytes([register]), 2), "little")
 
@@ -306,8 +302,7 @@ class EmulatedI2CBus:
         """Combined transfer of ``smbus2.i2c_msg`` messages (one ioctl, repeated starts).
 
         Write messages (``flags & I2C_M_RD == 0``) are delivered with ``i2c_write``; read messages are filled in place
-        from ``i2c_read``. Any failure aborts the remaining messages, as the kernel does.
-        """
+        from ``i2c_read``. Any failure aborts the remaining messages, as the kernel does."""
         with self._lock:
             if not i2c_msgs:
                 raise ValueError("i2c_rdwr needs at least one message")
@@ -335,8 +330,7 @@ class RegisterPointerEmulator:
     serialised by ``self._lock``.
 
     Subclasses implement ``_read_register(reg) -> int``, ``_write_register(reg, value)`` and may
-    override ``_next_pointer(reg) -> int`` (default: +1 modulo 256).
-    """
+    override ``_next_pointer(reg) -> int`` (default: +1 modulo 256)."""
 
     def __init__(self) -> None:
         self._lock = threading.RLock()
@@ -388,8 +382,7 @@ class ManualClock:
 
     Call it to read the time (s); pass :meth:`sleep` as the ``sleep`` function of an
     :class:`~hindrax_common.transport.i2c.I2CDevice` so that driver waits advance the emulators'
-    time instead of blocking. Thread-safe.
-    """
+    time instead of blocking. Thread-safe."""
 
     def __init__(self, start_s: float = 0.0) -> None:
         self._lock = threading.Lock()

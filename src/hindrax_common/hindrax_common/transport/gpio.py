@@ -25,8 +25,7 @@ retriggerable monostable does), and :class:`WatchedOutputEnable` is /OE as the P
 high when the guard drives (or releases) its line high, or when the watchdog has run out.
 
 Why a thin wrapper of our own: the guard needs "drive high / drive low / release" and nothing else, and tests
-need the same three calls on an emulated line that a register-exact chip emulator honours.
-"""
+need the same three calls on an emulated line that a register-exact chip emulator honours."""
 from __future__ import annotations
 
 import contextlib
@@ -117,8 +116,7 @@ class EmulatedGpioLine:
 
     ``pull_high``: the level of the released line (the vehicle's /OE pull-up: True). ``persist``: a released line
     keeps driving its last level (a Raspberry Pi kernel without ``strict_gpiod``). Starts released. Thread-safe.
-    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release` without ``persist``).
-    """
+    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release` without ``persist``)."""
 
     def __init__(self, pull_high: bool = True, persist: bool = False) -> None:
         self._lock = threading.Lock()

@@ -9,8 +9,7 @@ Why our own code: pyserial's ``loop://`` and ``socket://`` URL handlers do not e
 termios, select and fd code path a real ``/dev/ttyUSB*`` uses, and ``socat`` would be an external
 process dependency.  ``os.openpty`` + ``tty.setraw`` gives a real tty with no extra dependency.
 
-Linux/POSIX only (pty, termios).
-"""
+Linux/POSIX only (pty, termios)."""
 
 from __future__ import annotations
 
@@ -40,8 +39,7 @@ class ByteStreamEmulator(Protocol):
     """Contract of an I/O-free serial device emulator (docs/architecture.md §2 layer 2).
 
     ``feed_host_bytes(data)`` receives bytes the host wrote; ``poll(t_s)`` returns the bytes the
-    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls).
-    """
+    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls)."""
 
     def feed_host_bytes(self, data: bytes) -> None:  # pragma: no cover - protocol
         ...

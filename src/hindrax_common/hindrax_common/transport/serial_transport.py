@@ -12,8 +12,7 @@ lets a node record the traffic (docs/architecture.md §7); :meth:`SerialTranspor
 instead (a simulator's lock-step: :mod:`hindrax_sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
-error and has no reconnect, state, or tap.
-"""
+error and has no reconnect, state, or tap."""
 
 from __future__ import annotations
 

@@ -17,8 +17,7 @@ adapter that was removed, until the driver opens the bus again. Never set :data:
 
 Why our own code: the processes must share one emulated bus (the simulator reads the PCA9685's registers the ESC
 process writes), and there is no I2C-over-socket adapter in smbus2 or the kernel; ``multiprocessing.connection``
-does the framing.
-"""
+does the framing."""
 from __future__ import annotations
 
 import contextlib
@@ -62,8 +61,7 @@ class SocketI2CBus:
     """Client side of :class:`I2CSocketServer`: the ``smbus2.SMBus`` methods the drivers use, forwarded.
 
     Raises ``OSError`` from the constructor when nobody serves ``path`` (ENOENT, ECONNREFUSED), ``OSError`` with the
-    emulator's errno for a NACK (as ``smbus2`` does), and ``OSError`` ENODEV once the connection is lost.
-    """
+    emulator's errno for a NACK (as ``smbus2`` does), and ``OSError`` ENODEV once the connection is lost."""
 
     def __init__(self, path: str) -> None:
         try:

@@ -38,8 +38,7 @@ Truth -> measurement model (the emulator's own modelling choices are marked [EMU
   ``true_speed_of_sound_m_s`` is given; SET-VELOCITY-ADJUSTMENT multiplies velocities.
 - Not emulated: re-tweeted IMU/GPS lines, ``$DVKFA``/``$DVKFB`` (layout unverified, docs/devices.md §6),
   Ethernet/UDP, mounting-orientation mismatch (the truth is taken to be in the configured vehicle
-  frame), declination effects on heading.
-"""
+  frame), declination effects on heading."""
 
 from __future__ import annotations
 

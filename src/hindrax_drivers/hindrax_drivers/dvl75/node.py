@@ -44,8 +44,7 @@ Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time``
   offset = minimum over the last 10 s of (receive ROS time - ``tu``), i.e. ``tu`` plus the smallest
   transport latency seen, re-estimated after a DVL reboot (``tu`` backwards) or a ROS time jump.
 - ``dvl/altitude`` and messages built from ``$DVEXT`` alone use the receive time: ``$DVEXT`` carries no
-  device time (its field 14 is an EKF step length, docs/devices.md §1.3.2).
-"""
+  device time (its field 14 is an EKF step length, docs/devices.md §1.3.2)."""
 from __future__ import annotations
 
 import math

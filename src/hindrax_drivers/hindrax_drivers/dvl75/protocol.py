@@ -22,8 +22,7 @@ Why our own code: there is no maintained Python parser for these sentences (the 
 [D18] only adds two sentence types and raises generic errors), and the checksum, signed fields and
 trailing empty field need exact control.
 
-Frames (docs/devices.md §1.3.1, §1.5): each record's docstring gives the frame of each field.
-"""
+Frames (docs/devices.md §1.3.1, §1.5): each record's docstring gives the frame of each field."""
 
 from __future__ import annotations
 
@@ -244,8 +243,7 @@ def nmea_checksum(body: Union[bytes, str]) -> int:
         body: sentence body without ``$`` and ``*hh``; str is encoded as UTF-8.
     Returns:
         int 0..255.
-    Source: docs/devices.md §1.2 ("NMEA standard", verified on real captures [D21]).
-    """
+    Source: docs/devices.md §1.2 ("NMEA standard", verified on real captures [D21])."""
     return reduce(lambda acc, b: acc ^ b, _to_bytes(body), 0)
 
 
@@ -607,8 +605,7 @@ class DvlLineFramer:
     does not depend on how the stream is chunked.
 
     Args:
-        max_line_bytes: longest accepted line in bytes (a ``$DVEXT`` is about 250).
-    """
+        max_line_bytes: longest accepted line in bytes (a ``$DVEXT`` is about 250)."""
 
     def __init__(self, max_line_bytes: int = 1024) -> None:
         if max_line_bytes < 16:

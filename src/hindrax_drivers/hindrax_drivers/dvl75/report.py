@@ -37,8 +37,7 @@ Conventions and sources
     when unlocked or not positive.
   - beam velocities: the DVL's sign is + approaching (the only documented sign, Tracker-650 [D16],
     docs/devices.md §1.3.4; [UNVERIFIED for the DVL-75]); ``hindrax_msgs/Dvl`` wants + away from the
-    transducer, so the sign is flipped. Beams without lock report NaN range and velocity.
-"""
+    transducer, so the sign is flipped. Beams without lock report NaN range and velocity."""
 from __future__ import annotations
 
 import math

@@ -18,8 +18,7 @@ its timers through injected I2C ports, tested step by step against the register-
   samples unpublished, the start-up run again. An all-zero block is never published.
 - Magnetometer: an ``i2c_master`` block read under SLV0_NACK is old (:class:`MagNackFilter`, counted ``mag_nack``).
   :class:`MagnetometerWatch`: none for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises the
-  magnetometer alone, one step per poll, retried every ``mag_retry_interval_s`` (``mag_retries``).
-"""
+  magnetometer alone, one step per poll, retried every ``mag_retry_interval_s`` (``mag_retries``)."""
 from __future__ import annotations
 
 import collections
@@ -174,8 +173,7 @@ class BankedRegisters:
         device: the chip on the bus (``write_byte_data``, ``read_block``; raises ``I2CError``).
 
     :attr:`bank` is None while unknown: before the first selection, after a failed selection, after
-    :meth:`invalidate` (a failed transfer elsewhere) and after a DEVICE_RESET (reset-to-bank-0 is only assumed).
-    """
+    :meth:`invalidate` (a failed transfer elsewhere) and after a DEVICE_RESET (reset-to-bank-0 is only assumed)."""
 
     def __init__(self, device: I2CPort):
         self.device = device
@@ -271,8 +269,7 @@ class StartupSequence:
         """Run steps until one asks for a wait, a step fails, or none is left.
 
         An I2C failure or a wrong identity ends the attempt (``failure``); a magnetometer that does not answer does
-        not (``on_magnetometer(False, reason)``).
-        """
+        not (``on_magnetometer(False, reason)``)."""
         while self._steps:
             step = self._steps.popleft()
             try:
@@ -426,8 +423,7 @@ class GyroBias:
 
     :meth:`start` after each start-up begins the window once (True while it runs); :meth:`add` feeds
     it and returns a :class:`GyroBiasResult` once (at least two samples and ``duration_s``);
-    ``bias_rad_s`` (3,) is what the node subtracts: zero until a still window gave one.
-    """
+    ``bias_rad_s`` (3,) is what the node subtracts: zero until a still window gave one."""
 
     def __init__(self, enabled: bool, duration_s: float, gyro_var: float, accel_var: float) -> None:
         if not duration_s > 0.0:

@@ -19,8 +19,7 @@
   bus errors are injected by the bus.
 
 Not modelled: FIFO, DMP, interrupt pins, low-power cycling, self-test, the start-up delay after
-wake, filter dynamics (the DLPF only sets the output rate).
-"""
+wake, filter dynamics (the DLPF only sets the output rate)."""
 
 from __future__ import annotations
 
@@ -60,8 +59,7 @@ class Ak09916Emulator(RegisterPointerEmulator):
     but ST2 not yet), sets DOR and, in the second case, is discarded. DRDY and DOR clear when a data
     register or ST2 is read; reading ST2 ends the read lock. Values beyond +-32752 counts are
     clamped with ST2.HOFL = 1. Writing the current mode again keeps its timing; the self-test mode
-    is stored but produces no measurement. ``stuck = True`` freezes the data registers.
-    """
+    is stored but produces no measurement. ``stuck = True`` freezes the data registers."""
 
     def __init__(self, field_truth: Callable[[float], Sequence[float]],
                  clock: Callable[[], float] = time.monotonic) -> None:

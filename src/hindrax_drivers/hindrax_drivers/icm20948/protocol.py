@@ -13,8 +13,7 @@ conversion code, hard-code one configuration and write a questionable I2C_MST_CT
 Facts used that docs/devices.md marks as unverified or that go beyond it are flagged in the
 docstrings: gyro base rate 1125 Hz (§4.4 discrepancy), gyro ODR with the DLPF bypassed (9 kHz,
 datasheet spec table, not in docs/devices.md), INT_STATUS_1 / I2C_MST_STATUS bit positions (datasheet
-register descriptions), temperature room offset 0 (§4.4).
-"""
+register descriptions), temperature room offset 0 (§4.4)."""
 
 from __future__ import annotations
 
@@ -209,8 +208,7 @@ def gyro_odr_hz(smplrt_div: int, fchoice: int, dlpfcfg: int) -> float:
 
     1125/(1 + div) when FCHOICE = 1 and 0 < DLPFCFG < 7 (the divider only takes effect then);
     1125 Hz for FCHOICE = 1 with DLPFCFG 0 or 7; 9 kHz with the DLPF bypassed (flagged, see
-    :data:`GYRO_BYPASS_ODR_HZ`).
-    """
+    :data:`GYRO_BYPASS_ODR_HZ`)."""
     if not fchoice:
         return GYRO_BYPASS_ODR_HZ
     if 0 < int(dlpfcfg) < 7:
@@ -342,8 +340,7 @@ def reset_wake_sequence(reset_wait_s: float = 0.010, wake_wait_s: float = 0.020)
 
     PWR_MGMT_1 = 0x80 (DEVICE_RESET), wait ~10 ms; PWR_MGMT_1 = 0x01 (SLEEP = 0, CLKSEL auto),
     wait 20 ms (accel start-up from sleep [I1 p12]); PWR_MGMT_2 = 0x00 (all axes on). Check
-    WHO_AM_I == 0xEA before (step 1) with a read of bank 0 register 0x00.
-    """
+    WHO_AM_I == 0xEA before (step 1) with a read of bank 0 register 0x00."""
     return [
         BankedWrite(PWR_MGMT_1, PWR_MGMT_1_DEVICE_RESET, reset_wait_s, "DEVICE_RESET"),
         BankedWrite(PWR_MGMT_1, CLKSEL_AUTO, wake_wait_s, "wake, CLKSEL auto"),
@@ -366,8 +363,7 @@ def slave_read_writes(slave: int, address: int, register: int, length: int) -> l
     """Configure I2C master slave ``slave`` to read ``length`` bytes each cycle (docs/devices.md §4.6b).
 
     The slave is disabled first, so no master cycle can run with a half-updated configuration;
-    the bytes land in EXT_SLV_SENS_DATA in slave order.
-    """
+    the bytes land in EXT_SLV_SENS_DATA in slave order."""
     if not 1 <= length <= 15:
         raise Icm20948Error(f"slave read length must be 1..15, got {length}")
     a, r, c, _ = slave_registers(slave)
@@ -379,8 +375,7 @@ def slave_write_writes(slave: int, address: int, register: int, value: int, wait
     """Make the I2C master write ``value`` to ``register`` of ``address`` (docs/devices.md §4.6b step 4).
 
     SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The master repeats the write
-    every cycle until the slave is reconfigured; wait ``wait_s`` (at least one master cycle) after enabling.
-    """
+    every cycle until the slave is reconfigured; wait ``wait_s`` (at least one master cycle) after enabling."""
     a, r, c, d = slave_registers(slave)
     return [BankedWrite(c, 0x00), BankedWrite(a, address & 0x7F), BankedWrite(r, register & 0xFF),
             BankedWrite(d, value & 0xFF), BankedWrite(c, I2C_SLV_CTRL_EN | 1, wait_s)]

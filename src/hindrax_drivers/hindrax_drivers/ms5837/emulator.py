@@ -15,8 +15,7 @@ For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device s
 
 Modelling choices: reset is instantaneous; conversion time per OSR is
 :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (§3.1); unknown commands are ignored;
-reads not preceded by PROM/ADC commands return zeros.
-"""
+reads not preceded by PROM/ADC commands return zeros."""
 
 from __future__ import annotations
 
@@ -132,8 +131,7 @@ class Ms5837Emulator:
         ``blank_prom``: every PROM word reads 0 (whose CRC-4 is 0: it passes the CRC check).
         ``raw_override``: (D1, D2) counts every conversion returns instead of the truth's, or None.
 
-    Counter: ``zero_reads`` (ADC reads that returned 0).
-    """
+    Counter: ``zero_reads`` (ADC reads that returned 0)."""
 
     address = p.ADDRESS
 

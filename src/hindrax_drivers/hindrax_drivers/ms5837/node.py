@@ -18,8 +18,7 @@ armed or has not reported (:class:`hindrax_common.node_support.esc_state.ArmedWa
 change of the parameter also passes zero_depth's checks: at the surface, and within
 ``sensors.ms5837.zero_depth_margin_pa`` of the mean reading
 (:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`).
-Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
-"""
+Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
 from __future__ import annotations
 
 from typing import Any

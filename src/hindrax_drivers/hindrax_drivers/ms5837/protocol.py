@@ -10,8 +10,7 @@ to an arithmetic right shift), which reproduces both worked examples exactly.
 
 Vendor-document issue handled here: the 30BA datasheet example prints OFF = 2381326464, a digit
 typo for 2381323464 (docs/devices.md §3.7); we implement the formula, and the tests check the corrected
-value together with the printed P = 39998.
-"""
+value together with the printed P = 39998."""
 
 from __future__ import annotations
 
@@ -91,8 +90,7 @@ class Command:
     """Decoded command byte.
 
     ``kind`` is one of ``"reset"``, ``"adc_read"``, ``"prom_read"`` (``index`` = word 0..7),
-    ``"convert_d1"`` / ``"convert_d2"`` (``osr`` = oversampling ratio).
-    """
+    ``"convert_d1"`` / ``"convert_d2"`` (``osr`` = oversampling ratio)."""
 
     kind: str
     index: int | None = None
@@ -109,8 +107,7 @@ def _osr_index(osr: int) -> int:
 def convert_d1_command(osr: int) -> int:
     """Command byte starting a pressure (D1) conversion: 0x40 + 2*index(osr) (docs/devices.md §3.1).
 
-    Raises Ms5837Error for an OSR not in :data:`OSR_VALUES`.
-    """
+    Raises Ms5837Error for an OSR not in :data:`OSR_VALUES`."""
     return CMD_CONVERT_D1_BASE + 2 * _osr_index(osr)
 
 
@@ -189,8 +186,7 @@ def encode_adc(value: int) -> bytes:
 def parse_prom_word(data: bytes | Sequence[int]) -> int:
     """16-bit PROM word from the 2 bytes read after 0xA0+2k, MSB first (docs/devices.md §3.1).
 
-    Note that ``SMBus.read_word_data`` returns the bytes little-endian; use a 2-byte block read.
-    """
+    Note that ``SMBus.read_word_data`` returns the bytes little-endian; use a 2-byte block read."""
     return int.from_bytes(_as_bytes(data, 2, "PROM read"), "big")
 
 
@@ -272,8 +268,7 @@ class Calibration:
     Attributes:
         words: the 8 PROM words (word 7 may be 0).
     Properties: ``c1``..``c6`` (C1 SENS_T1, C2 OFF_T1, C3 TCS, C4 TCO, C5 T_REF, C6 TEMPSENS),
-    ``crc`` (stored nibble), ``product_code`` (bits 11:5 of word 0; bits 4:0 are factory settings).
-    """
+    ``crc`` (stored nibble), ``product_code`` (bits 11:5 of word 0; bits 4:0 are factory settings)."""
 
     words: tuple[int, ...]
 
@@ -322,8 +317,7 @@ def prom_sanity_issue(calibration: Calibration) -> str:
 
     A blank (all-zero) PROM has CRC-4 0 and passes the check of docs/devices.md §3.3; an unanswered read on a bus held
     high gives 0xFFFF words. Every coefficient C1..C6 of a real part is a non-zero 16-bit value (the datasheet examples:
-    34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000 or 0xFFFF rejects the PROM.
-    """
+    34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000 or 0xFFFF rejects the PROM."""
     bad = [f"C{k}" for k, c in enumerate(calibration.words[1:7], start=1) if c in (0, 0xFFFF)]
     if bad:
         return (f"PROM coefficient(s) {', '.join(bad)} read 0x0000 or 0xFFFF (blank or unread PROM; an all-zero "
@@ -378,8 +372,7 @@ class Compensation:
 
     ``dt`` (dT), ``temp`` (TEMP, 0.01 degC), ``off`` (OFF), ``sens`` (SENS), ``p`` (P: 0.1 mbar for
     30BA, 0.01 mbar for 02BA). For second order, ``temp``/``off``/``sens``/``p`` are TEMP2/OFF2/
-    SENS2/P2 and ``ti``/``offi``/``sensi`` hold the corrections (all 0 for first order).
-    """
+    SENS2/P2 and ``ti``/``offi``/``sensi`` hold the corrections (all 0 for first order)."""
 
     dt: int
     temp: int
@@ -456,8 +449,7 @@ def second_order(d1: int, first: Compensation, variant: Variant) -> Compensation
     """Apply the second-order correction to a first-order result (docs/devices.md §3.5).
 
     OFF2 = OFF - OFFi, SENS2 = SENS - SENSi, TEMP2 = TEMP - Ti, P recomputed with the same
-    divisors. Raises Ms5837Error if D1 is not 24-bit.
-    """
+    divisors. Raises Ms5837Error if D1 is not 24-bit."""
     _check_adc("D1", d1)
     variant = Variant(variant)
     ti, offi, sensi = _second_order_terms(first.dt, first.temp, variant)

@@ -4,8 +4,7 @@
 :class:`~hindrax_common.transport.i2c.I2CDevice` (``smbus2`` on the Pi, the emulated bus in tests). Every method
 raises :class:`~hindrax_common.transport.i2c.I2CError` when the chip does not answer; what that means for the
 outputs (UNKNOWN, disarm, retry) is :class:`.core.EscCore`'s. Registers and sequences: :mod:`.protocol`
-(datasheet §7.3, docs/devices.md §5.1).
-"""
+(datasheet §7.3, docs/devices.md §5.1)."""
 from __future__ import annotations
 
 from typing import Any, Sequence
@@ -40,8 +39,7 @@ class EscChip:
     lights'; ``reference``: (channel, us) of a constant pulse on a channel no ESC is on, or None. ``raw``: an object
     with ``begin_batch()`` and ``flush()`` (the node's ``raw/pca9685`` recorder), so that
     the transactions of one update go out in one message. :attr:`device` is None until the bus is open.
-    :attr:`written` (n,) holds the thruster widths on the chip as decoded from the counts written, us.
-    """
+    :attr:`written` (n,) holds the thruster widths on the chip as decoded from the counts written, us."""
 
     #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending
     EXPECTED_MODE1 = p.MODE1_AI | p.MODE1_ALLCALL

@@ -36,8 +36,7 @@ Rules (one test row each in ``test/test_esc_core.py``):
 * **Watchdog**: armed, a command older than ``watchdog_timeout_s`` (ROS time) gives neutral; so does no command
   for ``steady_watchdog_s`` of steady time (:meth:`EscCore.steady_check`: a stopped ROS clock).
 * **Output**: armed with a fresh valid command -> the command's widths through :class:`EscOutput` (reversal,
-  trim, slew limit, PCA9685 counts rounded away from neutral outside the deadband); otherwise neutral.
-"""
+  trim, slew limit, PCA9685 counts rounded away from neutral outside the deadband); otherwise neutral."""
 from __future__ import annotations
 
 import math
@@ -206,8 +205,7 @@ class EscOutput:
 
     ``target(command, dt_s)`` returns the (n,) widths to write now. Raises :class:`ValueError` for a command of
     the wrong length or with a non-finite value. Without a slew limit the widths of a command are computed once
-    (the same command object again returns them as they are); a new object, or :meth:`neutral`, computes anew.
-    """
+    (the same command object again returns them as they are); a new object, or :meth:`neutral`, computes anew."""
 
     def __init__(self, channels, reversed_, trim_us, min_us: float, neutral_us: float, max_us: float,
                  slew_rate_us_per_s: float = 0.0, count_us: float = 0.0, deadband_us: float = 0.0,

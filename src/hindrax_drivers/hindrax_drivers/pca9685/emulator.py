@@ -18,8 +18,7 @@ Models docs/devices.md §5.1:
   output carries no pulse.
 
 Not modelled: sub-addresses and All-Call decoding, OUTNE, OCH (updates apply at STOP), the
-oscillator's 500 us start-up, update at the end of the cycle.
-"""
+oscillator's 500 us start-up, update at the end of the cycle."""
 
 from __future__ import annotations
 
@@ -135,8 +134,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
         """High time per period that ``channel`` actually outputs, in us (docs/devices.md §5.1).
 
         0 while /OE is high (no signal), while sleeping, while stopped awaiting RESTART, or when full OFF; the
-        full period when full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement.
-        """
+        full period when full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement."""
         if self.outputs_disabled():
             return 0.0
         with self._lock:

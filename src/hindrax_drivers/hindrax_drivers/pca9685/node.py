@@ -40,8 +40,7 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
 
 The bus: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, or injected (an
 :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` holding a
-:class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation).
-"""
+:class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation)."""
 from __future__ import annotations
 
 import math

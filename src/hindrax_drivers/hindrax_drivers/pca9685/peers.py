@@ -7,8 +7,7 @@ verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and
 is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
 (:class:`~.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
 :func:`.core.heartbeat_verdict`'s. Node parameter (read-only, config.sections.esc): ``heartbeat_timeout_s``
-(default ``esc.heartbeat_timeout_s``).
-"""
+(default ``esc.heartbeat_timeout_s``)."""
 from __future__ import annotations
 
 import time

@@ -9,8 +9,7 @@ Sources: docs/devices.md §5.1 (NXP datasheet [Q1], UM10574 [Q2], Adafruit libra
 
 Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an ``smbus2.SMBus`` object,
 hides the register arithmetic, and computes counts from the *requested* frequency; docs/devices.md §5.1 requires using
-the actual prescale and (calibrated) oscillator frequency, which is what every function here takes.
-"""
+the actual prescale and (calibrated) oscillator frequency, which is what every function here takes."""
 
 from __future__ import annotations
 
@@ -173,8 +172,7 @@ def high_time_counts(setting: ChannelRegisters) -> int:
     """Counts per period the output is high, 0..4096 (docs/devices.md §5.1 output semantics).
 
     Full OFF wins (0); full ON gives 4096; otherwise ``(OFF - ON) mod 4096``, with ON == OFF
-    giving 0 (the measured behaviour quoted in §5.1).
-    """
+    giving 0 (the measured behaviour quoted in §5.1)."""
     if setting.full_off:
         return 0
     if setting.full_on:
@@ -250,8 +248,7 @@ def startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> li
     """MODE2 (totem-pole outputs, the reset value 0x04) then :func:`set_frequency_sequence`.
 
     Channel registers are not touched: at power-up every channel is full OFF (no pulses, which the
-    ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel.
-    """
+    ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel."""
     return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
 
 
@@ -266,8 +263,7 @@ def safe_startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL
 
     Why: :func:`startup_sequence` wakes and RESTARTs first, and RESTART resumes whatever the channel registers
     still hold (datasheet §7.3.1.1), e.g. the 1700 us of a previous process that died while armed, until the
-    driver writes neutral. Here the registers hold neutral (or full OFF) before RESTART.
-    """
+    driver writes neutral. Here the registers hold neutral (or full OFF) before RESTART."""
     freq = set_frequency_sequence(prescale, mode1)
     before = [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"),
               RegisterWrite(ALL_LED_OFF_H, FULL_BIT, 0.0, "every output full OFF before anything can restart"),

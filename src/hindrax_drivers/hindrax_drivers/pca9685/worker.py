@@ -15,8 +15,7 @@ Queue rules (one test each in ``test/test_esc_worker.py``):
 A bus call that has not returned after ``call_timeout_s`` is a fault the node acts on (:meth:`ChipWorker.stuck_s`; the
 heartbeat then says ERROR and the output guard's /OE stops the outputs, docs/watchdog.md): the worker itself cannot
 abandon a call that hangs. ``threaded=False`` runs each job in the posting thread instead (a lock-step simulation, whose
-chip writes must land at the simulated instant of the command); the jobs, their order and their results are the same.
-"""
+chip writes must land at the simulated instant of the command); the jobs, their order and their results are the same."""
 from __future__ import annotations
 
 import threading

@@ -28,8 +28,7 @@ Truth -> measurement [EMULATOR choices where marked]:
   1 m .. ``max_range_m`` [EMULATOR].  Manual mode uses the configured range.  No echo inside the scan
   window (or truth None) -> distance 0, confidence 0 [EMULATOR].
 - Transmit duration, gain choice in auto mode and the profile samples (a Gaussian echo on 200 points,
-  as brping's simulator uses [P4]) are [EMULATOR] models.
-"""
+  as brping's simulator uses [P4]) are [EMULATOR] models."""
 
 from __future__ import annotations
 

@@ -31,8 +31,7 @@ Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (
   ``ping/altitude`` and ``ping/confidence``), firmware version and verified settings.
 
 Time stamps: receive time (ROS time, ``use_sim_time`` supported): the Ping1D messages carry no device
-time (docs/devices.md §2.4).
-"""
+time (docs/devices.md §2.4)."""
 from __future__ import annotations
 
 import math

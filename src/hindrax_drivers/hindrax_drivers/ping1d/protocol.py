@@ -11,8 +11,7 @@ Our own codec, not the PyPI package ``bluerobotics-ping``: its 0.2.x ``Ping1D`` 
 with a declared parse error and a streaming framer that resynchronises on ``BR``.
 
 Units: payload fields are converted to SI on decode (mm -> m, mm/s -> m/s, ms/µs -> s, mV -> V,
-centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution.
-"""
+centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution."""
 
 from __future__ import annotations
 
@@ -342,8 +341,7 @@ def _payload(message_id: Ping1dId, note: str, *layout: tuple, tail: Optional[Tup
     ``layout``: one ``(field, struct code, conversion[, default])`` per fixed field, in wire order;
     ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring
     gives the wire layout, then ``note``; its sections are of docs/devices.md, §2.4 (the message
-    table) unless it says otherwise.
-    """
+    table) unless it says otherwise."""
     fields: list = [(name, _PY_TYPE.get(conv, float),
                      field(default=default[0] if default else MISSING))
                     for name, _, conv, *default in layout]

@@ -22,8 +22,7 @@ frames (the "gap"), which it keeps in a window with their stream offsets:
 
 Frames that pass the checksum but cannot be decoded are ``unknown_message`` (id not in docs/devices.md §2.4)
 or ``malformed`` (wrong payload size or value). Bytes older than two maximal frames are classified
-without waiting for the next good frame, so a stream of pure garbage is still reported.
-"""
+without waiting for the next good frame, so a stream of pure garbage is still reported."""
 from __future__ import annotations
 
 import bisect
@@ -100,8 +99,7 @@ class Ping1dStreamDecoder:
         frame ("chain-consistent"); otherwise it was cut short (truncated) by the next plausible header inside its
         claimed span, or by the end of the gap (where a good frame starts, or the stream stopped). Without ``stop`` the
         whole gap is classified; with ``stop`` only headers starting before ``stop`` (each consumed with its claimed
-        frame, which the caller guarantees lies inside ``gap``); the return value is then >= ``stop``.
-        """
+        frame, which the caller guarantees lies inside ``gap``); the return value is then >= ``stop``."""
         n = len(gap)
         limit = n if stop is None else min(stop, n)
         starts: List[int] = []  # header candidates with a plausible length (or cut before the length)

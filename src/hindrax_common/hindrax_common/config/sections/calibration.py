@@ -1,6 +1,5 @@
 """``calibration.*``: the known forces of the campaign's reference steps (docs/identification.md §6), the times
-of their holds, and the forces' derived view (:class:`CalibrationConfig`).
-"""
+of their holds, and the forces' derived view (:class:`CalibrationConfig`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -55,8 +54,7 @@ class CalibrationConfig:
 
     Weights in water and buoyancies are (m - rho V) g and (rho V - m) g with the configured water density and g.
     ``float_net_buoyancy_n`` is None without the optional ``calibration.float_*`` keys; ``net_buoyancy_std_n``
-    defaults to 0.05 N (the vehicle weighed in water with a spring scale; ASSUMPTION when not configured).
-    """
+    defaults to 0.05 N (the vehicle weighed in water with a spring scale; ASSUMPTION when not configured)."""
 
     ballast_weight_in_water_n: float
     line_pull_force_n: float

@@ -1,6 +1,5 @@
 """``control.*``: the depth/altitude, heading and velocity holds (hindrax_onboard control, docs/control.md §2-§3;
-all optional).
-"""
+all optional)."""
 from __future__ import annotations
 
 from ..spec import real, section

@@ -1,6 +1,5 @@
 """``hydrodynamics.*``: added mass and damping per DOF (positive numbers; [Hindrax-AM] Table 6,
-[Hindrax-Drag] Table 3), and their typed view per DOF (:class:`DofHydrodynamics`).
-"""
+[Hindrax-Drag] Table 3), and their typed view per DOF (:class:`DofHydrodynamics`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -63,8 +62,7 @@ class DofHydrodynamics:
     quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping ([Hindrax-Drag] Table 3:
     positive heave = moving down, w > 0 in FRD); for the other DOFs the positive and negative values are equal.
     Damping force/moment opposing motion: D(v) = linear v + quadratic |v| v, with the coefficient
-    chosen by the sign of v.
-    """
+    chosen by the sign of v."""
 
     dof: str
     added_mass: float

@@ -1,6 +1,5 @@
 """``sensors.*``: the DVL-75, the Ping1D altimeter, the MS5837 pressure sensor and the ICM-20948 IMU
-([Hindrax-Drag] Table 1; docs/devices.md), with their plausibility gates and declared noise.
-"""
+([Hindrax-Drag] Table 1; docs/devices.md), with their plausibility gates and declared noise."""
 from __future__ import annotations
 
 import math
