@@ -350,8 +350,7 @@ class PtyDevice:
             RuntimeError: while the service thread runs (one driver of the emulator at a time).
         """
         if self._thread is not None:
-            raise RuntimeError("PtyDevice.service() needs start=False: "
-                               "the service thread drives this device")
+            raise RuntimeError("PtyDevice.service() needs start=False: the service thread drives this device")
         before = self.bytes_to_host
         self._cycle(0.0, t_s, deliver)
         return self.bytes_to_host - before
