@@ -141,8 +141,7 @@ class SerialDeviceNode(VehicleNode):
         node_name: ROS node name.
         device_name: short device name (``raw/<device_name>``, diagnostics ``hindrax/<device_name>``).
         config_section: typed configuration section holding ``port`` and ``baud_rate`` (e.g.
-            :class:`~hindrax_common.config.typed_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys
-            declared.
+            :class:`~hindrax_common.config.typed_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys declared.
         command_gap_s: pause between start-up commands, s.
         **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
     Raises:

@@ -144,8 +144,7 @@ class StreamFaults:
 
         Args:
             message: the complete message as the device would send it.
-            corrupt_checksum: protocol-specific function returning ``message`` with a wrong
-                checksum.
+            corrupt_checksum: protocol-specific function returning ``message`` with a wrong checksum.
         Returns:
             the bytes to actually send (b"" when dropped).
         """
@@ -237,8 +236,7 @@ class PtyDevice:
         link_name: file name of the stable symlink inside a private temporary directory.
         start: start the service thread immediately.
         realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
-            (:func:`hindrax_common.process.scheduling.set_this_thread`): bytes on time on a loaded
-            machine, as a UART's.
+            (:func:`hindrax_common.process.scheduling.set_this_thread`): bytes on time on a loaded machine, as a UART's.
     Raises:
         OSError: if a pty cannot be created.
     """

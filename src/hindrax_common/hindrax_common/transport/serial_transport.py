@@ -69,8 +69,7 @@ class SerialTransport:
         port: device path or pyserial URL.
         baudrate: bit rate (8N1).
         on_data: called from the reader thread (or :meth:`pump`'s) with each received chunk (bytes).
-        on_raw: raw tap ``(direction 'rx'|'tx', data, t_monotonic_s)``; 'tx' is called from the
-            writing thread.
+        on_raw: raw tap ``(direction 'rx'|'tx', data, t_monotonic_s)``; 'tx' is called from the writing thread.
         on_connect: called from the reader thread after every successful (re)open.
         on_disconnect: called with the error text when the port is lost (from the reader thread, or
             from the writing thread when a write fails).

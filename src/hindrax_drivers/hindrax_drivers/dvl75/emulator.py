@@ -80,9 +80,8 @@ class DvlTruth:
             (yaw = heading clockwise from true north), rad.
         bottom_lock: False forces "searching" whatever the geometry.
         confidence_pct: ``$DVPDL`` confidence when locked, 0..100 %.
-        beam_locked, beam_velocity_m_s, beam_range_m, beam_gain_db: optional per-beam values in the
-            order A port, B stern, C starboard, D bow (4-tuples) reported verbatim instead of the
-            emulator's geometric model.
+        beam_locked, beam_velocity_m_s, beam_range_m, beam_gain_db: optional per-beam values in the order A port, B
+            stern, C starboard, D bow (4-tuples) reported verbatim instead of the emulator's geometric model.
     """
 
     velocity_frd_m_s: Tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -165,8 +164,7 @@ class Dvl75Emulator:
         min_altitude_m, max_altitude_m: lock envelope (docs/devices.md §1.1).
         seed: seed of the fault generator.
     Attributes:
-        faults: :class:`StreamFaults` (garbage, bad checksums, truncated/dropped lines, stuck values,
-            disconnect).
+        faults: :class:`StreamFaults` (garbage, bad checksums, truncated/dropped lines, stuck values, disconnect).
         flash: the :class:`DvlFlash` in use.
         sent_counts: sentences generated per sentence id (before faults).
         commands_received: every command line received, decoded.

@@ -86,8 +86,7 @@ class DvlPositionDelta:
         delta_roll_rad, delta_pitch_rad, delta_yaw_rad: fields ``adr, adp, ady``, rad, about X (bow),
             Y (starboard), Z (down).
         delta_x_m, delta_y_m, delta_z_m: fields ``pdx, pdy, pdz``, m, forward / starboard / down.
-        confidence_pct: field ``c``, 0..100 % (0 = none; then every field after ``dtu`` is garbage
-            [D4b]).
+        confidence_pct: field ``c``, 0..100 % (0 = none; then every field after ``dtu`` is garbage [D4b]).
     """
 
     time_since_boot_s: float
@@ -168,8 +167,7 @@ class DvlGprmc:
     as a position command (§1.4).
 
     Attributes:
-        time_of_day_s: UTC time of day in s (for the DVL: time since power-on, power-on = midnight);
-            None when empty.
+        time_of_day_s: UTC time of day in s (for the DVL: time since power-on, power-on = midnight); None when empty.
         valid: status ``A`` (True) or ``V`` (False).
         latitude_deg, longitude_deg: decimal degrees (+N, +E); None when empty.
         speed_m_s: speed over ground (knots on the wire), m/s; None when empty.
