@@ -20,8 +20,7 @@ NODES = {
     "static_tf_node": "hindrax_drivers.tf.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
-NODES = {name: mod for name, mod in NODES.items()
-         if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
+NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
 
 setup(
     name=PACKAGE,

@@ -209,8 +209,7 @@ class ThrustAllocationNode(VehicleNode):
         else:
             stamp_ns = now_ns
         # the command's CDR is published as bytes (50 Hz without an rclpy object, hindrax_common.cdr.lean_cdr)
-        self.pub_pwm.publish(thruster_pwm_encode(thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us,
-                                                                   not rejected)))
+        self.pub_pwm.publish(thruster_pwm_encode(thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us, not rejected)))
         saturated = np.asarray(saturated, dtype=bool)
         self._held = (stamp_ns, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
                       np.asarray(achieved, dtype=float), float(scale), saturated, rejected, reason)

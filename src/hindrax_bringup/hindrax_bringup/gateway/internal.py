@@ -46,8 +46,7 @@ DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")
 #: default longest wait for an internal service's answer, s
 DEFAULT_CALL_TIMEOUT_S = 2.0
 #: the vehicle file's sections the gateway reads: its name, and what the request bounds need
-BOUNDS_SECTIONS = ("vehicle", "identification", "supervisor", "limits", "pool", "hydrodynamics", "thrusters",
-                   "esc")
+BOUNDS_SECTIONS = ("vehicle", "identification", "supervisor", "limits", "pool", "hydrodynamics", "thrusters", "esc")
 #: the relay of these topics takes best-effort publishers too (odometry is often published best effort)
 BEST_EFFORT_TOPICS = frozenset({"odom"})
 

@@ -89,8 +89,7 @@ class SocketI2CBus:
     def i2c_rdwr(self, *i2c_msgs):
         """``smbus2.i2c_msg`` transfers (ctypes, not picklable) sent as (address, flags, bytes or
         length); the read messages' buffers are filled from the answer, as the kernel fills them."""
-        spec = [(int(m.addr), int(m.flags),
-                 int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
+        spec = [(int(m.addr), int(m.flags), int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
                 for m in i2c_msgs]
         reads = (m for m in i2c_msgs if m.flags & I2C_M_RD)
         for m, data in zip(reads, self._bus_call("i2c_rdwr", spec)):

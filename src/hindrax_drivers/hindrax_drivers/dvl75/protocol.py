@@ -449,8 +449,7 @@ def format_dvext(record: DvlExtended) -> bytes:
 
 
 # $GPRMC
-def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str,
-                negative: str) -> Optional[float]:
+def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str, negative: str) -> Optional[float]:
     if value == "" and hemi == "":
         return None
     v = _float(value, name)

@@ -342,8 +342,7 @@ def _payload(message_id: Ping1dId, note: str, *layout: tuple, tail: Optional[Tup
     ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring
     gives the wire layout, then ``note``; its sections are of docs/devices.md, §2.4 (the message
     table) unless it says otherwise."""
-    fields: list = [(name, _PY_TYPE.get(conv, float),
-                     field(default=default[0] if default else MISSING))
+    fields: list = [(name, _PY_TYPE.get(conv, float), field(default=default[0] if default else MISSING))
                     for name, _, conv, *default in layout]
     if tail is not None:
         tail_type, tail_default = _TAIL_TYPE[tail[1]]

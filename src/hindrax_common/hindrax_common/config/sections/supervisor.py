@@ -22,10 +22,8 @@ SCHEMA, OPTIONAL = section("supervisor", {
                             "max_identical_s, s",
                             0.1, 10.0),
     "min_rate.dvl_hz": real("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
-    "min_rate.altimeter_hz": real("minimum ping/altitude rate while armed, Hz (0 = not watched)",
-                                  0.0, 1000.0),
-    "min_rate.pressure_hz": real("minimum pressure/depth rate while armed, Hz (0 = not watched)",
-                                 0.0, 1000.0),
+    "min_rate.altimeter_hz": real("minimum ping/altitude rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
+    "min_rate.pressure_hz": real("minimum pressure/depth rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
     "min_rate.imu_hz": real("minimum imu/data_raw rate while armed, Hz (0 = not watched)", 0.0, 2000.0),
     "max_invalid_dvl_s": real("armed with no valid DVL velocity for this long -> trip (the cage's dead "
                               "reckoning is frozen meanwhile), s", 0.1, 60.0),
