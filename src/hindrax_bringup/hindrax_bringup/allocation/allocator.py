@@ -20,10 +20,9 @@ m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hin
      along its own direction (unlike ``scipy.optimize.lsq_linear``, which could turn the reduced
      axes). The null space of B is not used.
 3. **Deadband.** An ESC gives 0 N inside its deadband (docs/devices.md §5.2). If a force of step 2
-   falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses
-   which thrusters run as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one
-   symmetric pair at 1.73 N instead of four at 0.87 N. Otherwise step 2's forces are kept (the
-   search costs nothing).
+   falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses which thrusters run
+   as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one symmetric pair at 1.73 N instead of four at
+   0.87 N. Otherwise step 2's forces are kept (the search costs nothing).
 4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (:mod:`.thrust_curve`),
    optionally on the PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the
    nearest width not in the deadband, and the *actual* thrust at that width is evaluated with the
@@ -188,8 +187,7 @@ class ThrustAllocator:
         :data:`DEFAULT_PRIORITY_GROUPS`. Ignored in uniform mode.
     pulse_width_step_us:
         Optional quantisation step of the pulse-width generator (us), e.g. the PCA9685 tick
-        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no
-        quantisation.
+        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no quantisation.
     deadband_search:
         ``True`` (default): forces the thrusters cannot give (inside the ESC deadband) are avoided by choosing
         which thrusters run (:mod:`.deadband`); ``False``: each force is inverted on its own (small-force rule

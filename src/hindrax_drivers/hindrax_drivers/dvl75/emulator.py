@@ -22,8 +22,7 @@ Behaviour (docs/devices.md §1.1-§1.6, especially the §1.6 checklist):
 
 Truth -> measurement model (the emulator's own modelling choices are marked [EMULATOR]):
 - ``DvlTruth`` is given in the marine convention: body velocity over ground in FRD, attitude as
-  roll/pitch/yaw with yaw = heading clockwise from north (NED), altitude = vertical distance to a flat
-  bottom.
+  roll/pitch/yaw with yaw = heading clockwise from north (NED), altitude = vertical distance to a flat bottom.
 - ``$DVPDL`` deltas: trapezoidal integral of the FRD velocity over ``dtu``; angle deltas are wrapped
   differences of (roll, pitch, yaw) [EMULATOR: the firmware's exact definition is undocumented].
 - ``$DVEXT``: roll as is, pitch negated (DVL Euler angles are right-handed about X bow / Y port,

@@ -7,9 +7,8 @@
   0x41 (asleep), LP_CONFIG = 0x40, ACCEL_CONFIG = 0x01, GYRO_CONFIG_1 = 0x01 [UNVERIFIED];
   DEVICE_RESET restores them and selects bank 0 [assumed in §4.1]; bursts auto-increment;
 * data registers follow a truth source ``t_s -> (specific_force_m_s2 (3,), angular_rate_rad_s (3,),
-  magnetic_field_t (3,), temperature_c)`` in the SENSOR frame, sampled at the configured output data
-  rate and quantised with the full scale; frozen while SLEEP; INT_STATUS_1.RAW_DATA_0_RDY set on new
-  data, cleared on read;
+  magnetic_field_t (3,), temperature_c)`` in the SENSOR frame, sampled at the configured output data rate and quantised
+  with the full scale; frozen while SLEEP; INT_STATUS_1.RAW_DATA_0_RDY set on new data, cleared on read;
 * the AK09916 (:class:`Ak09916Emulator`: DRDY/DOR/HOFL, ST2 read-lock, modes) is reached directly
   through :attr:`Icm20948Emulator.aux_port` when BYPASS_EN = 1 and I2C_MST_EN = 0 (else it NACKs),
   or through the I2C master: SLV0..SLV3 once per master cycle (gyro ODR tick, and at once on a

@@ -10,8 +10,7 @@ For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device s
 * raw values from a truth source ``t_s -> (pressure_pa, temperature_c)`` at the start of each
   conversion, through the inverse compensation (§3.8, :func:`invert_to_raw`);
 * faults: stuck outputs, corrupted or blank PROM, forced ADC counts (``raw_override``), a power
-  cycle (:meth:`Ms5837Emulator.power_cycle`: ADC reads 0 until the next reset); NACKs are injected
-  by the bus.
+  cycle (:meth:`Ms5837Emulator.power_cycle`: ADC reads 0 until the next reset); NACKs are injected by the bus.
 
 Modelling choices: reset is instantaneous; conversion time per OSR is
 :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (§3.1); unknown commands are ignored;
@@ -84,9 +83,8 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
 
     Returns:
         (D1, D2), each 0..2^24-1. The round trip error is within half an output LSB
-        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with
-        the second-order model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a
-        value.
+        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with the second-order
+        model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a value.
 
     Raises:
         Ms5837Error: non-finite inputs.

@@ -3,8 +3,7 @@
 Models docs/devices.md §5.1:
 
 * reset values MODE1 = 0x11, MODE2 = 0x04, PRE_SCALE = 0x1E, every LEDn full OFF; reserved H bits
-  7:5 read 0; ALL_LED registers are write-only and write all 16 channels; TestMode (0xFF) and
-  0x46..0xF9 ignore writes;
+  7:5 read 0; ALL_LED registers are write-only and write all 16 channels; TestMode (0xFF) and 0x46..0xF9 ignore writes;
 * auto-increment only with MODE1.AI, wrapping 0x45 -> 0x00 and 0xFE -> 0x00;
 * PRE_SCALE written only while SLEEP, values below 3 forced to 3;
 * SLEEP/RESTART [Q1 §7.3.1.1]: sleeping with a channel active sets RESTART and stops the outputs,

@@ -115,9 +115,8 @@ class Ping1dEmulator:
         protocol_version: (major, minor, patch) reported in protocol_version.
         seed: seed of the fault generator.
     Attributes:
-        settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`),
-        streaming (streamed id -> destination device id), received (counts of accepted host messages
-        by id).
+        settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`), streaming (streamed
+        id -> destination device id), received (counts of accepted host messages by id).
     """
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,
