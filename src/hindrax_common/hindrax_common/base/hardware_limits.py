@@ -88,9 +88,7 @@ def esc_prescale(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR
     E.g. 400 Hz rounds to prescale 14 = 406.9 Hz at 25 MHz, above the Basic ESC's 400 Hz maximum,
     and is rejected; use 381.5 Hz (prescale 15) or 200 Hz.
 
-    Raises:
-        Pca9685Error: the actual frequency is outside 50..400 Hz.
-    """
+    Raises ``Pca9685Error``: the actual frequency is outside 50..400 Hz."""
     prescale = prescale_for_frequency(frequency_hz, oscillator_hz)
     actual_hz = frequency_for_prescale(prescale, oscillator_hz)
     if not ESC_MIN_FREQUENCY_HZ <= actual_hz <= ESC_MAX_FREQUENCY_HZ:

@@ -296,9 +296,7 @@ class I2CDevice:
         Up to 32 bytes use ``read_i2c_block_data``; longer reads use ``i2c_rdwr`` (write + read).
         Raw tap: ``("read", address, register, data)``.
 
-        Returns:
-            ``bytes`` of length ``length``.
-        """
+        Returns ``bytes`` of length ``length``."""
         check_byte("register", register)
         if not isinstance(length, int) or length < 1:
             raise ValueError(f"length must be an int >= 1, got {length!r}")

@@ -189,9 +189,7 @@ class PeriodicSchedule:
     def set_period(self, period_s: float) -> None:
         """Change the period; the next tick already scheduled is kept, later ones use the new one.
 
-        Raises:
-            ValueError: non-positive or non-finite period.
-        """
+        Raises ``ValueError``: non-positive or non-finite period."""
         if not (period_s > 0 and period_s < float("inf")):
             raise ValueError(f"period must be positive and finite, got {period_s}")
         if period_s != self._period_s and getattr(self, "_anchor_s", None) is not None:
@@ -344,9 +342,7 @@ class PtyDevice:
         ``deliver=False`` discards the output (counted in :attr:`bytes_dropped`), as a UART nobody listens to. Returns
         the number of bytes delivered.
 
-        Raises:
-            RuntimeError: while the service thread runs (one driver of the emulator at a time).
-        """
+        Raises ``RuntimeError``: while the service thread runs (one driver of the emulator at a time)."""
         if self._thread is not None:
             raise RuntimeError("PtyDevice.service() needs start=False: the service thread drives this device")
         before = self.bytes_to_host

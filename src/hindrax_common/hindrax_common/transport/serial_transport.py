@@ -127,9 +127,7 @@ class SerialTransport:
     def start(self) -> None:
         """Start the reader thread (idempotent).
 
-        Raises:
-            SerialTransportError: after :meth:`close`.
-        """
+        Raises ``SerialTransportError``: after :meth:`close`."""
         if self._closed:
             raise SerialTransportError("transport is closed")
         if self._thread is None:

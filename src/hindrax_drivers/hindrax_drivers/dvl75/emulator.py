@@ -199,9 +199,7 @@ class Dvl75Emulator:
     def set_rate_hz(self, rate_hz: float) -> None:
         """Change the output rate (5..20 Hz, docs/devices.md §1.1); takes effect from the next cycle.
 
-        Raises:
-            ValueError: outside 5..20 Hz.
-        """
+        Raises ``ValueError``: outside 5..20 Hz."""
         if not 5.0 <= rate_hz <= 20.0:
             raise ValueError(f"DVL-75 rate {rate_hz} Hz outside 5..20 Hz")
         self._schedule.set_period(1.0 / float(rate_hz))

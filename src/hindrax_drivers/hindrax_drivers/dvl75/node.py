@@ -86,9 +86,7 @@ IMPLAUSIBLE_HOLD_S = 2.0
 class Dvl75Node(SerialDeviceNode):
     """DVL-75 serial driver node (see the module docstring). ``**kwargs`` go to ``rclpy.node.Node``.
 
-    Raises:
-        ConfigError: invalid configuration (one line logged; ``main`` exits with status 1).
-    """
+    Raises ``ConfigError``: invalid configuration (one line logged; ``main`` exits with status 1)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("dvl75", device_name="dvl75", config_section=SensorsDvl75Section,

@@ -355,9 +355,7 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
     format"): integer µs times, ``%.6f`` angle deltas, ``%.3f`` position deltas, integer confidence,
     ``*HH`` checksum, CR LF.  Quantisation: 1 µs, 1e-6 rad, 1 mm.
 
-    Raises:
-        ValueError: negative times, non-finite values or confidence outside 0..100.
-    """
+    Raises ``ValueError``: negative times, non-finite values or confidence outside 0..100."""
     tu = round(record.time_since_boot_s * 1e6)
     dtu = round(record.delta_time_s * 1e6)
     if tu < 0 or dtu < 0:
@@ -397,9 +395,7 @@ def parse_dvext(fields: Sequence[str]) -> DvlExtended:
     """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty field 35 that
     real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is accepted too.
 
-    Raises:
-        DvlParseError: wrong field count, non-empty field 35, malformed number or flag.
-    """
+    Raises ``DvlParseError``: wrong field count, non-empty field 35, malformed number or flag."""
     n = _DVEXT_FIELDS - 1
     if len(fields) == n + 1:
         if fields[n] != "":
@@ -432,9 +428,7 @@ def format_dvext(record: DvlExtended) -> bytes:
     north/east ``%.3f``, lat/lon ``%.9f``, elapsed time ``%.3f``, quaternion ``%.6f``, gains integer
     dB, beam velocities ``%.4f``, beam ranges ``%.3f``.
 
-    Raises:
-        ValueError: non-finite values, or a GPS status / calibration field that is not printable.
-    """
+    Raises ``ValueError``: non-finite values, or a GPS status / calibration field that is not printable."""
     r = record
     floats = [getattr(r, attr) for attr, _, fmt in _DVEXT_SCALARS if fmt != "%d"] + [
         v for attr, _, parse, _ in _DVEXT_FOURS if parse is _float for v in getattr(r, attr)]
@@ -471,9 +465,7 @@ def parse_gprmc(fields: Sequence[str]) -> DvlGprmc:
     """Parse the data fields of ``$GPRMC`` (docs/devices.md §1.3.3): time, status, lat, N/S, lon, E/W,
     speed (knots), track (deg), date, magnetic variation, E/W, and an optional mode field.
 
-    Raises:
-        DvlParseError: wrong field count, malformed time/position/number, status not A/V.
-    """
+    Raises ``DvlParseError``: wrong field count, malformed time/position/number, status not A/V."""
     if len(fields) not in (11, 12):
         raise DvlParseError(f"$GPRMC: expected 11 or 12 fields, got {len(fields)}")
     t = fields[0]
@@ -535,9 +527,7 @@ def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float
 def format_dvtxt(text: str) -> bytes:
     """Format a free-form ``$DVTXT,<text>`` line, without checksum as documented [D10] (§1.2).
 
-    Raises:
-        ValueError: text not printable ASCII (or containing ``*``/``$``).
-    """
+    Raises ``ValueError``: text not printable ASCII (or containing ``*``/``$``)."""
     return format_sentence("DVTXT," + text, with_checksum=False)
 
 
@@ -666,9 +656,7 @@ def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
     command, LF-terminated, CR ignored).  Keywords are upper-cased (case sensitivity of the real
     firmware is undocumented).
 
-    Raises:
-        DvlParseError: empty line or non-printable bytes.
-    """
+    Raises ``DvlParseError``: empty line or non-printable bytes."""
     raw = _to_bytes(line).rstrip(b"\r\n").strip(b" \t")
     if not raw:
         raise DvlParseError("empty command")
@@ -687,9 +675,7 @@ def build_command(keyword: str, argument: Optional[str] = None) -> bytes:
     r"""Build one command line ``KEYWORD[ argument]\r\n`` (docs/devices.md §1.4; CR LF as the BlueOS
     driver sends [D17]).  Commands carry no checksum.
 
-    Raises:
-        ValueError: keyword/argument not printable ASCII, or keyword empty / containing spaces.
-    """
+    Raises ``ValueError``: keyword/argument not printable ASCII, or keyword empty / containing spaces."""
     if not keyword or " " in keyword:
         raise ValueError(f"invalid command keyword {keyword!r}")
     text = keyword if argument is None else f"{keyword} {argument}"
@@ -714,9 +700,7 @@ def cmd_send(message: str, enabled: bool) -> bytes:
     GPRMC, FREEFORM, DVKFA/DVKFB (the command table spells DVFKA/DVFKB, possibly a typo [UNVERIFIED];
     both spellings pass through verbatim).
 
-    Raises:
-        ValueError: unknown message name.
-    """
+    Raises ``ValueError``: unknown message name."""
     name = message.upper()
     if name not in _SEND_TARGETS:
         raise ValueError(f"unknown SEND- target {message!r}; expected one of {_SEND_TARGETS}")
@@ -727,9 +711,7 @@ def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: f
     """``SET-SENSOR-ORIENTATION <roll>,<pitch>,<heading>`` in degrees (docs/devices.md §1.4): the
     sensor -> vehicle rotation, each angle within ±180 deg; factory (0,0,0) = downward-looking.
 
-    Raises:
-        ValueError: an angle outside ±pi rad (±180 deg) or non-finite.
-    """
+    Raises ``ValueError``: an angle outside ±pi rad (±180 deg) or non-finite."""
     degs = [math.degrees(a) for a in (roll_rad, pitch_rad, heading_rad)]
     for d in degs:
         if not math.isfinite(d) or abs(d) > 180.0 + 1e-9:
@@ -740,9 +722,7 @@ def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: f
 def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
     """``SET-SPEED-OF-SOUND <m/s>`` (docs/devices.md §1.4: 1100..1950 m/s, sticky; factory 1484).
 
-    Raises:
-        ValueError: outside 1100..1950 m/s.
-    """
+    Raises ``ValueError``: outside 1100..1950 m/s."""
     if not 1100.0 <= speed_of_sound_m_s <= 1950.0:
         raise ValueError(f"speed of sound {speed_of_sound_m_s} m/s outside 1100..1950")
     return build_command("SET-SPEED-OF-SOUND", _num(speed_of_sound_m_s, 1))

@@ -123,9 +123,7 @@ def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: flo
     Full scale: the FS_SEL whose range equals the setting (2/4/8/16 g, 250/500/1000/2000 dps). DLPF: the
     same DLPFCFG for accel and gyro (FCHOICE = 1). Divider for both: ``round(1125 / rate) - 1`` in 0..255.
 
-    Raises:
-        Icm20948Error: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate.
-    """
+    Raises ``Icm20948Error``: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate."""
     try:
         accel_fs = p.ACCEL_RANGE_G.index(float(accel_full_scale_g))
         gyro_fs = p.GYRO_RANGE_DPS.index(float(gyro_full_scale_dps))

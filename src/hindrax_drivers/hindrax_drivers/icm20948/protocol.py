@@ -314,9 +314,7 @@ def flatten_writes(writes: Iterable[BankedWrite], current_bank: int | None = Non
     treated as unknown at the start (``current_bank=None``) and after a DEVICE_RESET write (the
     reset-to-bank-0 behaviour is only assumed in docs/devices.md §4.1), so it is always re-selected.
 
-    Raises:
-        Icm20948Error: a value outside 0..255 or an AK09916 register (bank None).
-    """
+    Raises ``Icm20948Error``: a value outside 0..255 or an AK09916 register (bank None)."""
     out: list[RegisterWrite] = []
     bank = current_bank
     for w in writes:
@@ -388,9 +386,7 @@ def mag_master_sequence(config: ImuConfig, mode: int = AK_MODE_CONTINUOUS_100HZ)
     SLV0 reads 9 bytes from ST1 (0x10) every cycle into EXT_SLV_SENS_DATA_00..08. Each SLV0 write waits three master
     cycles (the master runs at the gyro ODR, an assumption: the I2C_MST_ODR_CONFIG formula is unverified, §6).
 
-    Raises:
-        Icm20948Error: ``mode`` not an AK09916 CNTL2 mode.
-    """
+    Raises ``Icm20948Error``: ``mode`` not an AK09916 CNTL2 mode."""
     if mode not in (AK_MODE_POWER_DOWN, AK_MODE_SINGLE, AK_MODE_SELF_TEST, *AK_CONTINUOUS_MODE_RATE_HZ):
         raise Icm20948Error(f"0x{mode:02x} is not an AK09916 CNTL2 mode")
     cycle_wait_s = max(3.0 / config.gyro_odr_hz, AK_RESET_WAIT_S)
@@ -461,9 +457,7 @@ def parse_sensor_block(data: bytes | Sequence[int], config: ImuConfig) -> ImuSam
     Layout: accel X/Y/Z, gyro X/Y/Z, temperature, each int16 big-endian. accel = raw/LSB_per_g * g;
     gyro = raw/LSB_per_dps in rad/s; temperature = raw/333.87 + 21 degC.
 
-    Raises:
-        Icm20948Error: not 14 bytes.
-    """
+    Raises ``Icm20948Error``: not 14 bytes."""
     raw = np.frombuffer(_as_bytes(data, SENSOR_BLOCK_LENGTH, "ICM-20948 sensor block"), dtype=">i2")
     accel_raw = (int(raw[0]), int(raw[1]), int(raw[2]))
     gyro_raw = (int(raw[3]), int(raw[4]), int(raw[5]))
@@ -508,9 +502,7 @@ def parse_ak09916_block(data: bytes | Sequence[int]) -> MagSample:
     EXT_SLV_SENS_DATA_00..08 filled by SLV0 (docs/devices.md §4.5-4.7). Data are int16
     little-endian; 0.15 uT/LSB; axes flipped to the accel frame (m_x = hx, m_y = -hy, m_z = -hz).
 
-    Raises:
-        Icm20948Error: not 9 bytes.
-    """
+    Raises ``Icm20948Error``: not 9 bytes."""
     raw_bytes = _as_bytes(data, AK09916_BLOCK_LENGTH, "AK09916 block")
     st1, st2 = raw_bytes[0], raw_bytes[8]
     h = np.frombuffer(raw_bytes[1:7], dtype="<i2").astype(float)

@@ -86,9 +86,7 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
         (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with the second-order
         model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a value.
 
-    Raises:
-        Ms5837Error: non-finite inputs.
-    """
+    Raises ``Ms5837Error``: non-finite inputs."""
     if not all(map(lambda v: v == v and abs(v) != float("inf"), (pressure_pa, temperature_c))):
         raise p.Ms5837Error(f"truth values must be finite, got {pressure_pa}, {temperature_c}")
     variant = p.Variant(variant)

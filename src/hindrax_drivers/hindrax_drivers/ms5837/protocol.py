@@ -126,9 +126,7 @@ def prom_read_command(index: int) -> int:
 def decode_command(byte: int) -> Command:
     """Decode a command byte (device side; used by the emulator). Source: docs/devices.md §3.1.
 
-    Raises:
-        Ms5837Error: the byte is not an MS5837 command.
-    """
+    Raises ``Ms5837Error``: the byte is not an MS5837 command."""
     if not isinstance(byte, int) or not 0 <= byte <= 0xFF:
         raise Ms5837Error(f"command must be a byte, got {byte!r}")
     if byte == CMD_RESET:
@@ -165,9 +163,7 @@ def parse_adc(data: bytes | Sequence[int]) -> int:
 
     A value of 0 means "no completed conversion" (read too early, twice, or corrupted) and raises.
 
-    Raises:
-        Ms5837Error: not 3 bytes, or value 0.
-    """
+    Raises ``Ms5837Error``: not 3 bytes, or value 0."""
     raw = _as_bytes(data, 3, "ADC read")
     value = int.from_bytes(raw, "big")
     if value == 0:
@@ -219,9 +215,7 @@ def crc4(words: Sequence[int]) -> int:
     Returns:
         The 4-bit CRC (0..15), to compare with ``words[0] >> 12``.
 
-    Raises:
-        Ms5837Error: wrong number of words or a word outside 0..65535.
-    """
+    Raises ``Ms5837Error``: wrong number of words or a word outside 0..65535."""
     n = _prom_words(words)[:7] + [0]
     n[0] &= 0x0FFF
     rem = 0
@@ -276,9 +270,7 @@ class Calibration:
     def from_words(cls, words: Sequence[int], check_crc: bool = True) -> "Calibration":
         """Validate and wrap 7 or 8 PROM words.
 
-        Raises:
-            Ms5837Error: wrong count/range, or CRC mismatch when ``check_crc``.
-        """
+        Raises ``Ms5837Error``: wrong count/range, or CRC mismatch when ``check_crc``."""
         w = _prom_words(words)
         if len(w) == 7:
             w.append(0)
@@ -329,9 +321,7 @@ def parse_variant(value: Variant | str | None) -> Variant | None:
     """Variant from configuration: ``Variant``, ``"30BA"``/``"02BA"`` (case-insensitive, optional
     ``"MS5837-"`` prefix), or None/``"auto"`` meaning "detect" (returns None).
 
-    Raises:
-        Ms5837Error: any other value.
-    """
+    Raises ``Ms5837Error``: any other value."""
     if value is None or isinstance(value, Variant):
         return value
     name = str(value).strip().upper().replace("MS5837-", "").replace("MS5837_", "")
@@ -354,9 +344,7 @@ def detect_variant(calibration: Calibration, configured: Variant | str | None = 
         configured: ``Variant``, ``"30BA"``/``"02BA"`` (case-insensitive, optional "MS5837-"
             prefix), or None/``"auto"`` for the heuristic.
 
-    Raises:
-        Ms5837Error: unknown configured name, or C1 outside the recognised range.
-    """
+    Raises ``Ms5837Error``: unknown configured name, or C1 outside the recognised range."""
     variant = parse_variant(configured)
     if variant is not None:
         return variant
@@ -406,9 +394,7 @@ def first_order(d1: int, d2: int, calibration: Calibration, variant: Variant) ->
 
     dT = D2 - C5*2^8; TEMP = 2000 + dT*C6/2^23; OFF/SENS/P per variant table.
 
-    Raises:
-        Ms5837Error: D1/D2 not 24-bit ints.
-    """
+    Raises ``Ms5837Error``: D1/D2 not 24-bit ints."""
     _check_adc("D1", d1)
     _check_adc("D2", d2)
     c = calibration
@@ -493,9 +479,7 @@ def compensate(d1: int, d2: int, calibration: Calibration, variant: Variant,
     Never raises for 24-bit D1/D2 and any calibration (Python integers do not overflow); a result
     outside the specified temperature range is flagged, not rejected.
 
-    Raises:
-        Ms5837Error: D1/D2 not 24-bit ints, or an unknown variant.
-    """
+    Raises ``Ms5837Error``: D1/D2 not 24-bit ints, or an unknown variant."""
     try:
         variant = Variant(variant)
     except ValueError:
@@ -526,8 +510,6 @@ def depth_m(pressure_pa: float, fluid_density_kg_m3: float = FRESH_WATER_DENSITY
     Defaults: fresh water 997 kg/m^3, P_surface 101300 Pa, g = 9.80665 m/s^2. Measure the surface
     pressure at the start of a dive and pass it for best accuracy (§3.6).
 
-    Raises:
-        Ms5837Error: non-positive or non-finite density/gravity.
-    """
+    Raises ``Ms5837Error``: non-positive or non-finite density/gravity."""
     _check_density_gravity(fluid_density_kg_m3, gravity_m_s2)
     return (pressure_pa - surface_pressure_pa) / (fluid_density_kg_m3 * gravity_m_s2)

@@ -186,9 +186,7 @@ def channel_bytes_for_pulse(pulse_width_us: float, prescale: int,
 
     A pulse of 0 counts is encoded as full OFF (never ON == OFF, §5.1).
 
-    Raises:
-        Pca9685Error: see :func:`pulse_width_to_counts`; ``on_count`` not 0..4095.
-    """
+    Raises ``Pca9685Error``: see :func:`pulse_width_to_counts`; ``on_count`` not 0..4095."""
     counts = pulse_width_to_counts(pulse_width_us, prescale, oscillator_hz)
     if counts == 0:
         return ChannelRegisters.full_off_setting().to_bytes()
@@ -204,9 +202,7 @@ def channel_block_for_pulses(pulse_widths_us: Sequence[float], prescale: int,
     The same counts as :func:`channel_bytes_for_pulse` per channel (half-up rounding, 0 counts = full OFF), for a
     whole auto-increment block at once (the ESC node's hot path). Returns ``(4 * n bytes, n decoded widths us)``.
 
-    Raises:
-        Pca9685Error: a non-finite or negative width, or one needing more than 4095 counts.
-    """
+    Raises ``Pca9685Error``: a non-finite or negative width, or one needing more than 4095 counts."""
     count_us = count_duration_us(prescale, oscillator_hz)
     out = bytearray()
     decoded = []

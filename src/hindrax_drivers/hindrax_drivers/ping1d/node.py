@@ -59,9 +59,7 @@ _INTERVAL_TOLERANCE_S = 0.0015  # wire resolution 1 ms
 def startup_frames(speed_of_sound_m_s: float, ping_interval_s: float, mode_auto: bool) -> List[bytes]:
     """Byte strings the node sends after every (re)connect (see the module docstring), host id 0 -> device 0.
 
-    Raises:
-        ValueError: a value that does not fit its wire field (speed u32 mm/s, interval u16 ms).
-    """
+    Raises ``ValueError``: a value that does not fit its wire field (speed u32 mm/s, interval u16 ms)."""
     return [
         SYNC_BYTE,
         SetSpeedOfSound(float(speed_of_sound_m_s)).encode(),
@@ -78,9 +76,7 @@ def startup_frames(speed_of_sound_m_s: float, ping_interval_s: float, mode_auto:
 class Ping1dNode(SerialDeviceNode):
     """Ping1D serial altimeter node (see the module docstring). ``**kwargs`` go to ``rclpy.node.Node``.
 
-    Raises:
-        ConfigError: invalid configuration (one line logged; ``main`` exits with status 1).
-    """
+    Raises ``ConfigError``: invalid configuration (one line logged; ``main`` exits with status 1)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("ping1d", device_name="ping1d", config_section=SensorsPing1dSection,

@@ -113,9 +113,7 @@ class Ping1dMessage:
 def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
     """Build a complete frame: header, payload, checksum (docs/devices.md §2.2).
 
-    Raises:
-        ValueError: message id outside 0..65535, device ids outside 0..255, payload > 65535 bytes.
-    """
+    Raises ``ValueError``: message id outside 0..65535, device ids outside 0..255, payload > 65535 bytes."""
     if not 0 <= int(message_id) <= 0xFFFF:
         raise ValueError(f"message id {message_id} outside 0..65535")
     if not (0 <= int(src_device_id) <= 0xFF and 0 <= int(dst_device_id) <= 0xFF):
@@ -265,9 +263,7 @@ class Ping1dPayload:
     def unpack(cls, payload: bytes):
         """Decode payload bytes into this type.
 
-        Raises:
-            Ping1dParseError: wrong length or invalid boolean value.
-        """
+        Raises ``Ping1dParseError``: wrong length or invalid boolean value."""
         fmt = "<" + "".join(code for code, _ in cls.LAYOUT)
         size = struct.calcsize(fmt)
         payload = bytes(payload)
@@ -427,18 +423,14 @@ ContinuousStop = _payload(Ping1dId.CONTINUOUS_STOP, "id to stop.", ("requested_i
 def encode_message(payload: Ping1dPayload, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
     """Complete frame for a typed payload.
 
-    Raises:
-        ValueError: a field does not fit its wire type, or ids out of range.
-    """
+    Raises ``ValueError``: a field does not fit its wire type, or ids out of range."""
     return encode_frame(payload.MESSAGE_ID, payload.pack(), src_device_id, dst_device_id)
 
 
 def decode_message(message: Union[Ping1dMessage, bytes, bytearray]) -> Ping1dPayload:
     """Typed payload of a frame (a :class:`Ping1dMessage` or the raw frame bytes).
 
-    Raises:
-        Ping1dParseError: bad frame, unknown message id, or payload of the wrong size / content.
-    """
+    Raises ``Ping1dParseError``: bad frame, unknown message id, or payload of the wrong size / content."""
     if not isinstance(message, Ping1dMessage):
         message = decode_frame(message)
     cls = PAYLOAD_TYPES.get(message.message_id)
