@@ -37,9 +37,7 @@ class DeviceClockSync:
     Attributes:
         resets: number of re-initialisations (device clock backwards, ROS time jump).
         samples: samples accepted since construction.
-    Raises:
-        ValueError: non-positive window or jump, resync_samples < 1.
-    """
+    Raises ``ValueError``: non-positive window or jump, resync_samples < 1."""
 
     def __init__(self, window_s: float = 10.0, jump_s: float = 1.0, resync_samples: int = 3) -> None:
         if window_s <= 0 or jump_s <= 0 or resync_samples < 1:

@@ -63,8 +63,7 @@ def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_
 
     Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not Python's banker's rounding.
 
-    Raises:
-        Pca9685Error: non-finite/non-positive inputs, or a result outside 3..255 (about 24..1526 Hz at 25 MHz).
+    Raises ``Pca9685Error``: non-finite/non-positive inputs, or a result outside 3..255 (about 24..1526 Hz at 25 MHz).
     """
     osc = check_oscillator(oscillator_hz)
     if not (math.isfinite(frequency_hz) and frequency_hz > 0.0):

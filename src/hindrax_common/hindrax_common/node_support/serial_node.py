@@ -144,9 +144,7 @@ class SerialDeviceNode(VehicleNode):
             :class:`~hindrax_common.config.typed_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys declared.
         command_gap_s: pause between start-up commands, s.
         **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
-    Raises:
-        ConfigError: invalid vehicle configuration or ``stuck_limit_samples``.
-    """
+    Raises ``ConfigError``: invalid vehicle configuration or ``stuck_limit_samples``."""
 
     def __init__(self, node_name: str, *, device_name: str,
                  config_section: type[SensorsDvl75Section] | type[SensorsPing1dSection], command_gap_s: float,

@@ -145,9 +145,7 @@ class StreamFaults:
         Args:
             message: the complete message as the device would send it.
             corrupt_checksum: protocol-specific function returning ``message`` with a wrong checksum.
-        Returns:
-            the bytes to actually send (b"" when dropped).
-        """
+        Returns the bytes to actually send (b"" when dropped)."""
         with self._lock:
             if self._drop:
                 self._drop -= 1
@@ -235,9 +233,7 @@ class PtyDevice:
         start: start the service thread immediately.
         realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
             (:func:`hindrax_common.process.scheduling.set_this_thread`): bytes on time on a loaded machine, as a UART's.
-    Raises:
-        OSError: if a pty cannot be created.
-    """
+    Raises ``OSError``: if a pty cannot be created."""
 
     def __init__(self, emulator: ByteStreamEmulator, clock: Callable[[], float] = time.monotonic,
                  poll_period_s: float = 0.002, link_name: str = "tty", start: bool = True,

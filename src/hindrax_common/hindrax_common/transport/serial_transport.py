@@ -77,9 +77,7 @@ class SerialTransport:
         read_timeout_s: pyserial read timeout (bounds close() latency), s (writes: 1 s).
         clock: monotonic clock for tap timestamps (default ``time.monotonic``).
         start: start the reader thread immediately (it opens the port itself).
-    Raises:
-        ValueError: non-positive timing parameters.
-    """
+    Raises ``ValueError``: non-positive timing parameters."""
 
     def __init__(self, port: str, baudrate: int = 115200, *, on_data: Optional[Callable[[bytes], None]] = None,
                  on_raw: Optional[Callable[[str, bytes, float], None]] = None,

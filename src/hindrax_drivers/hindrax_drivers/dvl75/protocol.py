@@ -239,8 +239,7 @@ def nmea_checksum(body: Union[bytes, str]) -> int:
 
     Args:
         body: sentence body without ``$`` and ``*hh``; str is encoded as UTF-8.
-    Returns:
-        int 0..255.
+    Returns int 0..255.
     Source: docs/devices.md §1.2 ("NMEA standard", verified on real captures [D21])."""
     return reduce(lambda acc, b: acc ^ b, _to_bytes(body), 0)
 
@@ -251,9 +250,7 @@ def format_sentence(body: str, *, with_checksum: bool = True) -> bytes:
     Args:
         body: printable ASCII without ``$``, ``*``, CR or LF, e.g. ``"DVPDL,1,2,..."``.
         with_checksum: False gives ``$<body>\r\n`` (how ``$DVTXT`` is documented [D10]).
-    Raises:
-        ValueError: if ``body`` is not printable ASCII or contains ``$`` or ``*``.
-    """
+    Raises ``ValueError``: if ``body`` is not printable ASCII or contains ``$`` or ``*``."""
     raw = body.encode("ascii")  # UnicodeEncodeError is a ValueError
     if any(b < 0x20 or b > 0x7E for b in raw) or b"$" in raw or b"*" in raw:
         raise ValueError(f"sentence body must be printable ASCII without '$' or '*': {body!r}")
@@ -325,9 +322,7 @@ def parse_dvpdl(fields: Sequence[str]) -> DvlPositionDelta:
 
     Args:
         fields: the fields after the sentence id (checksum already verified and removed).
-    Raises:
-        DvlParseError: wrong field count, malformed number, negative time, confidence outside 0..100.
-    """
+    Raises ``DvlParseError``: wrong field count, malformed number, negative time, confidence outside 0..100."""
     if len(fields) != _DVPDL_FIELDS - 1:
         raise DvlParseError(f"$DVPDL: expected {_DVPDL_FIELDS - 1} fields, got {len(fields)}")
     tu = _int(fields[0], "tu")
@@ -496,9 +491,7 @@ def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float
     Args:
         time_of_day_s: s since midnight (wrapped to one day).
         track_rad: rad clockwise from north (printed as 0..360 deg).
-    Raises:
-        ValueError: non-finite inputs.
-    """
+    Raises ``ValueError``: non-finite inputs."""
     if not all(math.isfinite(v) for v in (time_of_day_s, speed_m_s, track_rad)):
         raise ValueError("non-finite $GPRMC input")
     centis = round((time_of_day_s % 86400.0) * 100) % 8640000
@@ -738,11 +731,8 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     Args:
         sensor_orientation_rad: (roll, pitch, heading) sensor -> vehicle rotation, rad.
         speed_of_sound_m_s: None leaves the DVL's sticky value alone.
-    Returns:
-        list of bytes, one command line each (CR LF terminated).
-    Raises:
-        ValueError: out-of-range arguments (see the individual builders).
-    """
+    Returns list of bytes, one command line each (CR LF terminated).
+    Raises ``ValueError``: out-of-range arguments (see the individual builders)."""
     cmds = [cmd_send("DVPDL", True), cmd_send("DVEXT", True), cmd_send("GPRMC", False),
             build_command("RETWEET-IMU", "OFF"), build_command("RETWEET-GPS", "OFF"),
             cmd_set_sensor_orientation(*sensor_orientation_rad)]

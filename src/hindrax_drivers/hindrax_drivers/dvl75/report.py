@@ -122,9 +122,7 @@ class DvlReportBuilder:
         max_angular_rate_rad_s: gate on |delta_theta| / dtu, rad/s (``sensors.dvl75.max_angular_rate_rad_s``);
             None: only finiteness. The speed gate applies to the lever-arm-corrected velocity (the one published):
             a wild attitude delta over a small displacement would otherwise pass as a huge CG velocity.
-    Raises:
-        ValueError: position not 3 finite numbers, negative std or age, non-positive gate.
-    """
+    Raises ``ValueError``: position not 3 finite numbers, negative std or age, non-positive gate."""
 
     def __init__(self, position_frd_m: Sequence[float] = (0.0, 0.0, 0.0), velocity_std_m_s: float = 0.02,
                  max_extended_age_s: float = 1.0, max_speed_m_s: Optional[float] = None,

@@ -212,8 +212,7 @@ def crc4(words: Sequence[int]) -> int:
         words: PROM words 0..6 (word 7, if given, is ignored and taken as 0); word 0's CRC nibble
             (bits 15:12) is ignored.
 
-    Returns:
-        The 4-bit CRC (0..15), to compare with ``words[0] >> 12``.
+    Returns The 4-bit CRC (0..15), to compare with ``words[0] >> 12``.
 
     Raises ``Ms5837Error``: wrong number of words or a word outside 0..65535."""
     n = _prom_words(words)[:7] + [0]
