@@ -479,10 +479,8 @@ def declare_frame_ids(node: Any, defaults: dict[str, str]) -> dict[str, str]:
     the ROS drivers do (nmea_navsat_driver, phidgets), a vehicle with other frame names sets them with
     ``-p frame_id:=...`` instead of editing code. A value that is already declared (a composed process) is reused.
 
-    Raises:
-        ValueError: an empty frame id or one starting with ``/`` (tf2 frame ids have no leading slash), naming the
-            parameter and the value in one line.
-    """
+    Raises ``ValueError``: an empty frame id or one starting with ``/`` (tf2 frame ids have no leading slash), naming
+    the parameter and the value in one line."""
     out: dict[str, str] = {}
     for name, default in defaults.items():
         if node.has_parameter(name):

@@ -61,10 +61,8 @@ class Scheduling:
 def requested_priority(environ: Mapping[str, str] | None = None) -> int:
     """The priority :data:`PRIORITY_ENV` asks for (0 when unset or empty).
 
-    Raises:
-        ValueError: a value that is not an integer in :data:`PRIORITY_RANGE` or 0, in one line naming the variable,
-            the value and the allowed range.
-    """
+    Raises ``ValueError``: a value that is not an integer in :data:`PRIORITY_RANGE` or 0, in one line naming the
+    variable, the value and the allowed range."""
     raw = (os.environ if environ is None else environ).get(PRIORITY_ENV, "").strip()
     if not raw:
         return 0

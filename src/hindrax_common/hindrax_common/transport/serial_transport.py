@@ -171,10 +171,8 @@ class SerialTransport:
     def write(self, data: bytes) -> int:
         """Write all of ``data``; returns the number of bytes written.  Thread-safe.
 
-        Raises:
-            SerialTransportError: port not open, or the write failed (the port is then closed and the
-                reader thread reconnects).
-        """
+        Raises ``SerialTransportError``: port not open, or the write failed (the port is then closed and the reader
+        thread reconnects)."""
         data = bytes(data)
         failure: Optional[str] = None
         with self._ser_lock:

@@ -265,10 +265,8 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
     Trailing CR/LF are ignored.  A checksum is recognised when the line ends in ``*`` + two hex
     digits; ``checksum_ok`` is None when there is none.
 
-    Raises:
-        DvlParseError: line does not start with ``$``, has a malformed sentence id, or its checksum
-            does not verify (docs/devices.md §1.2).
-    """
+    Raises ``DvlParseError``: line does not start with ``$``, has a malformed sentence id, or its checksum does not
+    verify (docs/devices.md §1.2)."""
     raw = _to_bytes(line).rstrip(b"\r\n")
     if not raw.startswith(b"$"):
         raise DvlParseError(f"not an NMEA sentence (no leading '$'): {raw[:40]!r}")
@@ -543,10 +541,8 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     ``GPS:$``, unknown ``$`` sentences) -> :class:`DvlUnknown`.  Bytes that are not UTF-8 are
     tolerated (replaced) and make numeric fields fail cleanly.
 
-    Raises:
-        DvlParseError: empty line, bad checksum on any ``$`` sentence, missing checksum on a data
-            sentence, malformed fields, or a non-``$`` line with non-printable bytes.
-    """
+    Raises ``DvlParseError``: empty line, bad checksum on any ``$`` sentence, missing checksum on a data sentence,
+    malformed fields, or a non-``$`` line with non-printable bytes."""
     raw = _to_bytes(line).rstrip(b"\r\n")
     if not raw:
         raise DvlParseError("empty line")

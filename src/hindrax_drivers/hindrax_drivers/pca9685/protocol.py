@@ -101,10 +101,8 @@ def count_duration_us(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_
 def pulse_width_to_counts(pulse_width_us: float, prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
     """Counts = round(pulse_us * f_osc / ((PRE_SCALE + 1) * 1e6)) (docs/devices.md §5.1 table note).
 
-    Raises:
-        Pca9685Error: non-finite or negative pulse, or one that needs more than 4095 counts
-        (use full ON for a constant high level).
-    """
+    Raises ``Pca9685Error``: non-finite or negative pulse, or one that needs more than 4095 counts (use full ON for a
+    constant high level)."""
     if not (math.isfinite(pulse_width_us) and pulse_width_us >= 0.0):
         raise Pca9685Error(f"pulse_width_us must be finite and >= 0, got {pulse_width_us}")
     counts = math.floor(pulse_width_us / count_duration_us(prescale, oscillator_hz) + 0.5)
@@ -277,10 +275,8 @@ def oscillator_from_measurement(measured_us: float, commanded_us: float, prescal
     ``commanded_us``) removes the rounding to one count. E.g. 1500 us commanded at 25 MHz, prescale 30: 1210
     counts; a 24.06 MHz part shows 1559.0 us, giving 24.06 MHz back.
 
-    Raises:
-        Pca9685Error: non-finite or non-positive reading, or a result outside 20-30 MHz (a wrong channel,
-        trigger or unit: real parts measure 23-27 MHz, docs/devices.md §5.1).
-    """
+    Raises ``Pca9685Error``: non-finite or non-positive reading, or a result outside 20-30 MHz (a wrong channel, trigger
+    or unit: real parts measure 23-27 MHz, docs/devices.md §5.1)."""
     if not (math.isfinite(measured_us) and measured_us > 0.0):
         raise Pca9685Error(f"measured pulse must be finite and > 0 us, got {measured_us}")
     counts = pulse_width_to_counts(commanded_us, prescale, oscillator_hz)

@@ -128,10 +128,8 @@ def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0, 
 def decode_frame(frame: Union[bytes, bytearray]) -> Ping1dMessage:
     """Decode exactly one complete frame.
 
-    Raises:
-        Ping1dParseError: too short, not starting with ``BR``, payload_length inconsistent with the
-            frame length, or checksum mismatch.
-    """
+    Raises ``Ping1dParseError``: too short, not starting with ``BR``, payload_length inconsistent with the frame length,
+    or checksum mismatch."""
     frame = bytes(frame)
     if len(frame) < HEADER_BYTES + CHECKSUM_BYTES:
         raise Ping1dParseError(f"frame too short ({len(frame)} bytes)")
@@ -240,10 +238,8 @@ class Ping1dPayload:
     def pack(self) -> bytes:
         """Payload bytes (little-endian).
 
-        Raises:
-            ValueError: a value that does not fit its wire type (negative, too large, non-finite,
-                non-integral where an integer is required, non-ASCII text).
-        """
+        Raises ``ValueError``: a value that does not fit its wire type (negative, too large, non-finite, non-integral
+        where an integer is required, non-ASCII text)."""
         names = [f.name for f in dc_fields(self)]  # type: ignore[arg-type]
         raw = [_to_raw(getattr(self, n), conv, n) for n, (_, conv) in zip(names, self.LAYOUT)]
         try:
