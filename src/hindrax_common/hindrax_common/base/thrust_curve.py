@@ -336,12 +336,11 @@ class ThrustCurve:
     def pulse_width_us(self, force_n, voltage_scale: float = 1.0):
         """Pulse width(s) (us) that produce thrust ``force_n`` (N); scalar in, float out; array in, array out.
 
-        The requested force is divided by ``voltage_scale``, then inverted on the monotone branch of its
-        sign (exact to 0.005 us). 0 N gives neutral. Forces beyond ``max_forward_n`` / ``max_reverse_n``
-        saturate at ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the
-        branch's smallest thrust go to neutral or to the branch's inner end according to
-        ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] eq. 1. Raises
-        :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``."""
+        The requested force is divided by ``voltage_scale``, then inverted on the monotone branch of its sign (exact to
+        0.005 us). 0 N gives neutral. Forces beyond ``max_forward_n`` / ``max_reverse_n`` saturate at
+        ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the branch's smallest thrust
+        go to neutral or to the branch's inner end according to ``small_force`` (module docstring). Source: inverse of
+        [Hindrax-Drag] eq. 1. Raises :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         return _out(self._pulse_width_unchecked(_finite_array(force_n, "force_n"), s))
 

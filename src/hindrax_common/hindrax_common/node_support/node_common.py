@@ -428,8 +428,7 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,
              exit_process: bool = True) -> int:
-    """Process entry point of one node (``factory`` creates it after ``rclpy.init``):
-    :func:`run_nodes`."""
+    """Process entry point of one node (``factory`` creates it after ``rclpy.init``): :func:`run_nodes`."""
     return run_nodes([factory], args, executor, exit_process)
 
 

@@ -202,10 +202,9 @@ class ForeignVehicleWatch:
         return self.clock() - self.t0 >= self.window_s
 
     def check_every(self) -> Any:
-        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (the node's
-        clock) running :meth:`check`, so a foreign ESC or supervisor discovered later raises
-        :class:`ForeignVehicleError` out of the executor's spin, the same one line. Returns the rclpy timer (it
-        goes with the node)."""
+        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (the node's clock)
+        running :meth:`check`, so a foreign ESC or supervisor discovered later raises :class:`ForeignVehicleError` out
+        of the executor's spin, the same one line. Returns the rclpy timer (it goes with the node)."""
         return self.node.create_timer(self.period_s, self.check)
 
     def poll(self) -> None:

@@ -9,10 +9,9 @@ Every process entry point (:func:`~hindrax_common.node_support.node_common.run_n
         proc.spin()
     return proc.status
 
-On leaving the block the clean-ups run, last registered first (for a node from
-:meth:`RosProcess.own`: its ``close()``, where the ESC writes neutral, then
-``RawDataPublisher.flush_pending``, then ``destroy_node()``), then the executor and the context
-shut down.
+On leaving the block the clean-ups run, last registered first (for a node from :meth:`RosProcess.own`: its ``close()``,
+where the ESC writes neutral, then ``RawDataPublisher.flush_pending``, then ``destroy_node()``), then the executor and
+the context shut down.
 
 Exceptions leaving the block: ``KeyboardInterrupt`` and ``ExternalShutdownException`` end the
 process normally; a type listed in ``errors`` is printed as one line ``"<prefix>: <first line>"``

@@ -1,9 +1,8 @@
 """Emulated I2C bus with the ``smbus2.SMBus`` interface, for tests and simulation.
 
 The onboard I2C drivers talk to an object with the ``smbus2.SMBus`` interface (docs/architecture.md §2): on the
-Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an
-:class:`EmulatedI2CBus` holding register- or command-exact device emulators (MS5837, ICM-20948,
-AK09916, PCA9685).
+Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an :class:`EmulatedI2CBus` holding
+register- or command-exact device emulators (MS5837, ICM-20948, AK09916, PCA9685).
 
 Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the Linux i2c-dev driver
 does on the wire, so that the real driver code paths run unchanged: every SMBus call is broken into the I2C transactions
@@ -322,11 +321,10 @@ class EmulatedI2CBus:
 class RegisterPointerEmulator:
     """Shared base for register-file device emulators (ICM-20948, AK09916, PCA9685).
 
-    Model of a typical I2C register device: in a write transaction the first byte loads the
-    register pointer and every further byte is written at the pointer, which then advances with
-    :meth:`_next_pointer`; a read transaction returns bytes from the pointer, advancing the same
-    way. :meth:`_begin_transaction` runs at the start of every transaction (used for lazy, clock-
-    driven state updates), :meth:`_end_read` after every read transaction. All state access is
+    Model of a typical I2C register device: in a write transaction the first byte loads the register pointer and every
+    further byte is written at the pointer, which then advances with :meth:`_next_pointer`; a read transaction returns
+    bytes from the pointer, advancing the same way. :meth:`_begin_transaction` runs at the start of every transaction
+    (used for lazy, clock-driven state updates), :meth:`_end_read` after every read transaction. All state access is
     serialised by ``self._lock``.
 
     Subclasses implement ``_read_register(reg) -> int``, ``_write_register(reg, value)`` and may

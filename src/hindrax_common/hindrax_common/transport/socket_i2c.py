@@ -3,12 +3,11 @@ machine without the hardware (docs/deployment.md §9).
 
 A driver started as its own process (the vehicle's launch layout: ``ros2 launch``, or the project's
 :class:`~.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus with
-:func:`~hindrax_common.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket,
-that function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an
-:class:`I2CSocketServer` in another process serves an
-:class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` (the register-exact MS5837, ICM-20948 and PCA9685
-emulators) there. A transaction is then one request and one answer on the socket (two system calls and a pickle
-each way), standing in for the ``ioctl`` of a real ``smbus2.SMBus``.
+:func:`~hindrax_common.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket, that
+function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an :class:`I2CSocketServer` in
+another process serves an :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` (the register-exact MS5837,
+ICM-20948 and PCA9685 emulators) there. A transaction is then one request and one answer on the socket (two system calls
+and a pickle each way), standing in for the ``ioctl`` of a real ``smbus2.SMBus``.
 
 The failures a driver sees are a real bus's: a socket that does not exist (or refuses) is ``OSError`` from the open,
 as a missing ``/dev/i2c-N`` (the bus is "absent"); an address nobody acknowledges is ``OSError`` 121 from the

@@ -12,12 +12,11 @@ The sequence is sent again when the DVL reboots (``tu`` goes backwards) and when
 
 Publishes (QoS reliable, depth 10):
 
-- ``dvl/data`` (hindrax_msgs/Dvl, frame ``base_link``): one message per ``$DVPDL``, with lock, attitude,
-  altitude and beams from the latest ``$DVEXT`` (at most one ping cycle older; see
-  :mod:`hindrax_drivers.dvl75.report` for every field, the FRD -> FLU conversion, the lever-arm
-  correction and the validity rule). A velocity is **never** published from an unlocked or
-  zero-confidence report: ``velocity_valid`` false, NaN velocity and delta position. When no ``$DVPDL``
-  has arrived for 1 s, one message per ``$DVEXT`` is published instead (velocity never valid).
+- ``dvl/data`` (hindrax_msgs/Dvl, frame ``base_link``): one message per ``$DVPDL``, with lock, attitude, altitude and
+  beams from the latest ``$DVEXT`` (at most one ping cycle older; see :mod:`hindrax_drivers.dvl75.report` for every
+  field, the FRD -> FLU conversion, the lever-arm correction and the validity rule). A velocity is **never** published
+  from an unlocked or zero-confidence report: ``velocity_valid`` false, NaN velocity and delta position. When no
+  ``$DVPDL`` has arrived for 1 s, one message per ``$DVEXT`` is published instead (velocity never valid).
 - ``dvl/twist`` (geometry_msgs/TwistWithCovarianceStamped, ``base_link``): the same velocity, only when
   valid; covariance linear block ``velocity_std_m_s**2 * I``, angular block -1 on the diagonal
   (angular velocity not measured here: 0 with unknown variance), 0 elsewhere.
@@ -25,16 +24,15 @@ Publishes (QoS reliable, depth 10):
   along the sensor axis; ``+inf`` when unlocked (REP-117 "no detection"). Limits 0.3..40 m and field of view
   :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (docs/devices.md §1.1 envelope); variance 0 (unknown, as Range.msg defines).
 - ``raw/dvl75`` (hindrax_msgs/RawDeviceData): every byte in both directions, receive/send time stamps.
-- ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
-  ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.malformed``,
-  ``errors.unknown_sentence`` (see :mod:`hindrax_drivers.dvl75.stream`), ``errors.implausible_velocity``
-  and the ERROR ``implausible`` (a ``$DVPDL`` outside the plausibility gates ``sensors.dvl75.max_speed_m_s``,
-  ``min_interval_s``, ``max_interval_s``: published with ``velocity_valid`` false, see
-  :mod:`hindrax_drivers.dvl75.report`; diagnostics published at once, cleared ``IMPLAUSIBLE_HOLD_S`` after the
-  last rejected report), the ERROR ``stuck``
-  (identical ``$DVPDL`` deltas with confidence > 0, or identical ``$DVEXT`` attitude/altitude/beam data,
-  for ``stuck_limit_samples`` reports: from then on, until the data change, every velocity is published
-  not valid and ``dvl/altitude`` is not published), clock-offset estimate, start-up state.
+- ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age, ``errors.garbage_bytes``,
+  ``errors.truncated``, ``errors.bad_checksum``, ``errors.malformed``, ``errors.unknown_sentence`` (see
+  :mod:`hindrax_drivers.dvl75.stream`), ``errors.implausible_velocity`` and the ERROR ``implausible`` (a ``$DVPDL``
+  outside the plausibility gates ``sensors.dvl75.max_speed_m_s``, ``min_interval_s``, ``max_interval_s``: published with
+  ``velocity_valid`` false, see :mod:`hindrax_drivers.dvl75.report`; diagnostics published at once, cleared
+  ``IMPLAUSIBLE_HOLD_S`` after the last rejected report), the ERROR ``stuck`` (identical ``$DVPDL`` deltas with
+  confidence > 0, or identical ``$DVEXT`` attitude/altitude/beam data, for ``stuck_limit_samples`` reports: from then
+  on, until the data change, every velocity is published not valid and ``dvl/altitude`` is not published), clock-offset
+  estimate, start-up state.
 
 Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time`` supported):
 

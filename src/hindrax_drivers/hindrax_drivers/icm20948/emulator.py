@@ -1,7 +1,6 @@
 """ICM-20948 and AK09916 device emulators (register-exact), for tests and simulation.
 
-:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md
-§4.8:
+:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md §4.8:
 
 * four banks selected by REG_BANK_SEL (0x7F, bits 5:4), WHO_AM_I = 0xEA, reset values PWR_MGMT_1 =
   0x41 (asleep), LP_CONFIG = 0x40, ACCEL_CONFIG = 0x01, GYRO_CONFIG_1 = 0x01 [UNVERIFIED];

@@ -206,9 +206,8 @@ def accel_odr_hz(smplrt_div: int, fchoice: int) -> float:
 def gyro_odr_hz(smplrt_div: int, fchoice: int, dlpfcfg: int) -> float:
     """Gyro output data rate (docs/devices.md §4.4).
 
-    1125/(1 + div) when FCHOICE = 1 and 0 < DLPFCFG < 7 (the divider only takes effect then);
-    1125 Hz for FCHOICE = 1 with DLPFCFG 0 or 7; 9 kHz with the DLPF bypassed (flagged, see
-    :data:`GYRO_BYPASS_ODR_HZ`)."""
+    1125/(1 + div) when FCHOICE = 1 and 0 < DLPFCFG < 7 (the divider only takes effect then); 1125 Hz for FCHOICE = 1
+    with DLPFCFG 0 or 7; 9 kHz with the DLPF bypassed (flagged, see :data:`GYRO_BYPASS_ODR_HZ`)."""
     if not fchoice:
         return GYRO_BYPASS_ODR_HZ
     if 0 < int(dlpfcfg) < 7:

@@ -42,10 +42,9 @@ BUS_CALL_TIMEOUT_S = 0.15
 
 @dataclass
 class ChipJob:
-    """What the chip should do: ``kind`` (:data:`.core.CONFIGURE`, ``WRITE``, ``NEUTRAL``, ``READBACK``),
-    the thruster widths ``widths_us`` (n,) and the lights' ``lights_us`` (us; unused by a read-back), the
-    ``output_state`` the widths give, and ``reason`` (text the node reports with it). ``seq`` is set by
-    :meth:`ChipWorker.post` (increasing)."""
+    """What the chip should do: ``kind`` (:data:`.core.CONFIGURE`, ``WRITE``, ``NEUTRAL``, ``READBACK``), the thruster
+    widths ``widths_us`` (n,) and the lights' ``lights_us`` (us; unused by a read-back), the ``output_state`` the widths
+    give, and ``reason`` (text the node reports with it). ``seq`` is set by :meth:`ChipWorker.post` (increasing)."""
 
     kind: str
     widths_us: np.ndarray | None = None

@@ -1,10 +1,9 @@
 """Ping1D byte stream -> typed messages, with every rejected byte classified (pure, no I/O).
 
-The one decoding path of the Ping altimeter driver: the ROS node (:mod:`hindrax_drivers.ping1d.node`)
-and ``hindrax decode ping1d`` both use :class:`Ping1dStreamDecoder`. Frames are extracted by the
-protocol layer's :class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer` (docs/devices.md §2.2: ``BR``,
-u16 length, u16 id, src, dst, payload, u16 sum checksum) and decoded with
-:func:`~hindrax_drivers.ping1d.protocol.decode_message`.
+The one decoding path of the Ping altimeter driver: the ROS node (:mod:`hindrax_drivers.ping1d.node`) and
+``hindrax decode ping1d`` both use :class:`Ping1dStreamDecoder`. Frames are extracted by the protocol layer's
+:class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer` (docs/devices.md §2.2: ``BR``, u16 length, u16 id, src, dst,
+payload, u16 sum checksum) and decoded with :func:`~hindrax_drivers.ping1d.protocol.decode_message`.
 
 The binary protocol has no terminator, so a frame cut short is only visible as a checksum failure
 inside the framer. This module tells the cases apart by looking at the bytes *between* two accepted
