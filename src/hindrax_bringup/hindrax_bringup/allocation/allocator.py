@@ -65,15 +65,14 @@ class InvalidWrenchError(ValueError):
 class AllocationResult:
     """Outcome of one :meth:`ThrustAllocator.allocate` call (FRD, N and N m, us).
 
-    ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after
-    saturation and deadband handling, before the curves and the pulse-width grid (``B @ allocated_force_n``
-    is the wrench the allocator aimed for; with the deadband search every force is 0 or outside the
-    deadband). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those
-    pulse widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
-    ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``) or the smallest
-    group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
-    the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation
-    (its force of the saturation step, or its allocated force, is at the limit)."""
+    ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after saturation and deadband
+    handling, before the curves and the pulse-width grid (``B @ allocated_force_n`` is the wrench the allocator aimed
+    for; with the deadband search every force is 0 or outside the deadband). ``pulse_width_us`` (n,): ESC commands.
+    ``force_n`` (n,): thrust the curves give at those pulse widths (deadband, small-force rule and quantisation
+    included). ``achieved_wrench`` (6,): ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``)
+    or the smallest group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
+    the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation (its force of
+    the saturation step, or its allocated force, is at the limit)."""
 
     requested_wrench: np.ndarray
     allocated_force_n: np.ndarray

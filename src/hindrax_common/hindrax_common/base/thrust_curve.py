@@ -13,14 +13,13 @@ one about (1500 us, 0 N) (docs/architecture.md §4, :func:`point_reflection`).
 ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop, 1900 us full
 forward, deadband 1500 +- 25 us (UNVERIFIED there). The forward model returns 0 N inside the deadband.
 
-Inverse: on each side only the monotone branch from the range end towards neutral is used, ending at
-the cubic's first extremum, its first zero or the deadband edge, whichever comes first (1100-1475 us
-and 1525-1900 us for the default curve, +-1.20 N to +-15.53 N). A smaller force maps to whichever of
-0 N and the branch's inner end is nearer (``small_force="nearest"``, default) or to neutral
-(``"neutral"``); a larger one saturates at the end. :meth:`ThrustCurve.thrust_n` gives the force
-actually produced. Each branch is tabulated once on a grid of at most 0.005 us and inverted with
-``numpy.interp`` (vectorised, exact to the grid step; ``numpy.roots`` and ``brentq`` are one Python
-call per thruster), about 2.4 MB per distinct curve; the tests check it against ``numpy.roots``.
+Inverse: on each side only the monotone branch from the range end towards neutral is used, ending at the cubic's first
+extremum, its first zero or the deadband edge, whichever comes first (1100-1475 us and 1525-1900 us for the default
+curve, +-1.20 N to +-15.53 N). A smaller force maps to whichever of 0 N and the branch's inner end is nearer
+(``small_force="nearest"``, default) or to neutral (``"neutral"``); a larger one saturates at the end.
+:meth:`ThrustCurve.thrust_n` gives the force actually produced. Each branch is tabulated once on a grid of at most
+0.005 us and inverted with ``numpy.interp`` (vectorised, exact to the grid step; ``numpy.roots`` and ``brentq`` are one
+Python call per thruster), about 2.4 MB per distinct curve; the tests check it against ``numpy.roots``.
 
 Battery voltage (docs/devices.md §5.3: full-throttle thrust roughly as V^1.2): both directions take
 ``voltage_scale``, which multiplies the forward model and divides the requested force;
@@ -87,11 +86,10 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
                          exponent: float = 1.2) -> float:
     """Thrust factor ``(battery_voltage_v / nominal_voltage_v) ** exponent`` for ``voltage_scale``.
 
-    Source: docs/devices.md §5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust
-    scales roughly with V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal
-    voltage is the Hindrax battery, 14.8 V ([Hindrax-Drag] section 2.1), at which the curves are taken to be
-    valid. Raises :class:`ThrustCurveError` unless both voltages are finite and positive and the
-    exponent is finite."""
+    Source: docs/devices.md §5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust scales roughly with
+    V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal voltage is the Hindrax battery, 14.8 V
+    ([Hindrax-Drag] section 2.1), at which the curves are taken to be valid. Raises :class:`ThrustCurveError` unless
+    both voltages are finite and positive and the exponent is finite."""
     for name, value in (("battery_voltage_v", battery_voltage_v), ("nominal_voltage_v", nominal_voltage_v)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
             raise ThrustCurveError(f"{name} must be a finite positive number, got {value!r}")

@@ -80,14 +80,13 @@ def config_from_parameters(params: Mapping[str, Any], source: str = "ros paramet
 def default_config_path() -> Path:
     """Path of the vehicle file used when none is given (``--config``, ``config_file``, ``--params-file``).
 
-    Order: in an installed workspace (this module imported from a colcon install space, e.g.
-    ``ros_ws/install`` or ``/ws/install``), ``share/hindrax_common/config/hindrax.yaml`` of that install;
-    otherwise (repository checkout, editable dev venv) the repository's ``ros_ws/config/hindrax.yaml``, found
-    by walking up from this file, then the installed share directory. The canonical file is the
-    repository's ``ros_ws/config/hindrax.yaml``; the package installs it through the symlink
-    ``src/hindrax_common/config -> ../../ros_ws/config``. The environment variable ``HINDRAX_CONFIG``, when set,
-    names the file instead (the Docker image sets it to the mounted vehicle file). Raises FileNotFoundError
-    naming the places searched."""
+    Order: in an installed workspace (this module imported from a colcon install space, e.g. ``ros_ws/install`` or
+    ``/ws/install``), ``share/hindrax_common/config/hindrax.yaml`` of that install; otherwise (repository checkout,
+    editable dev venv) the repository's ``ros_ws/config/hindrax.yaml``, found by walking up from this file, then the
+    installed share directory. The canonical file is the repository's ``ros_ws/config/hindrax.yaml``; the package
+    installs it through the symlink ``src/hindrax_common/config -> ../../ros_ws/config``. The environment variable
+    ``HINDRAX_CONFIG``, when set, names the file instead (the Docker image sets it to the mounted vehicle file). Raises
+    FileNotFoundError naming the places searched."""
     env = os.environ.get("HINDRAX_CONFIG")
     if env:
         if Path(env).is_file():

@@ -189,15 +189,14 @@ class RawDataPublisher:
     :meth:`i2c_tap` as an I2C helper's raw tap ``(kind 'read'|'write', address, register, data, t)``.
     Stamps are the node's ROS time at publication. Safe to call from transport threads.
 
-    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: one
-    message per parsed report (a host->device write flushes first: one direction per message). I2C:
-    kept until ``i2c_period_s`` (:data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest, or
-    :data:`RAW_I2C_MAX_BYTES` are pending (a publish costs far more than its bytes,
-    docs/architecture.md §10.1), then one message of records ``<direction u8, address u8, register
-    i16, length u16 (little-endian), data>`` with ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a
-    plain message for one transaction; :func:`raw_transactions` unpacks both, in wire order.
-    ``flush(force=True)`` publishes what is pending; a tap outside a batch publishes it at once,
-    so the order on the wire is kept."""
+    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: one message per parsed
+    report (a host->device write flushes first: one direction per message). I2C: kept until ``i2c_period_s``
+    (:data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest, or :data:`RAW_I2C_MAX_BYTES` are pending (a
+    publish costs far more than its bytes, docs/architecture.md §10.1), then one message of records
+    ``<direction u8, address u8, register i16, length u16 (little-endian), data>`` with
+    ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a plain message for one transaction; :func:`raw_transactions` unpacks
+    both, in wire order. ``flush(force=True)`` publishes what is pending; a tap outside a batch publishes it at once, so
+    the order on the wire is kept."""
 
     def __init__(self, node: Any, device_name: str, topic: str | None = None, i2c_period_s: float = RAW_I2C_PERIOD_S):
         self._node = node

@@ -28,9 +28,8 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Call
                message: str = "condition") -> Any:
     """Call ``poll`` (e.g. one executor spin) until ``predicate()`` is truthy; return its value.
 
-    poll: called between checks; default waits 5 ms on a threading.Event (a bounded poll interval, not a
-    fixed delay the caller relies on). Raises :class:`ConditionTimeout` after ``timeout_s`` seconds (wall clock,
-    ``time.monotonic``)."""
+    poll: called between checks; default waits 5 ms on a threading.Event (a bounded poll interval, not a fixed delay the
+    caller relies on). Raises :class:`ConditionTimeout` after ``timeout_s`` seconds (wall clock, ``time.monotonic``)."""
     ev = threading.Event()
     deadline = time.monotonic() + timeout_s
     while True:

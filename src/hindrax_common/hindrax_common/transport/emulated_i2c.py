@@ -46,11 +46,10 @@ def remote_io_error(address: int, detail: str = "") -> OSError:
 class I2CDeviceEmulator(Protocol):
     """Device side of the emulated bus: one call per I2C transaction.
 
-    ``i2c_write(data)``: one write transaction; ``data[0]`` is the register or command byte, the
-    rest are data bytes. ``i2c_read(n)``: one read transaction of ``n`` bytes continuing from the
-    device's internal pointer/state; must return exactly ``n`` bytes. Either may raise
-    ``OSError(errno.EREMOTEIO)`` to model a NACK. Optional: ``i2c_general_call(data)`` to react to
-    general-call (address 0x00) writes."""
+    ``i2c_write(data)``: one write transaction; ``data[0]`` is the register or command byte, the rest are data bytes.
+    ``i2c_read(n)``: one read transaction of ``n`` bytes continuing from the device's internal pointer/state; must
+    return exactly ``n`` bytes. Either may raise ``OSError(errno.EREMOTEIO)`` to model a NACK. Optional:
+    ``i2c_general_call(data)`` to react to general-call (address 0x00) writes."""
 
     def i2c_write(self, data: bytes) -> None:  # pragma: no cover - protocol
         """Handle one write transaction (``data[0]`` = register/command)."""

@@ -52,12 +52,11 @@ class Ak09916Emulator(RegisterPointerEmulator):
             applies the axis flip of §4.7 (hx = Bx, hy = -By, hz = -Bz).
         clock: monotonic clock, s.
 
-    Semantics: continuous modes measure every 1/rate s from the mode write; a measurement that
-    finds unread data (DRDY = 1), or arrives while a read is in progress (a data register was read
-    but ST2 not yet), sets DOR and, in the second case, is discarded. DRDY and DOR clear when a data
-    register or ST2 is read; reading ST2 ends the read lock. Values beyond +-32752 counts are
-    clamped with ST2.HOFL = 1. Writing the current mode again keeps its timing; the self-test mode
-    is stored but produces no measurement. ``stuck = True`` freezes the data registers."""
+    Semantics: continuous modes measure every 1/rate s from the mode write; a measurement that finds unread data
+    (DRDY = 1), or arrives while a read is in progress (a data register was read but ST2 not yet), sets DOR and, in the
+    second case, is discarded. DRDY and DOR clear when a data register or ST2 is read; reading ST2 ends the read lock.
+    Values beyond +-32752 counts are clamped with ST2.HOFL = 1. Writing the current mode again keeps its timing; the
+    self-test mode is stored but produces no measurement. ``stuck = True`` freezes the data registers."""
 
     def __init__(self, field_truth: Callable[[float], Sequence[float]],
                  clock: Callable[[], float] = time.monotonic) -> None:
