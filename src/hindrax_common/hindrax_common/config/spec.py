@@ -7,8 +7,8 @@ maintained schema library covers ROS parameter overrides. generate_parameter_lib
 parameter module per node at colcon build time (a CMake step), while this stack installs pip wheels and runs from an
 editable venv without a colcon build, and the library is not on PyPI. Its schema is per node; ours is per section of one
 vehicle file shared by every node, validated as a whole with cross-key checks that need Python. A Spec holds the fields
-of one of its entries (``kind`` -> ``type``, ``doc`` -> ``description``, ``lo``/``hi`` -> ``bounds<>``, ``choices`` ->
-``one_of<>``, ``length`` -> ``fixed_size<>``), should the stack move."""
+of one of its entries (``kind`` -> ``type``, ``doc`` -> ``description``, ``lo``/``hi`` -> ``bounds<>``,
+``choices`` -> ``one_of<>``, ``length`` -> ``fixed_size<>``), should the stack move."""
 from __future__ import annotations
 
 import math
