@@ -128,9 +128,8 @@ _stop_signals: list[int] = []
 
 
 def _terminate(signum: int, _frame) -> None:
-    """SIGINT and SIGTERM handler: record the signal and raise KeyboardInterrupt in the main thread, so a command
-    cleans up (closes its bag, removes its emulated ports) on SIGTERM (``docker stop``, ``kill``) exactly as on
-    Ctrl-C.
+    """SIGINT and SIGTERM handler: record the signal and raise KeyboardInterrupt in the main thread, so a command cleans
+    up (closes its bag, removes its emulated ports) on SIGTERM (``docker stop``, ``kill``) exactly as on Ctrl-C.
 
     Python runs this handler at the next bytecode of the main thread, which may be inside a C extension's call back
     into Python: pybind11 (rclpy's ``take_goal_response`` converting the response message) then replaces the
@@ -159,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "_import_error", None):
         print(f"hindrax: this command is unavailable ({args._import_error})", file=sys.stderr)
         return 1
-    from hindrax_drivers.process.dds_transport import loopback_transport  # stdlib only; --help never gets here
+    from hindrax_common.process.dds_transport import loopback_transport  # stdlib only; --help never gets here
 
     try:
         loopback_transport()  # before any command creates a participant

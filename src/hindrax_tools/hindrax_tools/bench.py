@@ -1,11 +1,10 @@
 """``make bench``: run the benchmark scripts and print one table, writing JSON beside it.
 
-Each module in :mod:`hindrax_tools.benchmarks` (listed in :data:`BENCHMARKS`) provides
-``run(quick: bool) -> list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally
-``target`` and ``note``. Benchmarks measure; tests never time anything (README, "Tests").
+Each module in :mod:`hindrax_tools.benchmarks` (listed in :data:`BENCHMARKS`) provides ``run(quick: bool) ->
+list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally ``target`` and ``note``. Benchmarks
+measure; tests never time anything (README, "Tests").
 
-Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline
-GIT_REF]``
+Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline GIT_REF]``
 (``--baseline``: the stack section measures that commit's launch layout too, in the same run).
 """
 from __future__ import annotations
@@ -21,10 +20,10 @@ import time
 from pathlib import Path
 
 from hindrax_tools import results_doc
-from hindrax_drivers.process.dds_transport import loopback_transport
+from hindrax_common.process.dds_transport import loopback_transport
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-loopback_transport()  # the vehicle's transport (hindrax_drivers.process.dds_transport)
+loopback_transport()  # the vehicle's transport (hindrax_common.process.dds_transport)
 
 #: benchmark name -> the modules of :mod:`hindrax_tools.benchmarks` whose rows form its
 #: section, each with ``run(quick)``; a section's first module is named like it

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.identification.online.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band,
                                                             design_signal, steady_speed)
 
@@ -150,7 +150,7 @@ def test_run_options_reach_the_campaign_and_the_graph_override():
     import argparse
 
     from hindrax_tools.commands import run as run_cmd
-    from hindrax_tools.commands.common import CommandError
+    from hindrax_onboard.commands.common import CommandError
 
     parser = argparse.ArgumentParser(prog="hindrax run")
     run_cmd.add_arguments(parser)

@@ -27,9 +27,9 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.recording.reader import BagReader
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
+from hindrax_bringup.recording.reader import BagReader
 from hindrax_fit.assessment.pipeline import OverlappedFits, _ready, identify_bag
 from hindrax_fit.bag_input import from_bag
 from hindrax_fit.fit.campaign_fit import fit_dofs
@@ -68,7 +68,7 @@ def write_surge_campaign_bag(path, cfg, seed: int = 5, walk_m_s: float = 0.0, tr
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import FluidPressure
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
 
     rng = np.random.default_rng(seed)
@@ -238,7 +238,7 @@ def test_a_parameter_at_its_bound_says_so_instead_of_an_interval(tmp_path, capsy
     it >= 0) puts linear_damping on its bound 0 (the empirical priors off, ``identification.prior_std_rel: 0``: they
     would pull it just off the bound). identification.yaml marks it (``at_bound``), the printed row gives that
     reason, and the report's interval cell says there is none."""
-    from hindrax_tools.commands.common import update_vehicle_file
+    from hindrax_onboard.commands.common import update_vehicle_file
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"

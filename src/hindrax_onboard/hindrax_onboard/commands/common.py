@@ -25,9 +25,8 @@ def add_config_argument(parser: argparse.ArgumentParser, default: Any = None) ->
 
 
 def choices(option: str, text: str | None, allowed, what: str, empty_ok: bool = True) -> list[str]:
-    """The comma-separated words of ``text`` (None or blank: none). Raises :class:`CommandError`
-    ``"<option>: unknown <what>(s) [...]; choose from ..."`` for a word not in ``allowed``, or for
-    none when not ``empty_ok``."""
+    """The comma-separated words of ``text`` (None or blank: none). Raises :class:`CommandError` ``"<option>: unknown
+    <what>(s) [...]; choose from ..."`` for a word not in ``allowed``, or for none when not ``empty_ok``."""
     words = [w.strip() for w in str(text or "").split(",") if w.strip()]
     bad = [w for w in words if w not in allowed]
     if bad or not (words or empty_ok):
@@ -36,13 +35,13 @@ def choices(option: str, text: str | None, allowed, what: str, empty_ok: bool = 
 
 
 def load_vehicle(path: str | None = None) -> Any:
-    """The validated :class:`~hindrax_drivers.config.VehicleConfig` of ``path`` (default: the repository's
+    """The validated :class:`~hindrax_common.config.VehicleConfig` of ``path`` (default: the repository's
     ``ros_ws/config/hindrax.yaml``).
 
     Raises :class:`CommandError` ``"invalid configuration: <key, value, allowed range>"`` when the file does
-    not load or validate (:class:`~hindrax_drivers.config.ConfigError`).
+    not load or validate (:class:`~hindrax_common.config.ConfigError`).
     """
-    from hindrax_drivers.config import ConfigError, default_config_path, load_config
+    from hindrax_common.config import ConfigError, default_config_path, load_config
 
     try:
         return load_config(path or default_config_path())
@@ -96,11 +95,11 @@ def update_vehicle_file(path: str | Path, values: Mapping[str, Any],
     new_keys: {dotted key of ``values`` that may be absent: (sibling key it is inserted after, end-of-line
     comment)}; any other key must already be in the file.
     Raises ValueError when a key (or its section) is missing (the file is not written),
-    :class:`~hindrax_drivers.config.ConfigError` when the result does not validate (the file is restored).
+    :class:`~hindrax_common.config.ConfigError` when the result does not validate (the file is restored).
     """
     from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
-    from hindrax_drivers.config import ConfigError, load_config
+    from hindrax_common.config import ConfigError, load_config
 
     p = Path(path)
     original = p.read_text()

@@ -40,15 +40,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.config import ConfigError, default_config_path
-    from hindrax_drivers.base.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
+    from hindrax_common.config import ConfigError, default_config_path
+    from hindrax_common.base.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
     from hindrax_drivers.pca9685 import protocol as p
 
     path = args.config or str(default_config_path())
     cfg = load_vehicle(path)
     assumed = float(cfg.esc.oscillator_hz)
-    commanded = float(args.commanded_us if args.commanded_us is not None
-                      else cfg.thrusters.pulse_width_neutral_us)
+    commanded = float(args.commanded_us if args.commanded_us is not None else cfg.thrusters.pulse_width_neutral_us)
     try:
         prescale = p.esc_prescale(cfg.esc.pwm_frequency_hz, assumed)
         f_true = p.oscillator_from_measurement(args.measured_us, commanded, prescale, assumed)
@@ -74,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         "written": False,
     }
     if args.write:
-        from hindrax_drivers.config.sections.esc import board_id
+        from hindrax_common.config.sections.esc import board_id
 
         try:
             record = f"{board_id()} {time.strftime('%Y-%m-%d', time.gmtime())} {float(args.measured_us):g} us"

@@ -5,7 +5,7 @@ dead-reckoned horizontal position from the DVL velocity and heading, the depth o
 the DVL velocity and the gyro rates) is turned into what a ROS tool (Foxglove's 3D panel, RViz) expects: the pose
 of ``base_link`` (FLU, REP-103) in ``odom`` (ENU, REP-105; origin at the pool start position of the vehicle file,
 continuous, drifting with the dead reckoning), and the twist in ``base_link``. Frames: docs/architecture.md §3;
-conversions: :mod:`hindrax_drivers.base.frames`. Pure, no ROS.
+conversions: :mod:`hindrax_common.base.frames`. Pure, no ROS.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hindrax_drivers.base import frames
+from hindrax_common.base import frames
 
 __all__ = ["OdometryEstimate", "odometry_estimate"]
 
@@ -42,8 +42,7 @@ def odometry_estimate(position_ned_m, rpy_rad, velocity_frd_m_s, rates_frd_rad_s
     v = np.asarray(velocity_frd_m_s, dtype=float)
     w = np.asarray(rates_frd_rad_s, dtype=float)
     known = bool(np.all(np.isfinite(v)))
-    twist = frames.twist_frd_to_flu(np.concatenate([v if known else np.zeros(3),
-                                                    np.where(np.isfinite(w), w, 0.0)]))
+    twist = frames.twist_frd_to_flu(np.concatenate([v if known else np.zeros(3), np.where(np.isfinite(w), w, 0.0)]))
     q = frames.quaternion_marine_to_ros(frames.quaternion_from_euler_ned(rpy))
     return OdometryEstimate(frames.ned_to_enu(pos), np.asarray(q, dtype=float), twist[:3], twist[3:], known)
 

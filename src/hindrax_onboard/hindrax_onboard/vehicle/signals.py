@@ -16,8 +16,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig
 
 __all__ = ["STILL_MESSAGE", "samples_from_dvl", "samples_from_imu", "sample_from_pressure", "sample_from_range",
            "thrust_of_written_widths"]
@@ -35,7 +35,7 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
     """Samples of one hindrax_msgs/Dvl message in the simulator's sample form (:mod:`hindrax_sim.sensors`).
 
     Returns ``[("dvl75_attitude", ns(stamp_s, roll_rad, pitch_rad, yaw_rad))]`` (NED Euler angles of body FRD,
-    via :func:`hindrax_drivers.base.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
+    via :func:`hindrax_common.base.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
     followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked, at_body_origin=True, beam_range_m (4,)))``
     (velocity FLU -> FRD; NaN and ``locked`` False without a valid velocity; the range along beams A-D, NaN for a beam
     without lock). Works on rclpy and bag-decoded messages alike.
@@ -82,8 +82,7 @@ def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> li
     t = _stamp_s(msg.header)
     r = np.eye(3) if mounting_frd_from_flu is None else mounting_frd_from_flu
     w = r @ np.array([msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z], dtype=float)
-    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z],
-                     dtype=float)
+    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z], dtype=float)
     return [("icm20948_gyro", SimpleNamespace(stamp_s=t, angular_rate_rad_s=w)),
             ("icm20948_accel", SimpleNamespace(stamp_s=t, specific_force_m_s2=a))]
 
@@ -101,8 +100,7 @@ def sample_from_range(msg) -> tuple[str, Any]:
 
 
 def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[float]) -> np.ndarray:
-    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote
-    (``thrusters/pulse_width``); (k, n) of (k, n).
+    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote (``thrusters/pulse_width``); (k, n) of (k, n).
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation
     (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve

@@ -10,7 +10,7 @@
 
 Used alike by the identification (online executive and bag analysis) and the controller. Everything here uses the
 vehicle configuration and SENSOR samples only, never the simulator's truth. Frames: body FRD, world NED
-(docs/architecture.md §3); conversions through :mod:`hindrax_drivers.base.frames`.
+(docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`.
 """
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ from typing import Sequence
 
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig
+from hindrax_common.base.frames import wrap_angle
 
 from .fusion import AccelAidedFilter
 
@@ -251,14 +251,13 @@ class SensorState:
 
 
 class DepthEstimator:
-    """Depth and depth rate of the body origin for the depth hold: the MS5837 depth (10 Hz, arriving tens of
-    ms after its conversion) fused with the 100 Hz vertical acceleration (:class:`~.fusion.AccelAidedFilter`,
-    position measured, NED z).
+    """Depth and depth rate of the body origin for the depth hold: the MS5837 depth (10 Hz, arriving tens of ms after
+    its conversion) fused with the 100 Hz vertical acceleration (:class:`~.fusion.AccelAidedFilter`, position
+    measured, NED z).
 
-    Why: a rate from the 10 Hz depth alone lags by about its own filter bandwidth, close to the
-    hold's crossover; with the ROS graph's latencies that drives the depth hold into a limit cycle
-    whose heave couples into the roll and pitch runs (Munk moment, Fossen eq. 6.55). The
-    acceleration gives the rate without that lag.
+    Why: a rate from the 10 Hz depth alone lags by about its own filter bandwidth, close to the hold's crossover;
+    with the ROS graph's latencies that drives the depth hold into a limit cycle whose heave couples into the roll
+    and pitch runs (Munk moment, Fossen eq. 6.55). The acceleration gives the rate without that lag.
 
     ``on_sample(device, stamp_s, state)`` takes every conditioned sample (``ms5837``: ``state.depth_m``;
     ``icm20948_accel``: ``state.acceleration_ned_m_s2[2]``); a sample older than the filter's time is fused at

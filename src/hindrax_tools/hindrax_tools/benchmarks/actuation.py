@@ -1,7 +1,7 @@
 """Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
 
 One process, one EventsExecutor (as the vehicle's ``actuation_node``, composing the two nodes:
-``hindrax_drivers.layout.composition``), every thread scheduled as ``vehicle.launch.xml`` starts that
+``hindrax_bringup.layout.composition``), every thread scheduled as ``vehicle.launch.xml`` starts that
 process (``SCHED_FIFO`` at its ``HINDRAX_REALTIME_PRIORITY``; if refused, nice 0 and a note: the p99
 is then mostly a shared machine's load): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the
 thrust allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated
@@ -27,14 +27,14 @@ from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
 from std_msgs.msg import Header
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.allocation.node import ThrustAllocationNode
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_bringup.allocation.node import ThrustAllocationNode
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.process.scheduling import apply_realtime_priority, set_every_thread
-from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.process.scheduling import apply_realtime_priority, set_every_thread
+from hindrax_common.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.srv import SetArmed
 
 from . import call, spinning
@@ -140,15 +140,13 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
                 m = WrenchStamped(header=Header(frame_id="base_link", stamp=stamp))
                 m.wrench.force.x = float(levels[state["sent"] % 2][0])
                 pending.clear()
-                pending.update(t0=time.monotonic(), cpu0=time.process_time(),
-                               target=expected[state["sent"] % 2])
+                pending.update(t0=time.monotonic(), cpu0=time.process_time(), target=expected[state["sent"] % 2])
                 pub.publish(m)
                 state["sent"] += 1
 
             driver.create_timer(1.0 / 50.0, send)
             cpu0, wall0 = time.process_time(), time.monotonic()
-            wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin,
-                       "commands sent")
+            wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin, "commands sent")
             cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
     if sched.granted:
         set_every_thread(os.SCHED_OTHER, 0)
@@ -161,8 +159,7 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
         {"name": "wrench_to_registers_cpu_p99", "value": float(np.percentile(np.array(cpu_latencies) * 1e3, 99)),
          "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait "
                                "for a core"},
-        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count",
-         "note": f"of {state['sent']} sent"},
+        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count", "note": f"of {state['sent']} sent"},
         {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
          "note": "whole process: publisher + allocation + ESC node"},
         {"name": "cpu_load_at_50hz", "value": cpu / wall * 100.0, "unit": "% of a core"},

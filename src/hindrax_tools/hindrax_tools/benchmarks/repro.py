@@ -17,8 +17,8 @@ from pathlib import Path
 
 import yaml
 
-from hindrax_drivers.config import DOFS
-from hindrax_drivers.testing import own_domain_env, python_executable
+from hindrax_common.config import DOFS
+from hindrax_common.testing import own_domain_env, python_executable
 from . import run_alone
 from .participant_churn import cpu_bound_neighbours
 

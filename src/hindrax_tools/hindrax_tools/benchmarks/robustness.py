@@ -64,13 +64,13 @@ from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.ms5837.protocol import Ms5837Error
 from hindrax_drivers.ping1d.protocol import Distance, encode_frame, encode_message
 from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.testing import config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.pty_device import PtyDevice
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 
 from . import run_alone, spin_for, spinning
 
@@ -417,8 +417,7 @@ def _icm_faults() -> list[dict]:
             mags = node.mag_samples
             emu.aux_connected = True
             retry_s = node.mag.retry_interval_s
-            recover = _until(lambda: node.mag_samples > mags, spin, 3 * retry_s + 5,
-                             "imu/mag again")
+            recover = _until(lambda: node.mag_samples > mags, spin, 3 * retry_s + 5, "imu/mag again")
             out.append(_fault_row("magnetometer NACK (AK09916 via I2C master)", detect, recover,
                                   "detect: NACK onset -> ERROR magnetometer (mag_stale_timeout_s 0.5 s; no "
                                   "frozen imu/mag published meanwhile); IMU continues without imu/mag; recover: "
@@ -458,8 +457,7 @@ def run(quick: bool = False) -> list[dict]:
     for f in _dvl_faults() + _icm_faults() + _ms5837_faults():
         rows.append({"name": f"{f['name']}: time to detect", "value": f["detect_s"] * 1e3, "unit": "ms",
                      "note": f["note"]})
-        rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3,
-                     "unit": "ms"})
+        rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3, "unit": "ms"})
     return rows
 
 

@@ -21,7 +21,7 @@ I2C transaction after which the emulator decodes every thruster channel at neutr
 Process, bus and clock failures (:func:`run_processes`; target 500 ms each), in the vehicle's layout: the
 ESC node, the supervisor and the output guard each in its own process (``python -m ...``, EventsExecutor), sharing
 an emulated PCA9685 and its /OE line that this process serves over a Unix socket
-(:mod:`hindrax_drivers.transport.shared_emulation`); the bench's own vehicle file wires /OE and watches no sensor:
+(:mod:`hindrax_common.transport.shared_emulation`); the bench's own vehicle file wires /OE and watches no sensor:
 
 * ``supervisor_killed|hung_outputs_stopped``: SIGKILL / SIGSTOP of the supervisor while armed at 1700 us, until
   no thruster carries a non-neutral pulse (the ESC's heartbeat disarm or the guard's /OE, whichever is first);
@@ -87,25 +87,25 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from hindrax_drivers.node_support.liveness import heartbeat_qos
+from hindrax_common.node_support.liveness import heartbeat_qos
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.process.scheduling import PRIORITY_ENV
-from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_common.process.scheduling import PRIORITY_ENV
+from hindrax_bringup.supervisor.node import SupervisorNode
+from hindrax_common.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
                                      SafetyHeartbeats, child_env, child_process, config_parameters,
                                      interrupt, python_executable, ros_context, wait_until)
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
-from hindrax_drivers.transport.shared_emulation import SOCKET_ENV, EmulationServer
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
+from hindrax_common.transport.shared_emulation import SOCKET_ENV, EmulationServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
@@ -156,11 +156,10 @@ def _rig(ctx, sim_time: bool = False):
     for n in (esc, sup, probe):
         ex.add_node(n)
     allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
-    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation,
-             cmd=allocation.pub,
+    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation, cmd=allocation.pub,
              depth=probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
-             clock=probe.create_publisher(Clock, "/clock", 10),
-             arm=probe.create_client(SetArmed, "esc/set_armed"), estop=probe.create_client(Trigger, "supervisor/estop"),
+             clock=probe.create_publisher(Clock, "/clock", 10), arm=probe.create_client(SetArmed, "esc/set_armed"),
+             estop=probe.create_client(Trigger, "supervisor/estop"),
              reset=probe.create_client(Trigger, "supervisor/reset"), ns=1_000_000_000)
 
     def spin(timeout_s: float = 0.002) -> None:
@@ -193,8 +192,7 @@ def _rig(ctx, sim_time: bool = False):
         res = call(r["arm"], SetArmed.Request(arm=True), spin)
         if not res.success:
             raise RuntimeError(f"arming refused: {res.message}")
-        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding,
-                   "1700 us on the wire")
+        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding, "1700 us on the wire")
         emu.watch = True
 
     def until_neutral(timeout_s: float = 10.0, poll=None) -> float:
@@ -215,8 +213,7 @@ def _close(r) -> None:
 
 
 def _ms_row(name: str, seconds, **extra) -> dict:
-    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus
-    ``extra`` keys."""
+    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus ``extra`` keys."""
     ms = np.asarray(seconds, dtype=float) * 1e3
     return {"name": name, "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
             "n": int(ms.size), **extra}
@@ -267,8 +264,7 @@ def run(quick: bool = False) -> list[dict]:
             t0 = time.monotonic()
             emu.reset()
             emu.watch, emu.neutral_at = True, None
-            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"],
-                       "chip reset detected")
+            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"], "chip reset detected")
             times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
             times["chip_reset_recover"].append(r["until_neutral"](poll=r["commanding"]) - t0)
         _close(r)
@@ -299,9 +295,9 @@ def run(quick: bool = False) -> list[dict]:
 # modules it runs imported and rclpy initialised, then gc.collect() timed (CPU of the process) before and after
 # freeze_startup_heap(), which RosProcess.spin() calls once the nodes are built.
 
-GC_PROCESSES = {"actuation": ["hindrax_drivers.layout.composition", "hindrax_drivers.allocation.node",
+GC_PROCESSES = {"actuation": ["hindrax_bringup.layout.composition", "hindrax_bringup.allocation.node",
                               "hindrax_drivers.pca9685.node"],
-                "supervisor": ["hindrax_drivers.supervisor.node"], "output_guard": ["hindrax_drivers.guard.node"]}
+                "supervisor": ["hindrax_bringup.supervisor.node"], "output_guard": ["hindrax_bringup.guard.node"]}
 
 _GC_PROBE = r"""
 import gc, importlib, json, sys, time
@@ -309,7 +305,7 @@ import rclpy
 for name in sys.argv[2:]:
     importlib.import_module(name)
 rclpy.init(args=[])
-from hindrax_drivers.process.ros_process import freeze_startup_heap
+from hindrax_common.process.ros_process import freeze_startup_heap
 
 def full_collection_ms():
     out = []
@@ -328,7 +324,7 @@ rclpy.shutdown()
 
 def gc_rows(quick: bool = False) -> list[dict]:
     """Rows ``gc_full_collection_cpu_ms_<process>`` (frozen: what a full collection costs once the process spins)
-    and ``..._unfrozen`` (the same heap without :func:`~hindrax_drivers.process.ros_process.freeze_startup_heap`),
+    and ``..._unfrozen`` (the same heap without :func:`~hindrax_common.process.ros_process.freeze_startup_heap`),
     median CPU ms of 3 (quick) or 7 collections, for each process of :data:`GC_PROCESSES`."""
     rows = []
     for label, modules in GC_PROCESSES.items():
@@ -346,11 +342,11 @@ def gc_rows(quick: bool = False) -> list[dict]:
 # ---------------------------------------------------------------------------------------------- process failures
 # The vehicle layout (vehicle.launch.xml): the ESC node, the supervisor and the output guard each in their own
 # process, sharing the PCA9685 and its /OE line. Here this process holds the emulated chip and line and serves them
-# (hindrax_drivers.transport.shared_emulation: a killed client's line returns to its pull-up, as the kernel frees a
+# (hindrax_common.transport.shared_emulation: a killed client's line returns to its pull-up, as the kernel frees a
 # dead process's request); the three nodes run as `python -m <module>` with HINDRAX_EMULATION_SOCKET set.
 
-PROCESSES = {"esc": "hindrax_drivers.pca9685.node", "supervisor": "hindrax_drivers.supervisor.node",
-             "guard": "hindrax_drivers.guard.node"}
+PROCESSES = {"esc": "hindrax_drivers.pca9685.node", "supervisor": "hindrax_bringup.supervisor.node",
+             "guard": "hindrax_bringup.guard.node"}
 #: the vehicle launch file's process of each (vehicle.launch.xml): its scheduling is theirs here
 VEHICLE_EXECUTABLES = {"esc": "actuation_node", "supervisor": "supervisor_node", "guard": "output_guard_node"}
 
@@ -359,7 +355,7 @@ VEHICLE_EXECUTABLES = {"esc": "actuation_node", "supervisor": "supervisor_node",
 def vehicle_scheduling() -> dict[str, tuple[tuple[str, ...], dict[str, str]]]:
     """Name of :data:`PROCESSES` -> (launch prefix, environment additions) that ``vehicle.launch.xml`` starts its
     process with: ``nice -n -5`` and ``HINDRAX_REALTIME_PRIORITY`` (docs/deployment.md §1,
-    :mod:`hindrax_drivers.process.scheduling`), read from the launch file, so a benchmark schedules the safety processes
+    :mod:`hindrax_common.process.scheduling`), read from the launch file, so a benchmark schedules the safety processes
     as the vehicle does. Read once per process (the launch file and the installed console scripts)."""
     read = {lp.process.executable: lp.process for lp in
             launch_processes(package_share("hindrax_drivers") / "launch" / "vehicle.launch.xml")}
@@ -372,9 +368,8 @@ WATCHDOG_TIMEOUT_S = 0.33
 
 
 class _Hardware:
-    """The emulated PCA9685 with /OE and the hardware watchdog on it (docs/watchdog.md), served to the node
-    processes; records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer
-    holds it)."""
+    """The emulated PCA9685 with /OE and the hardware watchdog on it (docs/watchdog.md), served to the node processes;
+    records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer holds it)."""
 
     def __init__(self, sock: str, feed: bool = True) -> None:
         hw = self
@@ -529,7 +524,7 @@ class _Layout:
     realtime = True
     #: True: each node process in a session of its own, as a launched process is (the project's runner, a systemd
     #: service), so that the kernel's session autogroups rank it as on the vehicle
-    #: (hindrax_drivers/process/scheduling.py)
+    #: (hindrax_common/process/scheduling.py)
     new_session = False
 
     def start(self, name: str, extra: tuple = ()) -> None:
@@ -537,8 +532,7 @@ class _Layout:
         # docs/deployment.md §1): on a machine shared with other jobs a 0.33 s gap in the guard's feed would be the
         # machine's load, not the failure measured
         prefix, env = vehicle_scheduling()[name]
-        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config,
-                *extra]
+        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config, *extra]
         self.procs[name] = start_logged(self.tmp / f"{name}.log", argv, "a",
                                         env=dict(self.env, **(env if self.realtime else {})),
                                         start_new_session=self.new_session)
@@ -780,8 +774,8 @@ REPLAY_CENSOR_S = 3.0
 _REPLAY = r"""
 import sys, time
 from rclpy.parameter import Parameter
-from hindrax_drivers.recording.player_node import BagPlayerNode
-from hindrax_drivers.process.ros_process import RosProcess
+from hindrax_bringup.recording.player_node import BagPlayerNode
+from hindrax_common.process.ros_process import RosProcess
 class Unchecked(BagPlayerNode):
     def _check_graph(self, force=False):
         pass
@@ -804,9 +798,8 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
     each topic as it discovers it): replayed from there, every pass carries them without a gap until its end."""
     bag = tmp / "vehicle_bag"
     lay.armed_at_1700()
-    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file",
-            lay.config, "-p", "all_topics:=true", "-p", "autostart:=true", "-p",
-            f"output_dir:={bag}"]
+    argv = [lay.py, "-m", "hindrax_bringup.recording.recorder_node", "--ros-args", "--params-file", lay.config,
+            "-p", "all_topics:=true", "-p", "autostart:=true", "-p", f"output_dir:={bag}"]
     rec = start_logged(tmp / "recorder.log", argv, env=lay.env)
     try:
         wait_until(lambda: (bag / "metadata.yaml").exists() or any(bag.glob("*.mcap")), 30, None, "recorder started")
@@ -1023,5 +1016,4 @@ def run_processes(quick: bool = False) -> list[dict]:
              "note": f"of {5 * repeats + 1} arm requests, the ESC disarmed itself before 1700 us "
                      "reached the wire (the bench armed again)"
                      + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")}]
-    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name])
-                   for name, values in times.items()]
+    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name]) for name, values in times.items()]

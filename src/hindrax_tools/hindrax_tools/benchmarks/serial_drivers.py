@@ -1,8 +1,8 @@
 """Serial drivers benchmark (DVL-75, Ping1D): CPU per published report and bytes-to-topic latency.
 
 For each driver one process runs its device emulator behind a pseudo-terminal
-(:class:`~hindrax_drivers.transport.pty_device.PtyDevice`), the driver node reading it through the real
-pyserial path (:class:`~hindrax_drivers.transport.serial_transport.SerialTransport`), and a probe node
+(:class:`~hindrax_common.transport.pty_device.PtyDevice`), the driver node reading it through the real
+pyserial path (:class:`~hindrax_common.transport.serial_transport.SerialTransport`), and a probe node
 subscribed to the output topics, in one SingleThreadedExecutor:
 
     emulator.poll -> pty write -> pyserial read (reader thread) -> decode -> publish -> probe callback
@@ -28,13 +28,13 @@ import numpy as np
 import rclpy
 from sensor_msgs.msg import Range
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_drivers.dvl75.node import Dvl75Node
 from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dSettings, Ping1dTruth
 from hindrax_drivers.ping1d.node import Ping1dNode
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.testing import config_parameters, ros_context, wait_until
+from hindrax_common.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl
 
 from . import run_alone, spin_for, spinning
@@ -45,9 +45,8 @@ PING_INTERVAL_S = 0.025
 
 
 class _TimedEmulator:
-    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``;
-    :attr:`written` maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its
-    bytes."""
+    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``; :attr:`written`
+    maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its bytes."""
 
     def __init__(self, make, truth, modulus: int) -> None:
         self.written: dict[int, int] = {}
@@ -70,8 +69,7 @@ class _TimedEmulator:
         return out
 
 
-def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str,
-             rate: str) -> list[dict]:
+def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str, rate: str) -> list[dict]:
     """Run node + probe for ``duration_s`` after a warm-up; the rows of :func:`_rows`."""
     latencies: dict[str, list[int]] = {topic: [] for topic, _, _ in subscriptions}
     dev = PtyDevice(emulator)
@@ -107,8 +105,7 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
     """Reports, CPU per report and load, and per topic the latency from the device's bytes."""
     n = max(reports, 1)
     rows = [
-        {"name": f"{device} reports published", "value": reports, "unit": "msgs",
-         "note": f"{rate} for {wall_s:.1f} s"},
+        {"name": f"{device} reports published", "value": reports, "unit": "msgs", "note": f"{rate} for {wall_s:.1f} s"},
         {"name": f"{device} reader-thread CPU per report", "value": reader_s / n * 1e3, "unit": "ms",
          "target": "< 2", "note": "decode + convert + publish all topics of one report"},
         {"name": f"{device} node+probe+DDS CPU per report", "value": (reader_s + other_s) / n * 1e3, "unit": "ms",
