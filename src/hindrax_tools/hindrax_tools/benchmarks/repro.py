@@ -1,7 +1,7 @@
-"""Reproducibility benchmark: the main job (``hindrax run``, the ROS graph in lock-step) run twice with one seed,
-quiet and beside six CPU-bound processes (:func:`.participant_churn.cpu_bound_neighbours`, on 2 cores a load of 8
-and more), and the two ``identification.yaml`` compared value by value (README: one seed gives the same table on
-any machine). Only ``provenance.date`` and ``provenance.bag`` (the run's folder) may differ.
+"""Reproducibility benchmark: the main job (``hindrax run``, the ROS graph in lock-step) run twice with the same
+options, quiet and beside six CPU-bound processes (:func:`.participant_churn.cpu_bound_neighbours`, on 2 cores a
+load of 8 and more), and the two ``identification.yaml`` compared value by value (README: the same table on any
+machine). Only ``provenance.date`` and ``provenance.bag`` (the run's folder) may differ.
 
 quick: heave and yaw, 2 levels; full: every DOF, the default levels (``make run``'s campaign). Rows: the entries
 that differ (target 0; the note names the first ones), the wall time of each run and the 1-minute load beside the
@@ -47,7 +47,7 @@ def differences(a, b, where: str = "") -> list[str]:
 
 
 def _main_job(out: Path, dofs: str, levels: list[str]) -> float:
-    """One ``hindrax run`` into ``out`` (seed 1); returns its wall time, s. Raises RuntimeError when it fails."""
+    """One ``hindrax run`` into ``out``; returns its wall time, s. Raises RuntimeError when it fails."""
     t0 = time.monotonic()
     proc = subprocess.run([python_executable(), "-m", "hindrax_tools.cli", "run", "--dofs", dofs, *levels,
                            "--seed", "1", "--out", str(out)], env=own_domain_env(), capture_output=True, text=True)
@@ -66,7 +66,7 @@ def run(quick: bool = False) -> list[dict]:
             load = os.getloadavg()[0]
         diff = differences(comparable(Path(tmp) / "quiet" / "identification.yaml"),
                            comparable(Path(tmp) / "busy" / "identification.yaml"))
-    what = f"{dofs}, {'2 levels' if levels else 'default levels'}, seed 1"
+    what = f"{dofs}, {'2 levels' if levels else 'default levels'}"
     return [{"name": f"identification.yaml entries differing, quiet vs beside {NEIGHBOURS} busy loops",
              "value": len(diff), "unit": "", "target": "0",
              "note": f"{what}; " + (", ".join(diff[:5]) + (" ..." if len(diff) > 5 else "") if diff else
