@@ -128,9 +128,8 @@ _stop_signals: list[int] = []
 
 
 def _terminate(signum: int, _frame) -> None:
-    """SIGINT and SIGTERM handler: record the signal and raise KeyboardInterrupt in the main thread, so a command
-    cleans up (closes its bag, removes its emulated ports) on SIGTERM (``docker stop``, ``kill``) exactly as on
-    Ctrl-C.
+    """SIGINT and SIGTERM handler: record the signal and raise KeyboardInterrupt in the main thread, so a command cleans
+    up (closes its bag, removes its emulated ports) on SIGTERM (``docker stop``, ``kill``) exactly as on Ctrl-C.
 
     Python runs this handler at the next bytecode of the main thread, which may be inside a C extension's call back
     into Python: pybind11 (rclpy's ``take_goal_response`` converting the response message) then replaces the

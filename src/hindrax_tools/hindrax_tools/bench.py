@@ -1,11 +1,10 @@
 """``make bench``: run the benchmark scripts and print one table, writing JSON beside it.
 
-Each module in :mod:`hindrax_tools.benchmarks` (listed in :data:`BENCHMARKS`) provides
-``run(quick: bool) -> list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally
-``target`` and ``note``. Benchmarks measure; tests never time anything (README, "Tests").
+Each module in :mod:`hindrax_tools.benchmarks` (listed in :data:`BENCHMARKS`) provides ``run(quick: bool) ->
+list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally ``target`` and ``note``. Benchmarks
+measure; tests never time anything (README, "Tests").
 
-Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline
-GIT_REF]``
+Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline GIT_REF]``
 (``--baseline``: the stack section measures that commit's launch layout too, in the same run).
 """
 from __future__ import annotations

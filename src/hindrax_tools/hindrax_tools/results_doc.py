@@ -7,18 +7,15 @@ command owns one section, delimited by two HTML comments::
     ...generated Markdown...
     <!-- results:bench:end -->
 
-:func:`write_section` replaces the text between a section's markers (or appends the section) and
-leaves every other section untouched. The commands take the path from ``--results-doc PATH`` (the
-Makefile passes ``docs/results.md``); without it nothing is written. The write is atomic (a
-temporary file, then ``os.replace``).
+:func:`write_section` replaces the text between a section's markers (or appends the section) and leaves every other
+section untouched. The commands take the path from ``--results-doc PATH`` (the Makefile passes ``docs/results.md``);
+without it nothing is written. The write is atomic (a temporary file, then ``os.replace``).
 
-``make bench`` replaces older partial results with the ``supersedes_*`` arguments of
-:func:`write_section`.
+``make bench`` replaces older partial results with the ``supersedes_*`` arguments of :func:`write_section`.
 
-Section ``durations`` (:func:`record_duration`): one row per long command (``make setup``, ``make
-ros-install``), written by the command itself with its seconds and the machine's load; the README
-quotes them. From a shell: ``python -m hindrax_tools.results_doc duration --results-doc
-docs/results.md "make setup (new .venv)" 211``.
+Section ``durations`` (:func:`record_duration`): one row per long command (``make setup``, ``make ros-install``),
+written by the command itself with its seconds and the machine's load; the README quotes them. From a shell: ``python
+-m hindrax_tools.results_doc duration --results-doc docs/results.md "make setup (new .venv)" 211``.
 """
 from __future__ import annotations
 
@@ -64,8 +61,7 @@ def commit() -> str:
 
 
 def provenance(command: str) -> str:
-    """One line naming the command, the date (UTC) and the commit the measurement was taken at
-    (:func:`commit`)."""
+    """One line naming the command, the date (UTC) and the commit the measurement was taken at (:func:`commit`)."""
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     return f"*Written by `{command}` on {now} at commit `{commit()}`.*"
 

@@ -150,7 +150,7 @@ def test_run_options_reach_the_campaign_and_the_graph_override():
     import argparse
 
     from hindrax_tools.commands import run as run_cmd
-    from hindrax_tools.commands.common import CommandError
+    from hindrax_onboard.commands.common import CommandError
 
     parser = argparse.ArgumentParser(prog="hindrax run")
     run_cmd.add_arguments(parser)

@@ -238,7 +238,7 @@ def test_a_parameter_at_its_bound_says_so_instead_of_an_interval(tmp_path, capsy
     it >= 0) puts linear_damping on its bound 0 (the empirical priors off, ``identification.prior_std_rel: 0``: they
     would pull it just off the bound). identification.yaml marks it (``at_bound``), the printed row gives that
     reason, and the report's interval cell says there is none."""
-    from hindrax_tools.commands.common import update_vehicle_file
+    from hindrax_onboard.commands.common import update_vehicle_file
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"

@@ -148,7 +148,7 @@ def test_written_curve_coefficients_load_back_as_floats(value):
     '-4e-07' as a string and '1500' as an int."""
     import yaml
 
-    from hindrax_tools.commands.common import yaml_float
+    from hindrax_onboard.commands.common import yaml_float
 
     loaded = yaml.safe_load("[" + ", ".join(yaml_float(v) for v in (value, value)) + "]")
     assert all(isinstance(x, float) for x in loaded)

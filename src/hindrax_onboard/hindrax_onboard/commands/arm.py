@@ -34,9 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def set_armed(node: Any, executor: Any, arm: bool, wanted: str | None, discovery_timeout_s: float,
               timeout_s: float) -> tuple[str, bool, str]:
-    """Arm (``arm`` True) or disarm the vehicle found by
-    :func:`~hindrax_onboard.commands.vehicle.find_vehicle`.
-    Returns (vehicle name, success, message). Raises :class:`CommandError` when no vehicle or no answer."""
+    """Arm (``arm`` True) or disarm the vehicle found by :func:`~hindrax_onboard.commands.vehicle.find_vehicle`. Returns
+    (vehicle name, success, message). Raises :class:`CommandError` when no vehicle or no answer."""
     from hindrax_msgs.srv import SetArmed
 
     target = find_vehicle(node, executor, wanted, discovery_timeout_s)

@@ -25,9 +25,8 @@ def add_config_argument(parser: argparse.ArgumentParser, default: Any = None) ->
 
 
 def choices(option: str, text: str | None, allowed, what: str, empty_ok: bool = True) -> list[str]:
-    """The comma-separated words of ``text`` (None or blank: none). Raises :class:`CommandError`
-    ``"<option>: unknown <what>(s) [...]; choose from ..."`` for a word not in ``allowed``, or for
-    none when not ``empty_ok``."""
+    """The comma-separated words of ``text`` (None or blank: none). Raises :class:`CommandError` ``"<option>: unknown
+    <what>(s) [...]; choose from ..."`` for a word not in ``allowed``, or for none when not ``empty_ok``."""
     words = [w.strip() for w in str(text or "").split(",") if w.strip()]
     bad = [w for w in words if w not in allowed]
     if bad or not (words or empty_ok):

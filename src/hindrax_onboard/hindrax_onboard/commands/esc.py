@@ -47,8 +47,7 @@ def run(args: argparse.Namespace) -> int:
     path = args.config or str(default_config_path())
     cfg = load_vehicle(path)
     assumed = float(cfg.esc.oscillator_hz)
-    commanded = float(args.commanded_us if args.commanded_us is not None
-                      else cfg.thrusters.pulse_width_neutral_us)
+    commanded = float(args.commanded_us if args.commanded_us is not None else cfg.thrusters.pulse_width_neutral_us)
     try:
         prescale = p.esc_prescale(cfg.esc.pwm_frequency_hz, assumed)
         f_true = p.oscillator_from_measurement(args.measured_us, commanded, prescale, assumed)

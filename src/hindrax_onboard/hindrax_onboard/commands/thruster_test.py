@@ -89,8 +89,7 @@ def _drive(core: AllocationCore, rows: list[dict], step_s: float, vehicle: str |
             ex.spin_until_future_complete(fut, timeout_sec=5.0)
             res = fut.result()
             if res is None or not res.success:
-                print(f"{'arm' if value else 'disarm'} refused: {res.message if res else 'no answer'}",
-                      file=sys.stderr)
+                print(f"{'arm' if value else 'disarm'} refused: {res.message if res else 'no answer'}", file=sys.stderr)
                 return False
             return True
 

@@ -22,8 +22,7 @@ from typing import Any, Callable
 
 from .common import CommandError
 
-__all__ = ["VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros", "wait_for",
-           "call_service"]
+__all__ = ["VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros", "wait_for", "call_service"]
 
 #: the environment variable naming the vehicle a topside PC commands (docker/topside.env.example): ``--vehicle``'s
 #: default
@@ -146,8 +145,7 @@ def with_ros(body: Callable[[Any, Any], Any], node_name: str) -> Any:
 _HEALTH = "check with hindrax health on the vehicle"
 
 
-def wait_for(executor: Any, done: Callable[[], Any], timeout_s: float, what: str,
-             hint: str = _HEALTH) -> None:
+def wait_for(executor: Any, done: Callable[[], Any], timeout_s: float, what: str, hint: str = _HEALTH) -> None:
     """Spin ``executor`` until ``done()`` is true. Raises :class:`CommandError` ``"<what> within
     <timeout_s> s (<hint>)"`` when it is not within ``timeout_s`` (wall time)."""
     deadline = time.monotonic() + timeout_s

@@ -1,7 +1,7 @@
 """The control law: depth / altitude, heading, roll, pitch and surge/sway velocity holds from a model (pure numpy).
 
-Per held DOF, with the model of :mod:`.model` (inertia M, damping D(v), constant force b, restoring
-k_r), the law of docs/control.md §2 (its items 1-6 give the reasons and the numbers):
+Per held DOF, with the model of :mod:`.model` (inertia M, damping D(v), constant force b, restoring k_r), the law of
+docs/control.md §2 (its items 1-6 give the reasons and the numbers):
 
 * a **reference model** (:class:`ReferenceModel`, [Fossen2011] §10.2) turns the setpoint r into a
   smooth desired state, rate- and acceleration-limited; surge and sway velocities pass a first-order
@@ -23,13 +23,12 @@ as Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range over
 (:class:`FloorEstimator`, fed with the Ping1D and the DVL-75 beam ranges as floor points), whose
 rate and acceleration under the moving vehicle are fed forward (:meth:`Controller._vertical`).
 
-Why our own code: the reference model, feedforward and anti-windup are a few lines each around the
-model, and no maintained Python library implements marine model-based PID with reference
-feedforward. The floor filter steps with :class:`~hindrax_onboard.estimation.kalman.LinearKalman`,
-filterpy's predict/update equations without scipy (that module's docstring).
+Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
+maintained Python library implements marine model-based PID with reference feedforward. The floor filter steps with
+:class:`~hindrax_onboard.estimation.kalman.LinearKalman`, filterpy's predict/update equations without scipy (that
+module's docstring).
 
-Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from
-north.
+Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north.
 """
 from __future__ import annotations
 
@@ -313,10 +312,9 @@ class VelocityAxis(_Axis):
 
 
 class FloorEstimator:
-    """The floor under the vehicle as a local plane (docs/control.md §2 item 6): depth z_f at the
-    body origin's horizontal position (NED z, m) and its gradient (g_n, g_e) (depth change per metre
-    north and east); a linear Kalman filter
-    (:class:`~hindrax_onboard.estimation.kalman.LinearKalman`).
+    """The floor under the vehicle as a local plane (docs/control.md §2 item 6): depth z_f at the body origin's
+    horizontal position (NED z, m) and its gradient (g_n, g_e) (depth change per metre north and east); a linear
+    Kalman filter (:class:`~hindrax_onboard.estimation.kalman.LinearKalman`).
 
     Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement
     z_f + g_n dN + g_e dE (:meth:`update_point`); between points the state advances as

@@ -20,12 +20,11 @@ the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforw
   (:func:`unexplained_bias`) makes the bias and damping fall back. Each value carries its source
   (:attr:`AxisModel.sources`).
 
-**Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no
-``dofs`` mapping, or an identification of another vehicle (matched by
-:mod:`hindrax_onboard.vehicle.vehicle_match`) raise :class:`ModelFileError` (one line).
+**Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no ``dofs`` mapping,
+or an identification of another vehicle (matched by :mod:`hindrax_onboard.vehicle.vehicle_match`) raise
+:class:`ModelFileError` (one line).
 
-Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is
-downwards.
+Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards.
 """
 from __future__ import annotations
 
@@ -159,8 +158,7 @@ def _disqualifying(entry: Mapping) -> list[str]:
 
 
 def unexplained_bias(entry: Mapping, file_bias: float, cfg: VehicleConfig, scale: float = 1.0) -> str | None:
-    """Why a DOF's identified constant force disqualifies its force terms, or None
-    (docs/control.md §4, "Verdicts").
+    """Why a DOF's identified constant force disqualifies its force terms, or None (docs/control.md §4, "Verdicts").
 
     ``entry``: the DOF's mapping of identification.yaml; ``file_bias``: the vehicle file's holding
     force (N; heave B - W, FRD down); ``scale``: the calibrated thrust scale the values are divided

@@ -7,17 +7,16 @@ controller publishes a ``wrench`` like the identification node or a pilot, and t
 it into pulse widths. Run alone: ``ros2 run hindrax_onboard controller_node --ros-args --params-file
 hindrax.yaml -p model_file:=identification.yaml``.
 
-Interfaces, and who owns ``wrench``: docs/control.md §3. The controller publishes only while
-**enabled**, which it never is at start-up; it **yields** (disables itself, saying why in
-``controller/status`` and the log) when ``identification/status`` reports a running goal, when a
-``wrench`` message it did not send arrives, when the ESC output is disarmed (``esc/output_state``),
-or when its depth or attitude is older than ``control.sensor_timeout_s``, or when its own tick came later than
-twice ``thrusters.wrench_timeout_s`` on the steady clock ("controller starved for ...": the CPU is short; then it
-publishes one zero wrench). Enabling again is always an explicit request (``controller/hold``, ``controller/enable``).
+Interfaces, and who owns ``wrench``: docs/control.md §3. The controller publishes only while **enabled**, which it
+never is at start-up; it **yields** (disables itself, saying why in ``controller/status`` and the log) when
+``identification/status`` reports a running goal, when a ``wrench`` message it did not send arrives, when the ESC
+output is disarmed (``esc/output_state``), or when its depth or attitude is older than ``control.sensor_timeout_s``,
+or when its own tick came later than twice ``thrusters.wrench_timeout_s`` on the steady clock ("controller starved
+for ...": the CPU is short; then it publishes one zero wrench). Enabling again is always an explicit request
+(``controller/hold``, ``controller/enable``).
 
-It also publishes ``odom`` (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz
-(REP-105, :mod:`.odometry`) while its sensor streams are open; a malformed ``esc/output_state``
-reads as disarmed.
+It also publishes ``odom`` (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz (REP-105,
+:mod:`.odometry`) while its sensor streams are open; a malformed ``esc/output_state`` reads as disarmed.
 
 CPU (docs/control.md §3 items 6-7): the tick runs at ``control.rate_hz`` only while enabled, every
 :data:`ODOM_PERIOD_S` while disabled, every :data:`GOAL_TICK_S` while an identification goal runs.
@@ -54,8 +53,7 @@ from hindrax_drivers.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
 from .maneuvers import HoldController, dof_authority
-from ..vehicle.signals import (sample_from_pressure, sample_from_range, samples_from_dvl,
-                               samples_from_imu)
+from ..vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from .law import ControlSettings
 from .loop import HoldLoop
 from .model import ModelFileError, load_model, model_from_config
@@ -135,8 +133,7 @@ class ControllerNode(VehicleNode):
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
         self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
-                                 esc_state_qos())
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10)
@@ -156,15 +153,13 @@ class ControllerNode(VehicleNode):
 
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
-        """Subscribe to the streams only a controller that may be enabled needs: the four sensor
-        topics (about 80 messages/s in the pool layout). The first IMU message after opening is
-        conditioned (:meth:`_on_imu`)."""
+        """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics (about 80
+        messages/s in the pool layout). The first IMU message after opening is conditioned (:meth:`_on_imu`)."""
         self._imu_count = IDLE_IMU_EVERY - 1
         sub, qos = self.create_subscription, sensor_input_qos(20)
         self._streams = [
             sub(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), qos),
-            sub(FluidPressure, "pressure/fluid_pressure",
-                lambda m: self._add([sample_from_pressure(m)]), qos),
+            sub(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]), qos),
             sub(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
             sub(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), qos)]
 
@@ -204,8 +199,7 @@ class ControllerNode(VehicleNode):
         self._pending.extend(samples)
 
     def _on_imu(self, data: bytes) -> None:
-        """``imu/data_raw`` as CDR bytes: every message while enabled, one in :data:`IDLE_IMU_EVERY`
-        while disabled."""
+        """``imu/data_raw`` as CDR bytes: every message while enabled, one in :data:`IDLE_IMU_EVERY` while disabled."""
         self._imu_count += 1
         if self.enabled or self._imu_count >= IDLE_IMU_EVERY:
             self._imu_count = 0
@@ -316,8 +310,7 @@ class ControllerNode(VehicleNode):
         return response
 
     def _answer_enable(self, response, why: str, refused: str, hold: bool):
-        """Enable (first holding the current state when ``hold``) unless :meth:`_refusal` says
-        why not."""
+        """Enable (first holding the current state when ``hold``) unless :meth:`_refusal` says why not."""
         refusal = self._refusal()
         if refusal:
             response.success, response.message = False, f"{refused}: {refusal}"

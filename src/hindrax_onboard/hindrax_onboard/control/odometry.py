@@ -42,8 +42,7 @@ def odometry_estimate(position_ned_m, rpy_rad, velocity_frd_m_s, rates_frd_rad_s
     v = np.asarray(velocity_frd_m_s, dtype=float)
     w = np.asarray(rates_frd_rad_s, dtype=float)
     known = bool(np.all(np.isfinite(v)))
-    twist = frames.twist_frd_to_flu(np.concatenate([v if known else np.zeros(3),
-                                                    np.where(np.isfinite(w), w, 0.0)]))
+    twist = frames.twist_frd_to_flu(np.concatenate([v if known else np.zeros(3), np.where(np.isfinite(w), w, 0.0)]))
     q = frames.quaternion_marine_to_ros(frames.quaternion_from_euler_ned(rpy))
     return OdometryEstimate(frames.ned_to_enu(pos), np.asarray(q, dtype=float), twist[:3], twist[3:], known)
 

@@ -1,9 +1,9 @@
 """Kinematic Kalman filter and RTS smoother: velocity and acceleration from noisy sensors.
 
-Identification needs v and v_dot per DOF (docs/architecture.md §5: "velocities and accelerations
-come from sensors through filters, not from raw finite differences"). [Hindrax-Drag] derived heave
-velocity "by deriving the altitude signal" and reported the resulting oscillations as the main
-perturbation of negative heave (section 5); a model-based filter avoids that.
+Identification needs v and v_dot per DOF (docs/architecture.md §5: "velocities and accelerations come from sensors
+through filters, not from raw finite differences"). [Hindrax-Drag] derived heave velocity "by deriving the altitude
+signal" and reported the resulting oscillations as the main perturbation of negative heave (section 5); a model-based
+filter avoids that.
 
 State model (both modes): x = [position, velocity, acceleration] of one DOF, constant
 acceleration driven by continuous white jerk of power spectral density ``jerk_psd``:
@@ -11,10 +11,9 @@ acceleration driven by continuous white jerk of power spectral density ``jerk_ps
     F(dt) = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]
     Q(dt) = jerk_psd * [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]]
 
-(``filterpy.common.Q_continuous_white_noise(3, dt, jerk_psd)`` written out: the online filters
-rebuild Q for every IMU sample, and filterpy's ``scipy.linalg.block_diag`` costs about 13 times
-more). F and Q are rebuilt from every sample interval, so non-uniform sampling is handled exactly.
-Measurements:
+(``filterpy.common.Q_continuous_white_noise(3, dt, jerk_psd)`` written out: the online filters rebuild Q for every
+IMU sample, and filterpy's ``scipy.linalg.block_diag`` costs about 13 times more). F and Q are rebuilt from every
+sample interval, so non-uniform sampling is handled exactly. Measurements:
 
 * ``measured='position'``: H = [1, 0, 0] (altitude/depth in m, roll/pitch/yaw angle in rad);
 * ``measured='velocity'``: H = [0, 1, 0] (DVL velocity in m/s, gyro rate in rad/s); the
@@ -27,9 +26,8 @@ Tuning: ``jerk_psd`` has units (measured unit)^2/s^5 (e.g. m^2/s^5); the filter 
 grows roughly as (jerk_psd / measurement_std^2)^(1/6) for position and ^(1/4) for velocity
 measurements. ``measurement_std`` is the sensor noise standard deviation in the measured unit.
 
-The offline smoother uses filterpy's ``KalmanFilter``; the online filter steps with
-:class:`~.kalman.LinearKalman` (why: that module's docstring). This module builds F, Q, H, R and
-handles time stamps and missing data.
+The offline smoother uses filterpy's ``KalmanFilter``; the online filter steps with :class:`~.kalman.LinearKalman`
+(why: that module's docstring). This module builds F, Q, H, R and handles time stamps and missing data.
 """
 
 from __future__ import annotations
@@ -195,8 +193,7 @@ class KinematicKalmanFilter:
         return np.array(self._kf.P, copy=True)
 
 
-def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
-                      measurement_std: float = 0.01):
+def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0, measurement_std: float = 0.01):
     """Offline position, velocity and acceleration from a whole record (Kalman + RTS smoother).
 
     Runs filterpy's ``KalmanFilter.batch_filter`` with per-interval F(dt), Q(dt) (non-uniform

@@ -48,13 +48,11 @@ from typing import Any, Optional, Tuple
 import numpy as np
 
 from .drag_coefficient import characteristic_length_from_volume, reynolds_number
-from .least_squares import (EstimationError, as_float_array, check_same_length, check_time_vector,
-                            positive)
+from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector, positive
 
-__all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_acceleration",
-           "find_release_index", "log_decrement", "damping_ratio_from_log_decrement",
-           "natural_frequency", "added_mass_exact", "added_mass_simplified",
-           "added_mass_error_percent", "damping_coefficient", "inertia_coefficient",
+__all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_acceleration", "find_release_index",
+           "log_decrement", "damping_ratio_from_log_decrement", "natural_frequency", "added_mass_exact",
+           "added_mass_simplified", "added_mass_error_percent", "damping_coefficient", "inertia_coefficient",
            "keulegan_carpenter", "DECAY_OUTPUTS", "QuadraticDecayFit", "fit_quadratic_free_decay",
            "quadratic_free_decay_keys", "IncliningResult", "restoring_from_inclining"]
 
@@ -104,8 +102,7 @@ def natural_frequency(omega_d_rad_s: float, zeta: float) -> float:
     return positive(omega_d_rad_s, "omega_d_rad_s") / np.sqrt(1.0 - _zeta(zeta) ** 2)
 
 
-def added_mass_exact(stiffness_n_per_m: float, omega_d_rad_s: float, zeta: float,
-                     mass_kg: float) -> float:
+def added_mass_exact(stiffness_n_per_m: float, omega_d_rad_s: float, zeta: float, mass_kg: float) -> float:
     """m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b in kg ([Hindrax-AM] eq. 5, based on omega_d)."""
     k = positive(stiffness_n_per_m, "stiffness_n_per_m")
     wd = positive(omega_d_rad_s, "omega_d_rad_s")
@@ -137,8 +134,7 @@ def damping_coefficient(zeta: float, stiffness_n_per_m: float, total_mass_kg: fl
                                        * positive(total_mass_kg, "total_mass_kg"))
 
 
-def inertia_coefficient(added_mass_kg: float, volume_m3: float,
-                        fluid_density_kg_m3: float = 1000.0) -> float:
+def inertia_coefficient(added_mass_kg: float, volume_m3: float, fluid_density_kg_m3: float = 1000.0) -> float:
     """C_M = m_ad / (rho V), dimensionless ([Hindrax-AM] eq. 8)."""
     return float(added_mass_kg) / (positive(fluid_density_kg_m3, "fluid_density_kg_m3")
                                    * positive(volume_m3, "volume_m3"))
@@ -146,8 +142,7 @@ def inertia_coefficient(added_mass_kg: float, volume_m3: float,
 
 def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> float:
     """KC = 2 pi A / D ([Hindrax-AM] eq. 9; D = V^(1/3) for the ROV model)."""
-    return 2.0 * np.pi * abs(float(amplitude_m)) / positive(characteristic_length_m,
-                                                         "characteristic_length_m")
+    return 2.0 * np.pi * abs(float(amplitude_m)) / positive(characteristic_length_m, "characteristic_length_m")
 
 
 # Signal processing
@@ -414,8 +409,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         peaks_idx.append(ip)
         heights.append(h)
     if len(heights) < 2:
-        raise EstimationError(
-            "fewer than two peaks above the noise floor: cannot measure a period")
+        raise EstimationError("fewer than two peaks above the noise floor: cannot measure a period")
     heights_arr = np.asarray(heights)
     n_periods = len(heights) - 1
     delta = log_decrement(heights_arr)
@@ -423,8 +417,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
 
     # omega_d from interior extrema (peaks and troughs), release excluded
     last = 2 * n_periods  # index in seq of the last used peak
-    times = np.array([_parabolic_time(t, sx * seq[j][1], seq[j][0])
-                      for j in range(1, min(len(seq), last + 2))])
+    times = np.array([_parabolic_time(t, sx * seq[j][1], seq[j][0]) for j in range(1, min(len(seq), last + 2))])
     # two peaks above the noise give at least three interior extrema
     half_period = float(np.polyfit(np.arange(times.size), times, 1)[0])
     omega_d = np.pi / half_period
@@ -442,8 +435,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     envelope = x0 * np.exp(-sigma * (t - t[0]))
 
     fit_end = min(t.size, peaks_idx[-1] + int(round(0.5 * fs * 2 * np.pi / omega_d)) + 1)
-    w_fit, w_fit_std, z_fit, z_fit_std = _fit_damped_sinusoid(t[:fit_end], a[:fit_end],
-                                                              omega_d, sigma)
+    w_fit, w_fit_std, z_fit, z_fit_std = _fit_damped_sinusoid(t[:fit_end], a[:fit_end], omega_d, sigma)
     peaks_arr = np.asarray(peaks_idx, dtype=int)
     return FreeDecayResult(
         omega_d_rad_s=float(omega_d), zeta=float(zeta), log_decrement=float(delta),
@@ -469,9 +461,8 @@ DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
 class QuadraticDecayFit:
     """Result of :func:`fit_quadratic_free_decay`.
 
-    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV]
-    eq. 12 with the restoring term of [Hindrax-AM] eq. 1 (a spring of stiffness k, or a
-    hydrostatic restoring moment C for roll/pitch):
+    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV] eq. 12 with the restoring term
+    of [Hindrax-AM] eq. 1 (a spring of stiffness k, or a hydrostatic restoring moment C for roll/pitch):
 
         M x'' + b1 x' + b2 |x'| x' + k x = 0,   M = m_b + m_ad   (rigid + added inertia)
 
@@ -632,8 +623,7 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
         x0, v0 = float(yc[0]), 0.0
     amp = max(abs(x0), 1e-12)
     u_mean = 0.5 * w * amp
-    theta0 = np.array([M0, 0.5 * c0, 0.5 * c0 / max(u_mean, 1e-12), x0, v0,
-                       float(np.mean(yy[int(0.8 * yy.size):]))])
+    theta0 = np.array([M0, 0.5 * c0, 0.5 * c0 / max(u_mean, 1e-12), x0, v0, float(np.mean(yy[int(0.8 * yy.size):]))])
 
     cache: dict = {}
 
@@ -653,8 +643,7 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
         th0[2] *= scale_b2
         try:
             res = optimize.least_squares(lambda th: model(th)[0] - yy, th0, jac=lambda th: model(th)[1],
-                                         bounds=(lower, np.full(6, np.inf)), x_scale="jac",
-                                         method="trf", max_nfev=100)
+                                         bounds=(lower, np.full(6, np.inf)), x_scale="jac", method="trf", max_nfev=100)
         except (ValueError, EstimationError) as exc:
             last_exc = exc
             continue
@@ -687,16 +676,14 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
 def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) -> dict:
     """The keys ``hindrax ident free-decay --model quadratic`` adds to the linear analysis' JSON.
 
-    Fits :func:`fit_quadratic_free_decay` to the acceleration from the release found by the linear
-    analysis ``res`` (its ``release_index``), started from its added mass (eq. 5) and damping (eq. 6).
-    Returns ``linear_damping_n_s_per_m``, ``quadratic_damping_n_s2_per_m2``, the ODE fit's
-    ``added_mass_ode_kg`` (rigid mass ``res.mass_kg`` subtracted), each with its ``_std``, and
-    ``ode_rms_residual_m_s2``.
+    Fits :func:`fit_quadratic_free_decay` to the acceleration from the release found by the linear analysis ``res``
+    (its ``release_index``), started from its added mass (eq. 5) and damping (eq. 6). Returns
+    ``linear_damping_n_s_per_m``, ``quadratic_damping_n_s2_per_m2``, the ODE fit's ``added_mass_ode_kg`` (rigid mass
+    ``res.mass_kg`` subtracted), each with its ``_std``, and ``ode_rms_residual_m_s2``.
     """
     t = np.asarray(t_s, dtype=float)[res.release_index:]
     a = np.asarray(acceleration_m_s2, dtype=float)[res.release_index:]
-    fit = fit_quadratic_free_decay(t, a, res.stiffness_n_per_m, rigid_inertia=res.mass_kg,
-                                   output="acceleration",
+    fit = fit_quadratic_free_decay(t, a, res.stiffness_n_per_m, rigid_inertia=res.mass_kg, output="acceleration",
                                    initial_total_inertia=res.mass_kg + res.added_mass_kg,
                                    initial_linear_damping=res.damping_n_s_per_m)
     out = {}
@@ -713,10 +700,9 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
 class IncliningResult:
     """Result of :func:`restoring_from_inclining`.
 
-    ``restoring_n_m_per_rad`` (C, N m/rad) and its ``_std`` (NaN with only two points); ``offset_n_m``
-    (the moment that holds the vehicle's own static list, from the intercept); ``bg_m`` (C / (m g), when
-    the vehicle mass was given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass);
-    ``n_points``; ``residual_rms_n_m``.
+    ``restoring_n_m_per_rad`` (C, N m/rad) and its ``_std`` (NaN with only two points); ``offset_n_m`` (the moment
+    that holds the vehicle's own static list, from the intercept); ``bg_m`` (C / (m g), when the vehicle mass was
+    given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass); ``n_points``; ``residual_rms_n_m``.
     """
 
     restoring_n_m_per_rad: float

@@ -1,11 +1,10 @@
 """The linear Kalman filter step of the online filters: predict and update, the equations of filterpy's
-``KalmanFilter.predict`` / ``KalmanFilter.update`` ([Bar-Shalom2001] §5.2; Joseph-form covariance update, as
-filterpy writes it).
+``KalmanFilter.predict`` / ``KalmanFilter.update`` ([Bar-Shalom2001] §5.2; Joseph-form covariance update, as filterpy
+writes it).
 
-Used by the filters that run in the node processes, sample by sample; the offline smoothers keep
-filterpy's ``batch_filter`` and ``rts_smoother``. Why our own step for the online filters: importing
-``filterpy.kalman`` pulls in ``scipy.stats``, ``scipy.sparse`` and ``scipy.linalg`` (tens of MB per
-process) for the two equations below.
+Used by the filters that run in the node processes, sample by sample; the offline smoothers keep filterpy's
+``batch_filter`` and ``rts_smoother``. Why our own step for the online filters: importing ``filterpy.kalman`` pulls
+in ``scipy.stats``, ``scipy.sparse`` and ``scipy.linalg`` (tens of MB per process) for the two equations below.
 
 Shapes: state x (n, 1), covariance P (n, n); F, Q (n, n); measurement z (m, 1), H (m, n), R (m, m).
 """

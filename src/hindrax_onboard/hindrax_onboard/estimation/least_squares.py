@@ -200,8 +200,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
     if p == 0:
         raise EstimationError("X has no columns")
     if n <= p:
-        raise EstimationError(
-            f"need more samples than parameters for eq. 8 (n - p > 0): n={n}, p={p}")
+        raise EstimationError(f"need more samples than parameters for eq. 8 (n - p > 0): n={n}, p={p}")
     if names is not None:
         names = tuple(str(s) for s in names)
         if len(names) != p:

@@ -45,10 +45,9 @@ import numpy as np
 
 from .least_squares import EstimationError
 
-__all__ = ["Geometry", "PriorInputs", "not_a_knot_spline", "added_mass_priors",
-           "quadratic_damping_priors", "linear_damping_priors", "empirical_priors",
-           "priors_from_config", "ADDED_MASS_3D", "ADDED_MASS_2D", "DRAG_2D", "DRAG_3D",
-           "ZETA_ROLL_PITCH", "LINEAR_TO_QUADRATIC_TRANSLATION", "UNITS"]
+__all__ = ["Geometry", "PriorInputs", "not_a_knot_spline", "added_mass_priors", "quadratic_damping_priors",
+           "linear_damping_priors", "empirical_priors", "priors_from_config", "ADDED_MASS_3D", "ADDED_MASS_2D",
+           "DRAG_2D", "DRAG_3D", "ZETA_ROLL_PITCH", "LINEAR_TO_QUADRATIC_TRANSLATION", "UNITS"]
 
 #: [NTNU-Thesis] App. A.1 ``EMP3D``: (B/A, C_a) of the DNV rectangular prism (two sides equal).
 ADDED_MASS_3D = ((1.0, 0.68), (2.0, 0.36), (3.0, 0.24), (4.0, 0.19), (5.0, 0.15), (6.0, 0.14), (7.0, 0.11))
@@ -256,9 +255,8 @@ class PriorInputs:
 def empirical_priors(g: Geometry, rigid: PriorInputs = PriorInputs()) -> dict[str, Any]:
     """The three 6-element prior vectors with their inputs, as one JSON-friendly dict.
 
-    Returns ``{"added_mass": [6], "linear_damping": [6] (None where it cannot be computed),
-    "quadratic_damping": [6], "units": UNITS, "inputs": {...}, "notes": [...]}``.
-    Raises :class:`EstimationError` on invalid inputs.
+    Returns ``{"added_mass": [6], "linear_damping": [6] (None where it cannot be computed), "quadratic_damping": [6],
+    "units": UNITS, "inputs": {...}, "notes": [...]}``. Raises :class:`EstimationError` on invalid inputs.
     """
     notes: list = []
     A = added_mass_priors(g, notes)
@@ -313,8 +311,7 @@ def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m
     rect = {"frontal": W * H, "side": L * H, "top": L * W}
     given = {"frontal": frontal_area_m2, "side": side_area_m2, "top": top_area_m2}
     areas = {k: (rect[k] if v is None else float(v)) for k, v in given.items()}
-    g = Geometry(L, W, H, float(cfg.environment.water_density_kg_m3), areas["frontal"], areas["side"],
-                 areas["top"])
+    g = Geometry(L, W, H, float(cfg.environment.water_density_kg_m3), areas["frontal"], areas["side"], areas["top"])
     inertia = list(v.inertia_kg_m2)
     zg = float(v.centre_of_gravity_frd_m[2])
     zb = float(v.centre_of_buoyancy_frd_m[2])

@@ -24,11 +24,10 @@ Algorithm (all thresholds are arguments; defaults in brackets):
    the duration test is repeated after trimming. So every sample at a window's edges is within
    ``EDGE_FACTOR * max_std`` of the window mean.
 
-Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise
-(DVL ~ 0.01 m/s, filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient
-accelerations (force / inertia). [Hindrax-Drag]'s heave runs never became steady for lack of depth
-(section 5); expect no windows there and use the transient fit (the fit core,
-:mod:`..identification.fit.fit_core`).
+Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise (DVL ~ 0.01 m/s,
+filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient accelerations (force / inertia).
+[Hindrax-Drag]'s heave runs never became steady for lack of depth (section 5); expect no windows there and use the
+transient fit (the fit core, :mod:`..identification.fit.fit_core`).
 """
 
 from __future__ import annotations
@@ -102,8 +101,7 @@ def _window_stats(t: np.ndarray, v: np.ndarray, i: np.ndarray, j: np.ndarray):
     """Slope and std of v over windows [i, j) using cumulative sums (t centred per call)."""
     tc = t - t[0]
     # running sums from 0 of t, t^2, v, v^2 and t v
-    c1, c2, cv, cv2, ctv = (np.concatenate([[0.0], np.cumsum(x)])
-                            for x in (tc, tc * tc, v, v * v, tc * v))
+    c1, c2, cv, cv2, ctv = (np.concatenate([[0.0], np.cumsum(x)]) for x in (tc, tc * tc, v, v * v, tc * v))
     m = (j - i).astype(float)
     st, stt = c1[j] - c1[i], c2[j] - c2[i]
     sv, svv, stv = cv[j] - cv[i], cv2[j] - cv2[i], ctv[j] - ctv[i]
@@ -154,8 +152,7 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)
     check_same_length(t_s=t, velocity=v, force=f)
-    for name, val in (("min_duration_s", min_duration_s), ("max_slope", max_slope),
-                      ("max_std", max_std)):
+    for name, val in (("min_duration_s", min_duration_s), ("max_slope", max_slope), ("max_std", max_std)):
         if not (np.isfinite(val) and val > 0):
             raise EstimationError(f"{name} must be > 0, got {val}")
     windows: List[SteadyWindow] = []

@@ -49,11 +49,9 @@ from typing import Tuple
 import numpy as np
 from numpy.polynomial import Polynomial
 
-from .least_squares import (EstimationError, LsResult, as_float_array, check_same_length,
-                            fit_linear_model)
+from .least_squares import EstimationError, LsResult, as_float_array, check_same_length, fit_linear_model
 
-__all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve",
-           "point_reflection", "NEUTRAL_US"]
+__all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve", "point_reflection", "NEUTRAL_US"]
 
 #: ESC stop pulse width ([Hindrax-Drag] section 2.2.1).
 NEUTRAL_US = 1500.0
@@ -135,12 +133,10 @@ class CubicFit:
         return float(np.sqrt(np.sum(np.asarray(self.predict_std(P)) ** 2) / f2))
 
     def to_dict(self) -> dict:
-        """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us,
-        pulse_width_max_us}."""
+        """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us, pulse_width_max_us}."""
         keys = ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std")
         return {**{k: float(getattr(self, k)) for k in keys}, "n": int(self.n),
-                "residual_std_n": float(self.residual_std_n),
-                "thrust_relative_std": self.relative_std(),
+                "residual_std_n": float(self.residual_std_n), "thrust_relative_std": self.relative_std(),
                 "pulse_width_min_us": float(self.pulse_width_min_us),
                 "pulse_width_max_us": float(self.pulse_width_max_us)}
 
@@ -194,8 +190,7 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US) -> CubicF
     if np.unique(P).size < 4:
         raise EstimationError("a cubic needs at least 4 distinct pulse widths")
     s = (P - centre_us) / _SCALE_US
-    ls = fit_linear_model(np.column_stack([s**3, s**2, s, np.ones_like(s)]), F,
-                          names=("a3", "a2", "a1", "a0"))
+    ls = fit_linear_model(np.column_stack([s**3, s**2, s, np.ones_like(s)]), F, names=("a3", "a2", "a1", "a0"))
     # ascending order for the transform
     a_asc = ls.theta[::-1]
     cov_asc = ls.covariance[::-1, ::-1]
@@ -205,12 +200,10 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US) -> CubicF
     c_desc = c_asc[::-1]                    # (c4, c3, c2, c1)
     cov_desc = cov_c_asc[::-1, ::-1]
     std = np.sqrt(np.clip(np.diag(cov_desc), 0.0, None))
-    return CubicFit(c4=float(c_desc[0]), c3=float(c_desc[1]), c2=float(c_desc[2]),
-                    c1=float(c_desc[3]), c4_std=float(std[0]), c3_std=float(std[1]),
-                    c2_std=float(std[2]), c1_std=float(std[3]), covariance=cov_desc,
-                    n=ls.n, residual_std_n=ls.residual_std, centre_us=float(centre_us),
-                    scale_us=_SCALE_US, pulse_width_min_us=float(P.min()),
-                    pulse_width_max_us=float(P.max()), ls=ls)
+    return CubicFit(c4=float(c_desc[0]), c3=float(c_desc[1]), c2=float(c_desc[2]), c1=float(c_desc[3]),
+                    c4_std=float(std[0]), c3_std=float(std[1]), c2_std=float(std[2]), c1_std=float(std[3]),
+                    covariance=cov_desc, n=ls.n, residual_std_n=ls.residual_std, centre_us=float(centre_us),
+                    scale_us=_SCALE_US, pulse_width_min_us=float(P.min()), pulse_width_max_us=float(P.max()), ls=ls)
 
 
 def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
@@ -249,8 +242,7 @@ def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
             fits[name] = fit_cubic(P[mask], F[mask], centre_us=float(neutral_us))
         except EstimationError as exc:
             raise EstimationError(f"{name} direction: {exc}") from None
-    return ThrusterCurveFit(negative=fits["negative"], positive=fits["positive"],
-                            neutral_us=float(neutral_us))
+    return ThrusterCurveFit(negative=fits["negative"], positive=fits["positive"], neutral_us=float(neutral_us))
 
 
 def point_reflection(c4: float, c3: float, c2: float, c1: float,

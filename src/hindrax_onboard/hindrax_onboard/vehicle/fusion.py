@@ -112,10 +112,9 @@ def smooth_with_rate(t_s, angle, rate, angle_std: float, rate_std: float, jerk_p
     angle as the primary (position) measurement and its rate as the second one (H = [0 1 0]) instead
     of an acceleration; ``t_s``, ``angle`` (rad), ``rate`` (rad/s) (n,), NaN = missing.
 
-    For roll and pitch: the DVL-75 attitude (10 Hz, noise ``angle_std``) with the Euler-angle rate
-    from the 100 Hz gyro (Fossen eq. 2.29; noise ``rate_std``): the attitude smoothed alone keeps
-    enough noise in the restoring regressor s(eta) to bias the roll/pitch damping by 1-2 %. Raises
-    :class:`EstimationError` without angle samples."""
+    For roll and pitch: the DVL-75 attitude (10 Hz, noise ``angle_std``) with the Euler-angle rate from the 100 Hz
+    gyro (Fossen eq. 2.29; noise ``rate_std``): the attitude smoothed alone keeps enough noise in the restoring
+    regressor s(eta) to bias the roll/pitch damping by 1-2 %. Raises :class:`EstimationError` without angle samples."""
     return _smooth_aided(t_s, angle, rate, "position", angle_std, rate_std, jerk_psd, 1)
 
 

@@ -82,8 +82,7 @@ def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> li
     t = _stamp_s(msg.header)
     r = np.eye(3) if mounting_frd_from_flu is None else mounting_frd_from_flu
     w = r @ np.array([msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z], dtype=float)
-    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z],
-                     dtype=float)
+    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z], dtype=float)
     return [("icm20948_gyro", SimpleNamespace(stamp_s=t, angular_rate_rad_s=w)),
             ("icm20948_accel", SimpleNamespace(stamp_s=t, specific_force_m_s2=a))]
 
@@ -101,8 +100,7 @@ def sample_from_range(msg) -> tuple[str, Any]:
 
 
 def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[float]) -> np.ndarray:
-    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote
-    (``thrusters/pulse_width``); (k, n) of (k, n).
+    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote (``thrusters/pulse_width``); (k, n) of (k, n).
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation
     (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve

@@ -251,14 +251,13 @@ class SensorState:
 
 
 class DepthEstimator:
-    """Depth and depth rate of the body origin for the depth hold: the MS5837 depth (10 Hz, arriving tens of
-    ms after its conversion) fused with the 100 Hz vertical acceleration (:class:`~.fusion.AccelAidedFilter`,
-    position measured, NED z).
+    """Depth and depth rate of the body origin for the depth hold: the MS5837 depth (10 Hz, arriving tens of ms after
+    its conversion) fused with the 100 Hz vertical acceleration (:class:`~.fusion.AccelAidedFilter`, position
+    measured, NED z).
 
-    Why: a rate from the 10 Hz depth alone lags by about its own filter bandwidth, close to the
-    hold's crossover; with the ROS graph's latencies that drives the depth hold into a limit cycle
-    whose heave couples into the roll and pitch runs (Munk moment, Fossen eq. 6.55). The
-    acceleration gives the rate without that lag.
+    Why: a rate from the 10 Hz depth alone lags by about its own filter bandwidth, close to the hold's crossover;
+    with the ROS graph's latencies that drives the depth hold into a limit cycle whose heave couples into the roll
+    and pitch runs (Munk moment, Fossen eq. 6.55). The acceleration gives the rate without that lag.
 
     ``on_sample(device, stamp_s, state)`` takes every conditioned sample (``ms5837``: ``state.depth_m``;
     ``icm20948_accel``: ``state.acceleration_ned_m_s2[2]``); a sample older than the filter's time is fused at

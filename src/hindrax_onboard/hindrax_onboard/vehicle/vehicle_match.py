@@ -1,14 +1,13 @@
 """Which vehicle an identification belongs to: the vehicle-file parameters its values depend on.
 
-An identification (``identification.yaml``) measures forces through the thrust model (the curves, the neutral
-and deadband, each thruster's ESC channel, direction, position, trim and reversal), separates added from rigid
-mass and inertia with the vehicle's mass properties (mass, inertia, products of inertia, centres of gravity and
-buoyancy, displaced volume, net buoyancy) and the environment (water density, gravity), and reads its velocities
-and attitude through the sensors' mounting (position and orientation keys of ``sensors.*``). Those values, as the
-vehicle file held them, are written to ``provenance.vehicle_parameters``; the controller uses the identification
-only for a vehicle file whose values are the same (:func:`parameter_differences`). Anything else in the file
-(comments, the disk floor, ESC calibration, supervisor limits, the hydrodynamic priors) can change without
-invalidating it.
+An identification (``identification.yaml``) measures forces through the thrust model (the curves, the neutral and
+deadband, each thruster's ESC channel, direction, position, trim and reversal), separates added from rigid mass and
+inertia with the vehicle's mass properties (mass, inertia, products of inertia, centres of gravity and buoyancy,
+displaced volume, net buoyancy) and the environment (water density, gravity), and reads its velocities and attitude
+through the sensors' mounting (position and orientation keys of ``sensors.*``). Those values, as the vehicle file
+held them, are written to ``provenance.vehicle_parameters``; the controller uses the identification only for a
+vehicle file whose values are the same (:func:`parameter_differences`). Anything else in the file (comments, the disk
+floor, ESC calibration, supervisor limits, the hydrodynamic priors) can change without invalidating it.
 """
 from __future__ import annotations
 

@@ -22,12 +22,10 @@ from rclpy.experimental.events_executor import EventsExecutor
 
 
 @contextmanager
-def spinning(ctx, *nodes, events: bool = False,
-             timeout_s: float = 0.1) -> Iterator[tuple[Any, Callable[[], None]]]:
-    """``nodes`` (of rclpy context ``ctx``) in one executor, a SingleThreadedExecutor or with
-    ``events`` rclpy's EventsExecutor (a node process's); yields (executor, spin): ``spin()`` is
-    one ``spin_once`` of at most ``timeout_s``. Shuts the executor down and destroys the nodes on
-    the way out."""
+def spinning(ctx, *nodes, events: bool = False, timeout_s: float = 0.1) -> Iterator[tuple[Any, Callable[[], None]]]:
+    """``nodes`` (of rclpy context ``ctx``) in one executor, a SingleThreadedExecutor or with ``events`` rclpy's
+    EventsExecutor (a node process's); yields (executor, spin): ``spin()`` is one ``spin_once`` of at most
+    ``timeout_s``. Shuts the executor down and destroys the nodes on the way out."""
     ex = (EventsExecutor if events else SingleThreadedExecutor)(context=ctx)
     for node in nodes:
         ex.add_node(node)
@@ -58,18 +56,15 @@ def spin_for(duration_s: float, spin: Callable[[], None] | None = None) -> tuple
     return time.process_time() - cpu0, time.monotonic() - start
 
 
-def call(client: Any, request: Any, spin: Callable[[], None] | None = None,
-         timeout_s: float = 10.0) -> Any:
-    """The answer to ``request`` from the service of rclpy ``client``, waited for up to
-    ``timeout_s`` (``spin``: one executor spin between checks; None: another thread spins).
-    Raises ConditionTimeout."""
+def call(client: Any, request: Any, spin: Callable[[], None] | None = None, timeout_s: float = 10.0) -> Any:
+    """The answer to ``request`` from the service of rclpy ``client``, waited for up to ``timeout_s`` (``spin``: one
+    executor spin between checks; None: another thread spins). Raises ConditionTimeout."""
     fut = client.call_async(request)
     wait_until(fut.done, timeout_s, spin, f"{client.srv_name} answer")
     return fut.result()
 
 
-def start_logged(log: Path, argv: Sequence[str], mode: str = "w",
-                 **popen_kwargs: Any) -> subprocess.Popen:
+def start_logged(log: Path, argv: Sequence[str], mode: str = "w", **popen_kwargs: Any) -> subprocess.Popen:
     """``argv`` started (:class:`subprocess.Popen` with ``popen_kwargs``), its output and errors
     written to the file ``log`` (opened with ``mode``: ``"a"`` keeps an earlier run's lines)."""
     with open(log, mode) as out:
@@ -77,9 +72,8 @@ def start_logged(log: Path, argv: Sequence[str], mode: str = "w",
 
 
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:
-    """Run one benchmark module alone (``python -m hindrax_tools.benchmarks.<name>
-    [--quick]``) on the vehicle's loopback transport: print the rows of ``run(quick)`` as JSON;
-    returns the exit status 0."""
+    """Run one benchmark module alone (``python -m hindrax_tools.benchmarks.<name> [--quick]``) on the vehicle's
+    loopback transport: print the rows of ``run(quick)`` as JSON; returns the exit status 0."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     loopback_transport()
     parser = argparse.ArgumentParser(description="one benchmark module's rows, as JSON")

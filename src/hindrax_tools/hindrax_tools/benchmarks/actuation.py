@@ -140,15 +140,13 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
                 m = WrenchStamped(header=Header(frame_id="base_link", stamp=stamp))
                 m.wrench.force.x = float(levels[state["sent"] % 2][0])
                 pending.clear()
-                pending.update(t0=time.monotonic(), cpu0=time.process_time(),
-                               target=expected[state["sent"] % 2])
+                pending.update(t0=time.monotonic(), cpu0=time.process_time(), target=expected[state["sent"] % 2])
                 pub.publish(m)
                 state["sent"] += 1
 
             driver.create_timer(1.0 / 50.0, send)
             cpu0, wall0 = time.process_time(), time.monotonic()
-            wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin,
-                       "commands sent")
+            wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin, "commands sent")
             cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
     if sched.granted:
         set_every_thread(os.SCHED_OTHER, 0)
@@ -161,8 +159,7 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
         {"name": "wrench_to_registers_cpu_p99", "value": float(np.percentile(np.array(cpu_latencies) * 1e3, 99)),
          "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait "
                                "for a core"},
-        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count",
-         "note": f"of {state['sent']} sent"},
+        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count", "note": f"of {state['sent']} sent"},
         {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
          "note": "whole process: publisher + allocation + ESC node"},
         {"name": "cpu_load_at_50hz", "value": cpu / wall * 100.0, "unit": "% of a core"},

@@ -67,8 +67,7 @@ def codec_rows(n: int) -> list[dict]:
             for i in range(1, n + 1):
                 one(i)
             per[kind].append((time.thread_time_ns() - t0) / n / 1e3)
-    return _cpu_rows("codec", per, n,
-                     "one ESC beat built as bytes and read back ({k}), median of {blocks} blocks")
+    return _cpu_rows("codec", per, n, "one ESC beat built as bytes and read back ({k}), median of {blocks} blocks")
 
 
 def cycle_rows(n: int) -> list[dict]:
@@ -87,12 +86,10 @@ def cycle_rows(n: int) -> list[dict]:
         pubs = {"status": tx.create_publisher(DiagnosticStatus, "status_beat", heartbeat_qos()),
                 "heartbeat": tx.create_publisher(Heartbeat, "heartbeat_beat", heartbeat_qos())}
         rx.create_subscription(DiagnosticStatus, "status_beat", count(_read_status), heartbeat_qos())
-        rx.create_subscription(Heartbeat, "heartbeat_beat", count(read_heartbeat), heartbeat_qos(),
-                               raw=True)
+        rx.create_subscription(Heartbeat, "heartbeat_beat", count(read_heartbeat), heartbeat_qos(), raw=True)
         build = {"status": _status_bytes, "heartbeat": _heartbeat_bytes}
         with spinning(rx_ctx, rx, events=True, timeout_s=0.05) as (ex, spin):
-            wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30, spin,
-                       "matched")
+            wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30, spin, "matched")
             for _ in range(BLOCKS):
                 for kind, pub in pubs.items():
                     got["n"] = 0
@@ -110,9 +107,8 @@ def cycle_rows(n: int) -> list[dict]:
 
 
 def _cpu_rows(what: str, per: dict[str, list[float]], n: int, note: str) -> list[dict]:
-    """Rows ``heartbeat_<what>_cpu_us_<kind>`` (the median of the blocks ``per[kind]``, us per
-    beat; ``note`` with ``{k}`` the kind, ``{blocks}`` their number) and
-    ``heartbeat_<what>_cpu_ratio``."""
+    """Rows ``heartbeat_<what>_cpu_us_<kind>`` (the median of the blocks ``per[kind]``, us per beat; ``note`` with
+    ``{k}`` the kind, ``{blocks}`` their number) and ``heartbeat_<what>_cpu_ratio``."""
     med = {k: statistics.median(v) for k, v in per.items()}
     name = f"heartbeat_{what}_cpu"
     return [*({"name": f"{name}_us_{k}", "value": med[k], "unit": "us", "n": n * BLOCKS,

@@ -67,9 +67,8 @@ def _idle_load(duration_s: float) -> float:
 
 
 def _timed(cls: type, timed_read: Callable[[int], bool]) -> type:
-    """Emulator class ``cls`` that also keeps ``reads_ns``, the wall time of each read of n bytes
-    with ``timed_read(n)``, and ``cpu_s``, the CPU time its reads and writes took (not the
-    driver's)."""
+    """Emulator class ``cls`` that also keeps ``reads_ns``, the wall time of each read of n bytes with
+    ``timed_read(n)``, and ``cpu_s``, the CPU time its reads and writes took (not the driver's)."""
     class Timed(cls):  # type: ignore[misc, valid-type]
         def i2c_read(self, n: int) -> bytes:
             c0 = time.process_time()

@@ -52,8 +52,7 @@ _TRUTH = {
     "hydrodynamics": {"yaw": {"added_mass_kg_m2": 1.65, "linear_damping_kg_m2_s": 0.74}},
     "disturbances": {
         "thrust": {"per_thruster": [1.0, 0.9, 1.05, 0.85, 1.08, 0.95, 0.9, 1.0], "negative": 0.85},
-        "current": {"velocity_ned_m_s": [0.02, 0.01, 0.0], "amplitude_ned_m_s": [0.02, 0.015, 0.0],
-                    "period_s": 240.0},
+        "current": {"velocity_ned_m_s": [0.02, 0.01, 0.0], "amplitude_ned_m_s": [0.02, 0.015, 0.0], "period_s": 240.0},
         "tether": {"anchor_ned_m": [5.0, 0.0, 0.0], "attachment_frd_m": [-0.25, 0.0, -0.1],
                    "drag_n_s2_m3": 2.0, "tension_n": 0.8},
         "dvl": {"latency_s": 0.05},

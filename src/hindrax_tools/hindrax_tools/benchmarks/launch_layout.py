@@ -1,11 +1,9 @@
-"""The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices
-emulated.
+"""The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices emulated.
 
-:func:`launch_processes` lists the processes of a launch XML file (``pool_test.launch.xml``, which
-includes ``vehicle.launch.xml``) through :func:`hindrax_drivers.layout.launch_xml.read_launch`, the
-project's one reader of launch files, each with its console script's function; the benchmark starts
-them with the arguments ``ros2 launch`` would give (the ``launch`` package is not installable here,
-docs/architecture.md §11.3).
+:func:`launch_processes` lists the processes of a launch XML file (``pool_test.launch.xml``, which includes
+``vehicle.launch.xml``) through :func:`hindrax_drivers.layout.launch_xml.read_launch`, the project's one reader of
+launch files, each with its console script's function; the benchmark starts them with the arguments ``ros2 launch``
+would give (the ``launch`` package is not installable here, docs/architecture.md §11.3).
 
 ``python -m hindrax_tools.benchmarks.launch_layout pool --socket PATH --ports-file FILE``:
 the virtual pool in its own process (excluded from the stack's CPU): the simulator

@@ -1,12 +1,10 @@
-"""One node process of the stack benchmark's launch layout: a console script's function, as
-installed.
+"""One node process of the stack benchmark's launch layout: a console script's function, as installed.
 
-``python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs
-``MODULE.FUNCTION()`` (default ``main``, e.g. ``hindrax_drivers.layout.composition:i2c_sensors_main``) as
-the installed console script does. The I2C drivers reach the virtual pool's emulated bus through
-their own ``open_smbus`` (:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so
-nothing of the node is replaced. This module imports no simulator, emulator or benchmark code, so a
-benchmarked process holds the modules and memory the vehicle's holds
+``python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs ``MODULE.FUNCTION()``
+(default ``main``, e.g. ``hindrax_drivers.layout.composition:i2c_sensors_main``) as the installed console script
+does. The I2C drivers reach the virtual pool's emulated bus through their own ``open_smbus``
+(:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so nothing of the node is replaced. This module imports no
+simulator, emulator or benchmark code, so a benchmarked process holds the modules and memory the vehicle's holds
 (``test_bench_launch_layout.py`` checks it).
 
 ``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`): cProfile, ``DIR/<module>.prof`` written on
@@ -56,9 +54,8 @@ _QOS_KEYS = ("history", "depth", "reliability", "durability", "liveliness", "dea
 #: an event type (``RCL_SUBSCRIPTION_LIVELINESS_CHANGED``...) less its prefix -> the callbacks' key
 _EVENT_KEYS = {"REQUESTED_DEADLINE_MISSED": "deadline", "OFFERED_DEADLINE_MISSED": "deadline",
                "LIVELINESS_CHANGED": "liveliness", "LIVELINESS_LOST": "liveliness",
-               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos",
-               "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos", "MESSAGE_LOST": "message_lost",
-               "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
+               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos", "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos",
+               "MESSAGE_LOST": "message_lost", "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
 
 
 def _type(cls: Any) -> str:
@@ -70,10 +67,8 @@ def _endpoint(e: Any, kind: str) -> dict:
     out: dict = {"topic": getattr(e, "topic_name", None) or e.srv_name,
                  "type": _type(getattr(e, "msg_type", None) or e.srv_type)}
     if kind in ("publishers", "subscriptions"):
-        out["qos"] = {k: int(getattr(v, "nanoseconds", v))
-                      for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
-        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]]
-                               for h in e.event_handlers)
+        out["qos"] = {k: int(getattr(v, "nanoseconds", v)) for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
+        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]] for h in e.event_handlers)
     if kind == "subscriptions":
         out["raw"] = bool(e.raw)
     return out
@@ -155,9 +150,8 @@ def skeleton_main() -> int:
             timer = node.create_timer(1.0 / rate, partial(_call_all, sends), autostart=k == 0)
             timers.append((k, timer))
         for s in nd["subscriptions"]:
-            node.create_subscription(interface_type(s["type"]), s["topic"], lambda _m: None,
-                                     _profile(s["qos"]), raw=s["raw"],
-                                     event_callbacks=_events("subscriptions", s["events"]))
+            node.create_subscription(interface_type(s["type"]), s["topic"], lambda _m: None, _profile(s["qos"]),
+                                     raw=s["raw"], event_callbacks=_events("subscriptions", s["events"]))
         for s in nd["services"]:
             if s["topic"] not in have:
                 node.create_service(interface_type(s["type"]), s["topic"], lambda _q, r: r)

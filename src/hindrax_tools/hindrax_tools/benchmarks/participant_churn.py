@@ -106,10 +106,9 @@ def hardware_priority() -> Iterator[str]:
 
 
 class _VehicleLayout(_Layout):
-    """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
-    is refused, as ``vehicle.launch.xml`` starts them
-    (:func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`), each in a session of its own as a
-    launched process is."""
+    """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that is
+    refused, as ``vehicle.launch.xml`` starts them (:func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`),
+    each in a session of its own as a launched process is."""
 
     new_session = True
 
@@ -193,9 +192,8 @@ class _Watch:
         self.armed, self.disarms, self.active = True, 0, True
 
     def rows(self, prefix: str, what: str, target_ms: float, n: int | None = None) -> list[dict]:
-        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials),
-        ``<prefix>heartbeat_gap_max_ms`` (target ``target_ms``),
-        ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
+        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials), ``<prefix>heartbeat_gap_max_ms``
+        (target ``target_ms``), ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
         beats = sum(len(v) for v in self.arrivals.values())
         rows = [{"name": prefix + "disarms", "value": self.disarms, "unit": "disarms", "target": 0,
                  **({} if n is None else {"n": n}), "note": what}]
@@ -228,8 +226,7 @@ def churn_rows(quick: bool = False) -> list[dict]:
                     if k % 2 == 0:
                         argv = subscriber_argv(str(k), 3.0)
                     else:
-                        argv = [python_executable(), "-m", "hindrax_tools.cli", "health",
-                                "--quiet", "--timeout", "3"]
+                        argv = [python_executable(), "-m", "hindrax_tools.cli", "health", "--quiet", "--timeout", "3"]
                     started.append(stack.enter_context(child_process(
                         argv, env=lay.env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)))
                     k += 1
@@ -248,10 +245,9 @@ def churn_rows(quick: bool = False) -> list[dict]:
 
 @contextmanager
 def cpu_bound_neighbours(n: int = NEIGHBOURS) -> Iterator[list[subprocess.Popen]]:
-    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of
-    its own (another service or a terminal on the Pi), for the block; killed on the way out. Raises
-    RuntimeError if one inherited this process's real-time priority (it would starve the vehicle's
-    processes, not stand beside them)."""
+    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of its own (another
+    service or a terminal on the Pi), for the block; killed on the way out. Raises RuntimeError if one inherited this
+    process's real-time priority (it would starve the vehicle's processes, not stand beside them)."""
     with ExitStack() as stack:
         neighbours = [stack.enter_context(child_process(
             [python_executable(), "-c", "while True: pass"], start_new_session=True,
@@ -293,20 +289,17 @@ def topside_topics(vehicle: str) -> tuple[str, ...]:
     """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics
     and odometry."""
     return (f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/supervisor/status",
-            f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status",
-            f"nav_msgs.msg:Odometry=/{vehicle}/odom")
+            f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status", f"nav_msgs.msg:Odometry=/{vehicle}/odom")
 
 
 def pool_day_rows(quick: bool = False) -> list[dict]:
     """The ``pool_day_churn_*`` rows (module docstring); ``quick``: :data:`QUICK_TRIALS` trials."""
     trials = QUICK_TRIALS if quick else TRIALS
     exits: list[int] = []
-    with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, \
-            domain_id() as topside:
+    with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, domain_id() as topside:
         watch = _Watch(lay.probe)
         lay.ensure()
-        internal_default = ({k: v for k, v in lay.env.items() if k != PROFILE_ENV}
-                            | {RANGE_ENV: "LOCALHOST"})
+        internal_default = {k: v for k, v in lay.env.items() if k != PROFILE_ENV} | {RANGE_ENV: "LOCALHOST"}
         topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
         health = [lay.py, "-m", "hindrax_tools.cli", "health", "--quiet", "--timeout", "3"]
         topics = topside_topics(lay.vehicle)
@@ -317,11 +310,9 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
                 watch.start()
                 for k in range(trials):
                     specs = ((subscriber_argv(f"internal_{k}", SUBSCRIBER_S), internal_default),
-                             (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env),
-                             (health, lay.env))
+                             (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env), (health, lay.env))
                     with ExitStack() as stack:
-                        procs = [stack.enter_context(child_process(argv, env=env, **quiet))
-                                 for argv, env in specs]
+                        procs = [stack.enter_context(child_process(argv, env=env, **quiet)) for argv, env in specs]
                         exits += [p.wait(TRIAL_TIMEOUT_S) for p in procs]
                 watch.active = False
                 load = os.getloadavg()[0]
@@ -337,8 +328,7 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
 def run(quick: bool = False) -> list[dict]:
     """This module's rows of the ``safety`` section (``make bench``,
     :mod:`hindrax_tools.bench`), in the order of the module docstring."""
-    return (churn_rows(quick) + busy_rows(quick) + busy_rows(quick, realtime=False)
-            + pool_day_rows(quick))
+    return churn_rows(quick) + busy_rows(quick) + busy_rows(quick, realtime=False) + pool_day_rows(quick)
 
 
 if __name__ == "__main__":

@@ -30,8 +30,7 @@ from domain_coordinator import domain_id
 from hindrax_drivers.recording.make_test_bags import STREAMS
 from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.recording.msgtypes import message_class
-from hindrax_drivers.testing import (child_env, child_process, interrupt, python_executable,
-                                     wait_until)
+from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 

@@ -417,8 +417,7 @@ def _icm_faults() -> list[dict]:
             mags = node.mag_samples
             emu.aux_connected = True
             retry_s = node.mag.retry_interval_s
-            recover = _until(lambda: node.mag_samples > mags, spin, 3 * retry_s + 5,
-                             "imu/mag again")
+            recover = _until(lambda: node.mag_samples > mags, spin, 3 * retry_s + 5, "imu/mag again")
             out.append(_fault_row("magnetometer NACK (AK09916 via I2C master)", detect, recover,
                                   "detect: NACK onset -> ERROR magnetometer (mag_stale_timeout_s 0.5 s; no "
                                   "frozen imu/mag published meanwhile); IMU continues without imu/mag; recover: "
@@ -458,8 +457,7 @@ def run(quick: bool = False) -> list[dict]:
     for f in _dvl_faults() + _icm_faults() + _ms5837_faults():
         rows.append({"name": f"{f['name']}: time to detect", "value": f["detect_s"] * 1e3, "unit": "ms",
                      "note": f["note"]})
-        rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3,
-                     "unit": "ms"})
+        rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3, "unit": "ms"})
     return rows
 
 

@@ -156,11 +156,10 @@ def _rig(ctx, sim_time: bool = False):
     for n in (esc, sup, probe):
         ex.add_node(n)
     allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
-    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation,
-             cmd=allocation.pub,
+    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation, cmd=allocation.pub,
              depth=probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
-             clock=probe.create_publisher(Clock, "/clock", 10),
-             arm=probe.create_client(SetArmed, "esc/set_armed"), estop=probe.create_client(Trigger, "supervisor/estop"),
+             clock=probe.create_publisher(Clock, "/clock", 10), arm=probe.create_client(SetArmed, "esc/set_armed"),
+             estop=probe.create_client(Trigger, "supervisor/estop"),
              reset=probe.create_client(Trigger, "supervisor/reset"), ns=1_000_000_000)
 
     def spin(timeout_s: float = 0.002) -> None:
@@ -193,8 +192,7 @@ def _rig(ctx, sim_time: bool = False):
         res = call(r["arm"], SetArmed.Request(arm=True), spin)
         if not res.success:
             raise RuntimeError(f"arming refused: {res.message}")
-        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding,
-                   "1700 us on the wire")
+        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding, "1700 us on the wire")
         emu.watch = True
 
     def until_neutral(timeout_s: float = 10.0, poll=None) -> float:
@@ -215,8 +213,7 @@ def _close(r) -> None:
 
 
 def _ms_row(name: str, seconds, **extra) -> dict:
-    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus
-    ``extra`` keys."""
+    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus ``extra`` keys."""
     ms = np.asarray(seconds, dtype=float) * 1e3
     return {"name": name, "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
             "n": int(ms.size), **extra}
@@ -267,8 +264,7 @@ def run(quick: bool = False) -> list[dict]:
             t0 = time.monotonic()
             emu.reset()
             emu.watch, emu.neutral_at = True, None
-            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"],
-                       "chip reset detected")
+            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"], "chip reset detected")
             times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
             times["chip_reset_recover"].append(r["until_neutral"](poll=r["commanding"]) - t0)
         _close(r)
@@ -372,9 +368,8 @@ WATCHDOG_TIMEOUT_S = 0.33
 
 
 class _Hardware:
-    """The emulated PCA9685 with /OE and the hardware watchdog on it (docs/watchdog.md), served to the node
-    processes; records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer
-    holds it)."""
+    """The emulated PCA9685 with /OE and the hardware watchdog on it (docs/watchdog.md), served to the node processes;
+    records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer holds it)."""
 
     def __init__(self, sock: str, feed: bool = True) -> None:
         hw = self
@@ -537,8 +532,7 @@ class _Layout:
         # docs/deployment.md §1): on a machine shared with other jobs a 0.33 s gap in the guard's feed would be the
         # machine's load, not the failure measured
         prefix, env = vehicle_scheduling()[name]
-        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config,
-                *extra]
+        argv = [*prefix, self.py, "-m", PROCESSES[name], "--ros-args", "--params-file", self.config, *extra]
         self.procs[name] = start_logged(self.tmp / f"{name}.log", argv, "a",
                                         env=dict(self.env, **(env if self.realtime else {})),
                                         start_new_session=self.new_session)
@@ -804,9 +798,8 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
     each topic as it discovers it): replayed from there, every pass carries them without a gap until its end."""
     bag = tmp / "vehicle_bag"
     lay.armed_at_1700()
-    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file",
-            lay.config, "-p", "all_topics:=true", "-p", "autostart:=true", "-p",
-            f"output_dir:={bag}"]
+    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file", lay.config,
+            "-p", "all_topics:=true", "-p", "autostart:=true", "-p", f"output_dir:={bag}"]
     rec = start_logged(tmp / "recorder.log", argv, env=lay.env)
     try:
         wait_until(lambda: (bag / "metadata.yaml").exists() or any(bag.glob("*.mcap")), 30, None, "recorder started")
@@ -1023,5 +1016,4 @@ def run_processes(quick: bool = False) -> list[dict]:
              "note": f"of {5 * repeats + 1} arm requests, the ESC disarmed itself before 1700 us "
                      "reached the wire (the bench armed again)"
                      + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")}]
-    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name])
-                   for name, values in times.items()]
+    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name]) for name, values in times.items()]

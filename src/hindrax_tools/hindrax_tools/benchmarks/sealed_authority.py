@@ -63,17 +63,15 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
 @contextmanager
 def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
     """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
-    (:func:`~hindrax_tools.benchmarks.safety.running_layout`), on its internal domain and the
-    topside domain ``topside`` (LOCALHOST, the shipped file's range), with operator keys from
-    ``keys_dir`` (none: every operator request refused); yields its process once its internal
-    participant has sockets, and stops it on the way out."""
+    (:func:`~hindrax_tools.benchmarks.safety.running_layout`), on its internal domain and the topside domain
+    ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
+    request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
     env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
     argv = [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config,
             "-p", f"topside_domain_id:={topside}"]
     gateway = start_logged(lay.tmp / "gateway.log", argv, env=env)
     try:
-        wait_until(lambda: "internal domain" in (lay.tmp / "gateway.log").read_text(), WAIT_S, None,
-                   "gateway started")
+        wait_until(lambda: "internal domain" in (lay.tmp / "gateway.log").read_text(), WAIT_S, None, "gateway started")
         wait_until(lambda: len(child_pids(gateway.pid)) == 1 and udp_sockets(child_pids(gateway.pid)[0]),
                    WAIT_S, None, "gateway's internal participant")
         yield gateway
@@ -97,8 +95,7 @@ def run(quick: bool = False) -> list[dict]:
             rows = [exposure_row({name: udp_sockets(pid) for name, pid in pids.items()})]
             with probe_spinning(topside, "bench_operator") as (node, _ex, spin):
                 client = node.create_client(SignedTrigger, f"/{vehicle}/arm")
-                wait_until(client.service_is_ready, WAIT_S, spin,
-                           f"/{vehicle}/arm on the topside")
+                wait_until(client.service_is_ready, WAIT_S, spin, f"/{vehicle}/arm on the topside")
                 signer = Signer(key, vehicle)
                 wait_until(lambda: lay.arm_client.service_is_ready() and lay.reset_client.service_is_ready(),
                            WAIT_S, None, "ESC and supervisor up")

@@ -45,9 +45,8 @@ PING_INTERVAL_S = 0.025
 
 
 class _TimedEmulator:
-    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``;
-    :attr:`written` maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its
-    bytes."""
+    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``; :attr:`written`
+    maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its bytes."""
 
     def __init__(self, make, truth, modulus: int) -> None:
         self.written: dict[int, int] = {}
@@ -70,8 +69,7 @@ class _TimedEmulator:
         return out
 
 
-def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str,
-             rate: str) -> list[dict]:
+def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str, rate: str) -> list[dict]:
     """Run node + probe for ``duration_s`` after a warm-up; the rows of :func:`_rows`."""
     latencies: dict[str, list[int]] = {topic: [] for topic, _, _ in subscriptions}
     dev = PtyDevice(emulator)
@@ -107,8 +105,7 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
     """Reports, CPU per report and load, and per topic the latency from the device's bytes."""
     n = max(reports, 1)
     rows = [
-        {"name": f"{device} reports published", "value": reports, "unit": "msgs",
-         "note": f"{rate} for {wall_s:.1f} s"},
+        {"name": f"{device} reports published", "value": reports, "unit": "msgs", "note": f"{rate} for {wall_s:.1f} s"},
         {"name": f"{device} reader-thread CPU per report", "value": reader_s / n * 1e3, "unit": "ms",
          "target": "< 2", "note": "decode + convert + publish all topics of one report"},
         {"name": f"{device} node+probe+DDS CPU per report", "value": (reader_s + other_s) / n * 1e3, "unit": "ms",

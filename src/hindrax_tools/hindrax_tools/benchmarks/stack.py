@@ -1,30 +1,27 @@
-"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process
-and in the launch layout, messages per second per topic, and the cost of a skeleton sending the same
-topics at the same rates.
+"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process and in the launch
+layout, messages per second per topic, and the cost of a skeleton sending the same topics at the same rates.
 
-CPU is process (or thread) CPU time over wall time. It still grows with the load of a shared machine
-(by 20-40 % between a quiet and a loaded run here), so compare layouts in runs close in time, and
-repeat.
+CPU is process (or thread) CPU time over wall time. It still grows with the load of a shared machine (by 20-40 %
+between a quiet and a loaded run here), so compare layouts in runs close in time, and repeat.
 
-The graph: the sensor drivers, the ESC, the allocation, the identification node, the supervisor and
-the recorder (every topic except ``sim/*`` and ``/clock``), devices emulated and excluded from the
-stack's CPU. Two phases of ``duration_s`` each: ``running`` (the identification node runs a surge
-goal) and ``idle`` (goal cancelled, a 50 Hz ``wrench`` stream from the benchmark).
+The graph: the sensor drivers, the ESC, the allocation, the identification node, the supervisor and the recorder
+(every topic except ``sim/*`` and ``/clock``), devices emulated and excluded from the stack's CPU. Two phases of
+``duration_s`` each: ``running`` (the identification node runs a surge goal) and ``idle`` (goal cancelled, a 50 Hz
+``wrench`` stream from the benchmark).
 
-``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`,
-``drive_clocks``) in one executor; per node the CPU of its callbacks less the emulators' time in
-them, plus its own threads; the rest is ``executor+dds``. ``launch``: the processes of
-:data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the virtual pool in another process;
-CPU per process from ``/proc/<pid>/stat``; the running phase in :data:`RUNNING_WINDOWS` windows,
-each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the launch layout's
-bag.
+``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`, ``drive_clocks``) in one
+executor; per node the CPU of its callbacks less the emulators' time in them, plus its own threads; the rest is
+``executor+dds``. ``launch``: the processes of :data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the
+virtual pool in another process; CPU per process from ``/proc/<pid>/stat``; the running phase in
+:data:`RUNNING_WINDOWS` windows, each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the
+launch layout's bag.
 
-Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at
-the reference machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`.
-Wake-ups per process and the DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process
-costs. ``--baseline GIT_REF`` measures that commit's launch layout first (:func:`baseline_launch`,
-rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``): the launch layout alone in a Pi-sized CPU rig of F
-cores here (:func:`rig_rows`, :mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
+Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at the reference
+machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`. Wake-ups per process and the
+DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process costs. ``--baseline GIT_REF`` measures that
+commit's launch layout first (:func:`baseline_launch`, rows ``..._vs_baseline``). ``--rig-cores F`` (``make rig``):
+the launch layout alone in a Pi-sized CPU rig of F cores here (:func:`rig_rows`,
+:mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
 
 Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
 with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
@@ -145,9 +142,8 @@ def _wrench_msg(stamp: Any) -> Any:
 
 
 def _wrench_stream(probe: Any) -> Callable[[bool], None]:
-    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on (the returned
-    ``switch(on)``): its timer runs only while it is on, so the bench wakes no 50 Hz timer in the
-    running phase."""
+    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on (the returned ``switch(on)``): its timer
+    runs only while it is on, so the bench wakes no 50 Hz timer in the running phase."""
     wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
     timer = probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
         _wrench_msg(probe.get_clock().now().to_msg())), autostart=False)
@@ -157,13 +153,12 @@ def _wrench_stream(probe: Any) -> Callable[[bool], None]:
 def _running_then_idle(probe: Any, action: Any, switch: Callable[[bool], None], window: Any,
                        spin: Any, spin_idle: Any, what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
-    :class:`~hindrax_drivers.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s
-    of warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
+    :class:`~hindrax_drivers.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3
+    s of warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
-    switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one
-    executor spin while running / while idle. Raises
-    RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
-    have measured a running campaign)."""
+    switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one executor spin
+    while running / while idle. Raises RuntimeError when the goal is rejected, or when it ended before the running
+    window did (the window would not have measured a running campaign)."""
     goals = GoalSender(probe, action, "run_identification")
     switch(False)
     handle = goals.send(RunIdentification.Goal(dofs=["surge"], levels_per_dof=3), spin, 30)
@@ -242,8 +237,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
         sim_node.advance_clock_period = _timed(advance, emu, lambda: "(simulator)")
         for device in (hw.emulators[n] for n in ("ms5837", "icm20948", "pca9685")):
             for meth in ("i2c_read", "i2c_write"):
-                setattr(device, meth, _timed(getattr(device, meth), emu,
-                                             lambda: current[0] or "(outside callbacks)"))
+                setattr(device, meth, _timed(getattr(device, meth), emu, lambda: current[0] or "(outside callbacks)"))
 
         recorder = graph.nodes["recorder"]
         recorder.stop_recording()
@@ -288,8 +282,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             threads1 = thread_cpu_s()
             counts1 = writer.topic_counts()
             thr = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
-            per = {name: cpu.get(name, 0.0) - emu.get(name, 0.0)
-                   for name in NODES if name in graph.nodes}
+            per = {name: cpu.get(name, 0.0) - emu.get(name, 0.0) for name in NODES if name in graph.nodes}
             for name, port in hw.ports.items():
                 per[name] += thr.get(f"SerialTransport({port})", 0.0)
             per["recorder"] += sum(v for k, v in thr.items() if k.startswith("bag-writer"))
@@ -300,8 +293,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
                                     "stack": stack / wall, "rates": rates,
                                     "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
 
-        _running_then_idle(probe, action, lambda on: stream.update(on=on), window, spin,
-                           spin_with_wrench, "in-process")
+        _running_then_idle(probe, action, lambda on: stream.update(on=on), window, spin, spin_with_wrench, "in-process")
         out["types"] = {pub.topic_name: type_name_of(pub.msg_type) for n in graph.nodes.values()
                         for pub in n.publishers}
         out["dropped"] = recorder._writer.dropped
@@ -311,8 +303,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- launch layout
-def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = None,
-            tally: dict | None = None) -> dict:
+def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = None, tally: dict | None = None) -> dict:
     """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in
     another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle
     phase); per window the CPU of every process and its wall-clock span (the rates come from the
@@ -472,8 +463,7 @@ def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, window
     :class:`~hindrax_tools.benchmarks.rig.RigError` where no cgroup cpu controller is writable."""
     tally: dict = {"armed": None, "disarms": 0, "stale": 0, "why": [], "rig": []}
     error = ""
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-rig-") as tmpdir, \
-            Rig(cores, busy_loops=busy_loops) as rig:
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-rig-") as tmpdir, Rig(cores, busy_loops=busy_loops) as rig:
         try:
             _launch(duration_s, Path(tmpdir), windows, rig=rig, tally=tally)
         except (RuntimeError, ConditionTimeout) as exc:
@@ -603,14 +593,12 @@ PARTICIPANT_PROBES = {
 
 
 # ---------------------------------------------------------------------------------------- skeletons
-def skeleton_spec(topology: dict, rates: list[dict[str, float]],
-                  payloads: dict[str, str] | None = None) -> dict:
+def skeleton_spec(topology: dict, rates: list[dict[str, float]], payloads: dict[str, str] | None = None) -> dict:
     """The processes of a skeleton (:func:`~.launch_node.skeleton_main`): ``topology`` (label ->
     :func:`~.launch_node.topology` of that process) with, on every publisher, ``rates`` (one per
     phase: that phase's messages/s of its topic, shared equally by the topic's publishers) and
     ``payload`` (``payloads``: topic -> CDR bytes, hex; else a default-constructed message)."""
-    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"]
-                                for p in n["publishers"])
+    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"] for p in n["publishers"])
     out = json.loads(json.dumps(topology))
     for n in (n for t in out.values() for n in t["nodes"]):
         for p in n["publishers"]:
@@ -641,8 +629,7 @@ def read_topologies(procs: dict[str, subprocess.Popen], directory: Path) -> dict
         (directory / f"{p.pid}.json").unlink(missing_ok=True)
         p.send_signal(signal.SIGUSR1)
     paths = {label: directory / f"{p.pid}.json" for label, p in procs.items()}
-    wait_until(lambda: all(f.is_file() for f in paths.values()), 30, None,
-               "every process's topology")
+    wait_until(lambda: all(f.is_file() for f in paths.values()), 30, None, "every process's topology")
     return {label: json.loads(f.read_text()) for label, f in paths.items()}
 
 
@@ -654,8 +641,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
     stream on in ``stream_phase``; ``check``: topology to match (else RuntimeError). Returns
     ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology"}``."""
     out: dict = {"phases": {}}
-    with (tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir,
-          domain_id() as did):
+    with (tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir, domain_id() as did):
         tmp = Path(tmpdir)
         env = child_env(ROS_DOMAIN_ID=str(did), **{TOPOLOGY_ENV: tmpdir})
         (tmp / "spec.json").write_text(json.dumps({"processes": spec}))
@@ -669,13 +655,11 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                 switch = _wrench_stream(probe)
                 settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S,
                                        min_nodes=sum(len(t["nodes"]) for t in spec.values()))
-                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin,
-                           "the skeleton's graph settled")
+                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin, "the skeleton's graph settled")
                 out["topology"] = read_topologies(procs, tmp)
                 wrong = topology_differences(check, out["topology"]) if check is not None else []
                 if wrong:
-                    raise RuntimeError("the skeleton's topology is not the launch's:\n"
-                                       + "\n".join(wrong[:20]))
+                    raise RuntimeError("the skeleton's topology is not the launch's:\n" + "\n".join(wrong[:20]))
                 for k, (phase, n) in enumerate(phases):
                     if k:
                         for p in procs.values():
@@ -704,8 +688,7 @@ def _endpoint(topic: str, type_name: str, raw: bool | None = None) -> dict:
     """A skeleton's topic endpoint: depth 10, reliable, volatile, no QoS event handler."""
     qos = dict(history=1, depth=10, reliability=1, durability=2, liveliness=0, deadline=0,
                lifespan=0, liveliness_lease_duration=0)
-    return {"topic": topic, "type": type_name, "qos": qos, "events": [],
-            **({} if raw is None else {"raw": raw})}
+    return {"topic": topic, "type": type_name, "qos": qos, "events": [], **({} if raw is None else {"raw": raw})}
 
 
 def _one_node(name: str, pubs: list, subs: list) -> dict:
@@ -856,8 +839,7 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                                                  for k, v in threads.most_common(6))})
             rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
                          "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
-            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items()
-                       if k.startswith("dds.")) for w in wins]
+            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items() if k.startswith("dds.")) for w in wins]
             rows.append({"name": f"launch_{phase}_cpu_dds_threads", "unit": "% of a core",
                          "value": 100 * _median(dds),
                          "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, "
@@ -932,11 +914,10 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
         duration_s: float | None = None, baselines: bool = True,
         baseline: str | None = None) -> list[dict]:
-    """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
-    windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
-    s; baselines: bare rclpy and the launch's skeleton; baseline: a git ref whose
-    launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
-    the baseline's (``..._vs_baseline``)."""
+    """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running windows of
+    the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length, s; baselines:
+    bare rclpy and the launch's skeleton; baseline: a git ref whose launch layout is measured first in the same run
+    (:func:`baseline_launch`), for the rows of today's cost over the baseline's (``..._vs_baseline``)."""
     # windows: 10 s per phase and layout (the launch layout's running phase: 3 of them, medians), 8 s per baseline
     duration_s = duration_s or (8.0 if quick else 10.0)
     windows = windows or (1 if quick else RUNNING_WINDOWS)
@@ -979,8 +960,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                              "note": "one process, identification running surge, recorder on"})
         if baselines:
             # the topics' types: the launch layout's bag, the graph's publishers, and two of rcl's
-            types = {"/rosout": "rcl_interfaces/msg/Log",
-                     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+            types = {"/rosout": "rcl_interfaces/msg/Log", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
                      **(launch["types"] if launch else {}), **inproc["types"]}
             idle_rates = sorted(inproc["phases"]["idle"]["rates"].items())
             idle_spec = [(t, types[t], r) for t, r in idle_rates if r > 0.05 and t in types]
@@ -1080,8 +1060,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description="The Pi budget: CPU of the vehicle graph in the launch layout "
                                                  "(one process per <node> of pool_test.launch.xml) and in one "
                                                  "process. CPU = process CPU time / wall time.")
-    parser.add_argument("--layouts", nargs="+", choices=("inproc", "launch"),
-                        default=("inproc", "launch"))
+    parser.add_argument("--layouts", nargs="+", choices=("inproc", "launch"), default=("inproc", "launch"))
     parser.add_argument("--windows", type=int, default=None,
                         help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
     parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .common import CommandError, add_config_argument, load_vehicle
+from hindrax_onboard.commands.common import CommandError, add_config_argument, load_vehicle
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_config_argument
+from hindrax_onboard.commands.common import add_config_argument
 
 #: printed on stderr by ``hindrax bringup`` without ``--sim``
 VEHICLE_NOTICE = ("bringup: this is the single-process graph of the virtual pool and the tests; the vehicle runs the "
@@ -46,6 +46,5 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.sim:
         print(VEHICLE_NOTICE, file=sys.stderr, flush=True)
-    return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record,
-                     record_dir=args.record_dir, seed=args.seed, real_time_factor=args.rtf,
-                     controller=args.controller, model_file=args.model)
+    return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record, record_dir=args.record_dir,
+                     seed=args.seed, real_time_factor=args.rtf, controller=args.controller, model_file=args.model)

@@ -1,23 +1,18 @@
-"""What the topside commands share beyond the vehicle's helpers (:mod:`hindrax_onboard.commands.common`, re-exported
-here): result folders and a wall-clock progress printer."""
+"""What the topside commands share beyond the vehicle's helpers (:mod:`hindrax_onboard.commands.common`): result
+folders and a wall-clock progress printer."""
 from __future__ import annotations
 
 import contextlib
 import time
 from pathlib import Path
 
-from hindrax_onboard.commands.common import (CommandError, add_config_argument, choices, load_vehicle,
-                                             update_vehicle_file, yaml_float)
-
-__all__ = ["CommandError", "WallProgress", "add_config_argument", "choices", "load_vehicle",
-           "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
+from hindrax_onboard.commands.common import CommandError
 
 
 def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:
-    """The folder of one result (:mod:`hindrax_tools.output_dirs`): ``out`` when given (new or
-    empty), else a new ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was
-    taken). Raises CommandError: ``out`` unusable, or ``unwritable`` (its ``{why}`` filled in) when
-    ``root`` is not writable."""
+    """The folder of one result (:mod:`hindrax_tools.output_dirs`): ``out`` when given (new or empty), else a new
+    ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was taken). Raises CommandError: ``out``
+    unusable, or ``unwritable`` (its ``{why}`` filled in) when ``root`` is not writable."""
     from ..output_dirs import OutputDirError, explicit_result_dir, new_result_dir
 
     try:

@@ -1,19 +1,18 @@
 """``hindrax control evaluate | scenarios | model``: the identified model in closed loop (docs/control.md).
 
-* ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...]
-  [--seed N] [--seeds N]``: closed-loop runs in the in-process virtual pool on the truth FILE
-  (:mod:`hindrax_sim.control_evaluate`): a 0.3 m depth step, an altitude hold at 0.5 m over a
-  sloped floor and a 30 degree heading step, each with the model of YAML, the vehicle file's model
-  and the former PD hold. Prints the table (RMSE, overshoot, settling time, RMS thrust) and the
-  ratios, writes ``control.json`` and ``report/index.html`` in DIR (default
-  ``<recording.output_root>/control-<UTC time>``); with ``--seeds N`` the mean over N noise seeds.
-  A model file that cannot be used is reported in one line and the command exits 1.
+* ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...] [--seed N]
+  [--seeds N]``: closed-loop runs in the in-process virtual pool on the truth FILE
+  (:mod:`hindrax_sim.control_evaluate`): a 0.3 m depth step, an altitude hold at 0.5 m over a sloped floor and a 30
+  degree heading step, each with the model of YAML, the vehicle file's model and the former PD hold. Prints the table
+  (RMSE, overshoot, settling time, RMS thrust) and the ratios, writes ``control.json`` and ``report/index.html`` in
+  DIR (default ``<recording.output_root>/control-<UTC time>``); with ``--seeds N`` the mean over N noise seeds. A
+  model file that cannot be used is reported in one line and the command exits 1.
 * ``hindrax control scenarios [--scenarios NAMES] [--seed N] [--levels N] [--out DIR]``: for each
   truth of the scenario suite, an in-process identification campaign against that truth, then the
   depth step and the altitude hold with the identified model, the vehicle file's and the PD hold:
   ``control_scenarios.json`` and ``control_scenarios.md`` (the RMSE ratios per scenario).
-* ``hindrax control model [--model YAML]``: the gains of each hold, their bandwidth and the source
-  of every model value (identified, or the vehicle file and why).
+* ``hindrax control model [--model YAML]``: the gains of each hold, their bandwidth and the source of every model
+  value (identified, or the vehicle file and why).
 
 Exit status 0, or 1 on bad input (one line on stderr).
 """
@@ -25,7 +24,8 @@ import math
 from pathlib import Path
 
 from .. import results_doc
-from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
+from hindrax_onboard.commands.common import CommandError, add_config_argument, choices, load_vehicle
+from .common import WallProgress
 
 __all__ = ["add_arguments", "run"]
 

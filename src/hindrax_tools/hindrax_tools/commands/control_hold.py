@@ -21,7 +21,7 @@ import math
 import time
 from typing import Any
 
-from .common import CommandError
+from hindrax_onboard.commands.common import CommandError
 from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service, find_vehicle, wait_for,
                                               with_ros)
 
@@ -89,8 +89,7 @@ def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Name
             pub.publish(target.sign("controller/setpoint", msg))
             sent[0] = time.monotonic()
         return False
-    wait_for(executor, arrived, args.timeout,
-             f"{target.name}: the controller did not take the setpoint")
+    wait_for(executor, arrived, args.timeout, f"{target.name}: the controller did not take the setpoint")
 
 
 def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple[str, bool, str]:

@@ -1,21 +1,21 @@
 """``hindrax ident bag BAG [--out DIR] [--config FILE] [--restoring-n-m-per-rad C --restoring-std S]``: offline
 identification of a recorded campaign bag.
 
-Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag,
-``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints
-the summary table; the pipeline is :mod:`hindrax_fit.assessment.pipeline`
-(docs/identification.md §7). Calibration steps' results in the bag (``identification/calibration``)
-are applied as ``hindrax run`` applies them (docs/identification.md §6). A DOF whose chosen model
-does not beat holding the velocity in the cross-validation gets that verdict, as in ``hindrax ident
-fit``. Exit 0, or 1 with one line on stderr when the configuration, the bag or its content is
-unusable, or when no DOF could be identified.
+Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag, ``<bag>_ident_<time>``
+(``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints the summary table; the pipeline is
+:mod:`hindrax_fit.assessment.pipeline` (docs/identification.md §7). Calibration steps' results in the bag
+(``identification/calibration``) are applied as ``hindrax run`` applies them (docs/identification.md §6). A DOF whose
+chosen model does not beat holding the velocity in the cross-validation gets that verdict, as in ``hindrax ident
+fit``. Exit 0, or 1 with one line on stderr when the configuration, the bag or its content is unusable, or when no
+DOF could be identified.
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from .common import CommandError, add_config_argument, load_vehicle, remove_if_empty, result_dir
+from hindrax_onboard.commands.common import CommandError, add_config_argument, load_vehicle
+from .common import remove_if_empty, result_dir
 
 __all__ = ["add_arguments", "run", "identify_campaign_bag", "result_dir_for_bag"]
 

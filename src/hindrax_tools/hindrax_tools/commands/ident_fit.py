@@ -16,7 +16,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError, load_vehicle, remove_if_empty
+from hindrax_onboard.commands.common import CommandError, load_vehicle
+from .common import remove_if_empty
 
 __all__ = ["add_arguments", "run", "format_table"]
 
@@ -109,9 +110,8 @@ def format_table(res, cfg=None) -> str:
 
 
 def _run_campaign(args: argparse.Namespace, cfg, out: Path) -> int:
-    """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of
-    ``hindrax ident bag`` (:func:`~.ident_bag.identify_campaign_bag`) into ``out`` and this
-    command's table of the core's results."""
+    """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of ``hindrax ident bag``
+    (:func:`~.ident_bag.identify_campaign_bag`) into ``out`` and this command's table of the core's results."""
     from hindrax_fit.assessment.pipeline import campaign_result, core_options
     from .ident_bag import identify_campaign_bag
 
@@ -178,8 +178,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_any(args: argparse.Namespace, cfg, out: Path, choice, dofs, options) -> int:
-    """Bags of any topics: fit (:func:`~...identification.assessment.pipeline.fit_bags`), write
-    into ``out``, print."""
+    """Bags of any topics: fit (:func:`~...identification.assessment.pipeline.fit_bags`), write into ``out``, print."""
     from hindrax_drivers.recording.reader import BagError
 
     from hindrax_fit.assessment.pipeline import fit_bags, write_any_outputs

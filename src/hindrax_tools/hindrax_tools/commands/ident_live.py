@@ -26,7 +26,7 @@ import signal
 import time
 from typing import Any, Callable
 
-from .common import CommandError, choices
+from hindrax_onboard.commands.common import CommandError, choices
 from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service, find_vehicle, wait_for,
                                               with_ros)
 
@@ -138,8 +138,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     goals = GoalSender(node, client, action_name)
     spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
     running = _running_campaign(node, executor, status_topic)
-    wait_for(executor, client.server_is_ready, server_timeout_s, "no run_identification server",
-             _NO_STACK)
+    wait_for(executor, client.server_is_ready, server_timeout_s, "no run_identification server", _NO_STACK)
     running()  # a campaign under way: its line, and no goal sent (it would wait behind the running one)
     goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
                                   calibrate=list(calibrate or []), calibration_only=bool(calibration_only))

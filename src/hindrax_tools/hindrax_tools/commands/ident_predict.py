@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError, load_vehicle
+from hindrax_onboard.commands.common import CommandError, load_vehicle
 from .ident_fit import _num
 
 __all__ = ["add_arguments", "run"]
@@ -39,8 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.reader import BagError
 
     from hindrax_fit.bag_input.reader import FitInputError, TopicChoice
-    from hindrax_fit.assessment.predict import (ModelError, dofs_of, load_model, predict_bag,
-                                                      rule_text, write_csv)
+    from hindrax_fit.assessment.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv
 
     if args.segment_s is not None and not 0.5 <= args.segment_s <= 3600.0:
         raise CommandError(f"ident predict: --segment-s {args.segment_s:g}: must be in [0.5, 3600] s")

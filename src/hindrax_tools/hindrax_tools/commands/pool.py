@@ -30,7 +30,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from .common import CommandError
+from hindrax_onboard.commands.common import CommandError
 
 __all__ = ["add_arguments", "run", "rehearsal_env"]
 

@@ -1,22 +1,20 @@
 """``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--in-process]``: the main job.
 
-Default: the campaign through the whole ROS graph in one process
-(:mod:`hindrax_sim.graph.graph_campaign`: virtual pool, device emulators, drivers, ESC, allocation,
-identification node and recorder; armed through ``esc/set_armed``, one ``run_identification``
-goal, disarmed, then identified from the bag), in lock-step with the identification node's control
-tick, so CPU load slows the run but does not change it.
+Default: the campaign through the whole ROS graph in one process (:mod:`hindrax_sim.graph.graph_campaign`: virtual
+pool, device emulators, drivers, ESC, allocation, identification node and recorder; armed through ``esc/set_armed``,
+one ``run_identification`` goal, disarmed, then identified from the bag), in lock-step with the identification node's
+control tick, so CPU load slows the run but does not change it.
 
-``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the
-simulator (:mod:`hindrax_sim.campaign`: no drivers, no ROS graph, no bag), about four times
-faster; for quick studies of the method.
+``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
+(:mod:`hindrax_sim.campaign`: no drivers, no ROS graph, no bag), about four times faster; for quick studies of the
+method.
 
-Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
-``--in-process``), with a ``latest`` link beside it moved once the run has completed
-(:mod:`hindrax_tools.output_dirs`), or ``--out``, which must be new or empty. It holds
-``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
-``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF
-and parameter the identified value with its std, the configured value ("truth" in simulation) and
-the relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
+Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for ``--in-process``),
+with a ``latest`` link beside it moved once the run has completed (:mod:`hindrax_tools.output_dirs`), or ``--out``,
+which must be new or empty. It holds ``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
+``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF and parameter the
+identified value with its std, the configured value ("truth" in simulation) and the relative error. Exit 0, or 1 when
+the campaign aborted or produced no estimate.
 """
 from __future__ import annotations
 
@@ -26,8 +24,8 @@ import os
 from pathlib import Path
 
 from .. import results_doc
-from .common import (CommandError, WallProgress, add_config_argument, choices, load_vehicle,
-                     remove_if_empty, result_dir)
+from hindrax_onboard.commands.common import CommandError, add_config_argument, choices, load_vehicle
+from .common import WallProgress, remove_if_empty, result_dir
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
 
@@ -120,10 +118,8 @@ def format_summary(identifications: dict) -> str:
 
 
 def summary_markdown(identifications: dict) -> str:
-    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth,
-    error, verdict)."""
-    header = ["DOF", "parameter", "identified", "std", "unit", "configured (truth)", "rel. error",
-              "verdict"]
+    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
+    header = ["DOF", "parameter", "identified", "std", "unit", "configured (truth)", "rel. error", "verdict"]
     return results_doc.markdown_table(header, [
         [r["dof"], r["parameter"], f"{r['value']:.5g}", f"{r['std']:.3g}", r["unit"], tr, err, why]
         for r, err, tr, why in _summary(identifications)])
@@ -291,5 +287,4 @@ def run_in_process(args: argparse.Namespace) -> int:
         write_outputs(out, idents, cfg, None, note, source="simulation", seed=record.seed,
                       calibration=record.calibration, sections=lambda doc: reference_sections(
                           doc, record, cfg, args.restoring_n_m_per_rad, args.restoring_std, progress))
-    return _finish(args, progress, out, idents, errors, not record.aborted,
-                   "in-process (no ROS graph)")
+    return _finish(args, progress, out, idents, errors, not record.aborted, "in-process (no ROS graph)")

@@ -8,17 +8,16 @@ running on the scenario's truth, every estimator on the vehicle file), the offli
 error, z = (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
 
 Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
-table) and prints the table. A scenario *meets the target* when every parameter's interval covers the
-truth in at least 90 % of the seeds or the parameter is suspect in every case where it does not; the
-no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
+table) and prints the table. A scenario *meets the target* when every parameter's interval covers the truth in at
+least 90 % of the seeds or the parameter is suspect in every case where it does not; the no-disturbance scenario also
+needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
 
 ``--excitation ladder,multisine,prbs`` runs every case once per force input
-(:mod:`hindrax_onboard.identification.online.excitation`); the label becomes
-``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
-(:func:`format_excitation_table`). ``--calibrate thrust`` (or other reference steps) runs them
-before the manoeuvres of every case and identifies as ``hindrax ident campaign --calibrate`` does
-(:func:`run_case`); the label gains ``[calibrate <steps>]``. Without it the cases are identified on
-the curve's force.
+(:mod:`hindrax_onboard.identification.online.excitation`); the label becomes ``<scenario> [<excitation>]`` for the
+other excitations, and a second table compares them (:func:`format_excitation_table`). ``--calibrate thrust`` (or
+other reference steps) runs them before the manoeuvres of every case and identifies as ``hindrax ident campaign
+--calibrate`` does (:func:`run_case`); the label gains ``[calibrate <steps>]``. Without it the cases are identified
+on the curve's force.
 """
 from __future__ import annotations
 
@@ -33,7 +32,8 @@ from pathlib import Path
 from typing import Sequence
 
 from .. import results_doc
-from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
+from hindrax_onboard.commands.common import CommandError, add_config_argument, choices, load_vehicle
+from .common import WallProgress
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
            "format_excitation_table"]
@@ -220,8 +220,7 @@ def _case_star(args):
     try:
         return run_case(*args)
     except Exception as exc:  # noqa: BLE001 - reported per case, the suite goes on
-        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True,
-                "abort_reason": "",
+        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True, "abort_reason": "",
                 "error": f"{type(exc).__name__}: {exc}", "errors": {}, "cases": [], "dofs": {}}
 
 
@@ -252,8 +251,7 @@ def summarise(results: Sequence[dict]) -> dict:
                           "max_abs_z": max(zs) if zs else None,
                           "meets": cov >= 0.9 * len(rows) or ok == len(rows),
                           "reasons": sorted({x for r in rows for x in r["reasons"]})[:4]})
-        n_cases, n_cov, n_sus, n_ok = (sum(p[k] for p in table)
-                                       for k in ("n", "covered", "suspect", "ok"))
+        n_cases, n_cov, n_sus, n_ok = (sum(p[k] for p in table) for k in ("n", "covered", "suspect", "ok"))
         meets = all(p["meets"] for p in table) and not (sc == "none" and n_sus > 0.1 * n_cases)
         all_rows = [r for rows in params.values() for r in rows]
         pub = [r for r in all_rows if r.get("rls_std") is not None]
