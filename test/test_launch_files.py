@@ -189,18 +189,16 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     pool = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages)
     # the pool test records in the identification's process (hindrax_onboard.composition), never twice
     assert ("hindrax_drivers", "recorder_node") not in pool and ("hindrax_onboard", "ident_record_node") in pool
-    # with the sensors (docs/pi_budget.md): their messages to the estimator and the recorder stay in the process
-    assert IDENT_GROUPS["ident_record_node"] == (*GROUPS["sensors_node"], "identification", "controller", "recorder")
-    assert ("hindrax_drivers", "sensors_node") not in pool
+    assert IDENT_GROUPS["ident_record_node"] == ("identification", "controller", "recorder")
     unrecorded = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages, {"record": "false"})
     assert ("hindrax_onboard", "ident_control_node") in unrecorded
     assert not {exe for _pkg, exe in unrecorded} & {"recorder_node", "ident_record_node"}
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
     live = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
-    # the pool test runs the sensors, the identification node and the controller in one process;
+    # the pool test runs the identification node and the controller in one process (hindrax_onboard.composition);
     # the controller is optional (off by default) in the vehicle, alone there
-    assert IDENT_GROUPS["ident_control_node"] == (*GROUPS["sensors_node"], "identification", "controller")
+    assert IDENT_GROUPS["ident_control_node"] == ("identification", "controller")
     assert ("hindrax_onboard", "controller_node") not in vehicle
     held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                         {"controller": "true", "model_file": "/ws/runs/x/identification.yaml"})
@@ -363,8 +361,8 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
     read = read_launch(REPO / "src/hindrax_onboard/launch/pool_test.launch.xml", {},
                        find_share=lambda pkg: REPO / "src" / pkg)
     prefixed = {p.executable: p.launch_prefix for p in read if p.launch_prefix}
-    assert prefixed == {e: ("nice", "-n", "-5") for e in ("ident_record_node", "actuation_node", "supervisor_node",
-                                                           "output_guard_node", "gateway_node")}
+    assert prefixed == {e: ("nice", "-n", "-5") for e in ("sensors_node", "actuation_node", "supervisor_node",
+                                                                   "output_guard_node")}
     # Jazzy's launch labels a prefixed process after the prefix ("[nice-3]") unless exec_name says otherwise
     assert {p.executable: p.exec_name for p in read if p.launch_prefix} == {e: e for e in prefixed}
     runner = ProcessRunner(read, log_dir=tmp_path, command=lambda p: ["/opt/x/" + p.executable])
@@ -376,13 +374,8 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
     from hindrax_drivers.process.scheduling import PRIORITY_ENV, PRIORITY_RANGE, requested_priority
     priority = {p.executable: requested_priority(dict(p.env)) for p in read}
     assert {e for e, v in priority.items() if v} == set(prefixed), priority
-    # the gateway (the topside's e-stop) above the sensors' and identification's process, below the safety ones
     assert priority["output_guard_node"] > priority["supervisor_node"] > priority["actuation_node"] \
-        > priority["gateway_node"] > priority["ident_record_node"] >= PRIORITY_RANGE[0], priority
-    vehicle = {p.executable: requested_priority(dict(p.env))
-               for p in read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml", {},
-                                    find_share=lambda pkg: REPO / "src" / pkg)}
-    assert vehicle["sensors_node"] == priority["ident_record_node"] < vehicle["gateway_node"]
+        > priority["sensors_node"] >= PRIORITY_RANGE[0], priority
     for p in read:
         assert runner.environment(p).get(PRIORITY_ENV, "") == dict(p.env).get(PRIORITY_ENV, ""), p.label
     top = max(priority.values())

@@ -1,18 +1,16 @@
-"""hindrax_onboard's composed processes: the sensor drivers, the identification node and the controller in one
-process, with or without the recorder.
+"""hindrax_onboard's composed processes: the identification node and the controller in one process, with or without the
+recorder.
 
-``ident_control_node`` (``pool_test.launch.xml``): the nodes keep their names (``dvl75`` ... ``static_tf``,
-``identification``, ``controller``), read the same vehicle file and are spun by one executor
-(:func:`hindrax_drivers.layout.composition.run_group`; the node list is
-:data:`hindrax_drivers.layout.composition.IDENT_GROUPS`, this module maps it to classes).
-``ident_record_node`` (recording on, the default): the same two and the recorder (the other nodes
-ignore keys they do not declare).
+``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their names (``identification``, ``controller``),
+read the same vehicle file and are spun by one executor (:func:`hindrax_drivers.layout.composition.run_group`; the
+node list is :data:`hindrax_drivers.layout.composition.IDENT_GROUPS`, this module maps it to classes).
+``ident_record_node`` (recording on, the default): the same two and the recorder (the other nodes ignore keys they do
+not declare).
 
-Why composed: docs/architecture.md §10.1, docs/pi_budget.md (the sensors' messages to the estimator and the
-recorder stay inside the process). None of them has a safety role (§8): a failure of one ends all, the
-allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source, and the supervisor
-trips on the lost sensors as when the sensors' own process ends. The recorder's bag writer keeps its own
-thread, and its keep-last depth (``queue_depth``, 1000) holds what arrives while an identification callback runs.
+Why composed: docs/architecture.md §10.1. None of them has a safety role (§8): a failure of one ends all, and the
+allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source. The recorder's bag writer
+keeps its own thread, and its keep-last depth (``queue_depth``, 1000) holds what arrives while an identification
+callback runs.
 """
 from __future__ import annotations
 
@@ -24,9 +22,9 @@ __all__ = ["NODE_CLASSES", "ident_control_main", "ident_record_main"]
 
 #: node -> "module:class" of the nodes this package composes
 NODE_CLASSES: dict[str, str] = {
-    **DRIVER_CLASSES,
     "identification": "hindrax_onboard.identification.online.node:IdentificationNode",
     "controller": "hindrax_onboard.control.node:ControllerNode",
+    "recorder": DRIVER_CLASSES["recorder"],
 }
 
 

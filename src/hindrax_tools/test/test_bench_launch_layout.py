@@ -99,19 +99,17 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
 
     procs = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1], {"output_dir": "/tmp/b"})
     entries = [p.module for p in procs]
-    # the sensor drivers, the identification node, the controller and the recorder, in one process
-    # (hindrax_onboard.composition); no sensors' process of their own
+    # the identification node, the controller and the recorder, in one process (hindrax_onboard.composition)
     assert "hindrax_onboard.composition:ident_record_main" in entries
-    assert not [p for p in procs if p.module.endswith(":sensors_main")]
     assert not [p for p in procs if p.module.startswith("hindrax_drivers.recording")]  # recorded once
     controller = next(p for p in procs if p.module == "hindrax_onboard.composition:ident_record_main")
-    assert controller.process.node_names == ("dvl75", "ping1d", "ms5837", "icm20948", "static_tf", "identification",
-                                             "controller", "recorder")
+    assert controller.process.node_names == ("identification", "controller", "recorder")
     write, written = _values(tmp_path)
     controller.process.ros_arguments(write)
     # the empty default stays the empty string (not None, not "''"); output_dir is the root of the recorder's
     # timestamped bags (recording/bag_dir.py)
-    assert {"model_file": "", "recording.output_root": "/tmp/b", "autostart": True, "all_topics": True} in written
+    assert {"model_file": "", "recording.output_root": "/tmp/b", "autostart": True, "all_topics": True,
+            "exclude_regex": "^/(esc|guard|supervisor)/heartbeat|^/thrusters/command_pulse_width"} in written
 
 
 def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
@@ -156,7 +154,7 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
 _POOL_MODULES = ("hindrax_sim", "hindrax_tools.benchmarks.launch_layout",
                  "hindrax_tools.benchmarks.stack")
 #: the processes that run drivers or safety nodes only: they hold no scipy either (frames and mountings are numpy)
-_LEAN_PROCESSES = ("actuation", "supervisor", "output_guard", "gateway")
+_LEAN_PROCESSES = ("sensors", "actuation", "supervisor", "output_guard", "gateway")
 #: the identification node and the controller: no scipy or filterpy at start either (the online filters step
 #: estimation/kalman.py, the priors' tables estimation/priors.py's own spline; the offline fits import scipy in the
 #: function that uses it): scipy held ~50 MB of proportional set size in that process

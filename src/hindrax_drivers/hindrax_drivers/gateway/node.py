@@ -64,7 +64,6 @@ from rclpy.serialization import deserialize_message, serialize_message
 from ..process.dds_transport import PROFILE_ENV, RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path
 from .operator_signing import OperatorKeyError, Verifier, key_path, load_key, replay_path
 from ..process.ros_process import RosProcess
-from ..process.scheduling import apply_realtime_priority
 from .sros2_policy import topside_enclaves
 from .bounds import RequestBounds
 from .interface import GATEWAY_NODE, STATUS_TOPIC, duplicate_problem, extra_servers_problem, participants, relays
@@ -400,11 +399,6 @@ def main(args: Sequence[str] | None = None) -> int:
     the internal side) or when the internal side cannot start."""
     argv = list(sys.argv[1:] if args is None else args)
     internal_domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    try:  # the e-stop's path runs above the sensors' and identification's process (vehicle.launch.xml); the
-        apply_realtime_priority()  # internal side, forked from this thread, inherits the policy
-    except ValueError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        return 1
     child, channel = start_internal_side(argv)
     try:
         first = channel.recv()

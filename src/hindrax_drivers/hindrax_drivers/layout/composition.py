@@ -22,11 +22,10 @@ Groups (:data:`GROUPS`):
     callback inside the process, as from any other publisher. The ESC node is built last and so
     closed first on exit: it writes neutral before anything else shuts down.
 ``ident_control_node`` (hindrax_onboard, :data:`IDENT_GROUPS`)
-    the sensors' group, the identification node and the controller, all non-safety
-    (:mod:`hindrax_onboard.composition` builds them; this package names them only): the sensors' messages to the
-    estimator stay inside the process (docs/pi_budget.md).
+    the identification node and the controller, both non-safety (:mod:`hindrax_onboard.composition`
+    builds them; this package names them only).
 ``ident_record_node`` (hindrax_onboard, :data:`IDENT_GROUPS`)
-    the same and the recorder: the pool test's layout with recording on.
+    the same two and the recorder: the pool test's layout with recording on.
 
 ``python -m hindrax_drivers.layout.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
 :data:`NODE_CLASSES` (for measurements; the launch files use the groups).
@@ -54,13 +53,12 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "sensors_node": tuple(d.node for d in DEVICES if not d.output) + ("static_tf",),
     "actuation_node": ("thrust_allocation", "esc"),
 }
-SENSORS = GROUPS["sensors_node"]
 
 #: hindrax_onboard's composed processes: console script -> its nodes (the classes: hindrax_onboard.composition; this
 #: package imports nothing of hindrax_onboard, it only names the nodes for the launch-file readers)
 IDENT_GROUPS: dict[str, tuple[str, ...]] = {
-    "ident_control_node": (*SENSORS, "identification", "controller"),
-    "ident_record_node": (*SENSORS, "identification", "controller", "recorder"),
+    "ident_control_node": ("identification", "controller"),
+    "ident_record_node": ("identification", "controller", "recorder"),
 }
 
 
