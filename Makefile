@@ -9,8 +9,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 SETUP_INPUTS := requirements.txt requirements-colcon.txt constraints.txt scripts/setup_venv.sh scripts/progress.sh \
 	src/hindrax_msgs/CMakeLists.txt src/hindrax_msgs/package.xml \
 	$(wildcard src/hindrax_msgs/msg/*.msg src/hindrax_msgs/srv/*.srv src/hindrax_msgs/action/*.action) \
-	src/hindrax_drivers/setup.py src/hindrax_drivers/package.xml \
-	$(foreach p,onboard fit sim tools,src/hindrax_$(p)/setup.py src/hindrax_$(p)/package.xml) \
+	$(foreach p,common drivers bringup onboard fit sim tools,src/hindrax_$(p)/setup.py src/hindrax_$(p)/package.xml) \
 	third_party/tf2_msgs/CMakeLists.txt third_party/tf2_msgs/package.xml $(wildcard third_party/tf2_msgs/msg/*.msg)
 
 .PHONY: setup run test bench clean ros-install rig rig-pool-day
@@ -50,9 +49,9 @@ rig-pool-day: setup
 	HINDRAX_RIG_CORES=$(RIG_CORES) HINDRAX_RIG_BUSY_LOOPS=$(RIG_BUSY_LOOPS) \
 	  $(PY) -m pytest -n0 -p no:randomly -s test/test_pool_day.py -k readme_writes
 
-# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, hindrax_msgs, hindrax_drivers and
-# hindrax_onboard only (the fit, the simulator and the tools are topside: the venv's editable installs), against the
-# venv's ROS wheels (the Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
+# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, hindrax_msgs, hindrax_common,
+# hindrax_drivers, hindrax_bringup and hindrax_onboard only (the fit, the simulator and the tools are topside: the
+# venv's editable installs), against the venv's ROS wheels (the Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
 # .venv/bin/activate && source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/)
 # and share/ are there. Extra colcon options: COLCON_ARGS="--symlink-install" (docs/deployment.md §3). A progress line
 # shows what colcon builds (hindrax_tools.progress_run); RECORD_DURATIONS=1: a plain build's time into docs/results.md.

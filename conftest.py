@@ -1,7 +1,7 @@
 """Test-session set-up shared by every test directory.
 
 - Discovery and data stay on loopback, over the vehicle's transport: UDPv4 bound to 127.0.0.1, no shared memory
-  (:mod:`hindrax_drivers.process.dds_transport`; docs/architecture.md §11.4).
+  (:mod:`hindrax_common.process.dds_transport`; docs/architecture.md §11.4).
 - Each pytest-xdist worker (three, pytest.ini; and a plain run) reserves its own ROS domain ID through
   ``domain_coordinator`` (a port lock, so concurrent test runs on one machine never share a domain) and
   exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it. Worker gwN tries
@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-from hindrax_drivers.process.dds_transport import loopback_transport  # noqa: E402 - after the range is set
+from hindrax_common.process.dds_transport import loopback_transport  # noqa: E402 - after the range is set
 
 loopback_transport()
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -140,7 +140,7 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 def _stop_signals_not_left_ignored():
     """Fail a test that leaves SIGINT or SIGTERM ignored (``SIG_IGN``, which ``exec`` passes on to children) where it
     was not before, and put the handler found back. A process that got a stop signal ignores further ones until it
-    exits (:mod:`hindrax_drivers.process.ros_process`), so a test running such a process in its worker's main thread
+    exits (:mod:`hindrax_common.process.ros_process`), so a test running such a process in its worker's main thread
     must restore the handlers. Found by a fresh clone of e0567a0: a ``RosProcess`` test left both ignored, and a later
     test's bash could not end its own background loop with ``kill``."""
     sigs = (signal.SIGINT, signal.SIGTERM)

@@ -11,7 +11,7 @@
 #                            the topside PC is on the tether's Ethernet subnet; ROS_STATIC_PEERS=<topside IP> as well)
 #   HINDRAX_INTERNAL_DOMAIN_ID  the vehicle's internal domain, 0-101 (default 0): its own processes, and every
 #                            command run here, on loopback only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
-#   HINDRAX_LAUNCH           "<package> <launch file>" (default "hindrax_drivers vehicle.launch.xml"; a pool campaign:
+#   HINDRAX_LAUNCH           "<package> <launch file>" (default "hindrax_bringup vehicle.launch.xml"; a pool campaign:
 #                            "hindrax_onboard pool_test.launch.xml")
 #   HINDRAX_RECORD           1 (default): record every topic; 0: no recording
 #   HINDRAX_RUNS_DIR         root folder of the bags, a new timestamped bag per start (default /var/lib/hindrax/runs)
@@ -67,7 +67,7 @@ case "${HINDRAX_RECORD:-1}" in
   *) die "HINDRAX_RECORD=$HINDRAX_RECORD: allowed 1 or 0" ;;
 esac
 runs=${HINDRAX_RUNS_DIR:-/var/lib/hindrax/runs}
-read -r launch_pkg launch_file <<< "${HINDRAX_LAUNCH:-hindrax_drivers vehicle.launch.xml}"
+read -r launch_pkg launch_file <<< "${HINDRAX_LAUNCH:-hindrax_bringup vehicle.launch.xml}"
 [ -n "$launch_file" ] || die "HINDRAX_LAUNCH=$HINDRAX_LAUNCH: expected \"<package> <file>.launch.xml\""
 launch_args=()
 [ -n "${HINDRAX_CONFIG:-}" ] && launch_args+=("config:=$HINDRAX_CONFIG")

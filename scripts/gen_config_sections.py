@@ -1,4 +1,4 @@
-"""Write src/hindrax_drivers/hindrax_drivers/config/typed_sections.py: one frozen dataclass per configuration section.
+"""Write src/hindrax_common/hindrax_common/config/typed_sections.py: one frozen dataclass per configuration section.
 
 The classes mirror ``config.SCHEMA`` exactly (field name = the key's last segment, nested dataclasses where the
 key nests, Python type from ``Spec.kind``, ``X | None`` for optional keys). The ``thrusters`` section is the
@@ -14,10 +14,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "src" / "hindrax_drivers" / "hindrax_drivers" / "config" / "typed_sections.py"
-sys.path.insert(0, str(ROOT / "src" / "hindrax_drivers"))
+OUT = ROOT / "src" / "hindrax_common" / "hindrax_common" / "config" / "typed_sections.py"
+sys.path.insert(0, str(ROOT / "src" / "hindrax_common"))
 
-from hindrax_drivers import config as c  # noqa: E402
+from hindrax_common import config as c  # noqa: E402
 
 #: sections whose typed object is hand-written in their section module (not generated)
 HAND_WRITTEN = ("thrusters",)
@@ -26,12 +26,12 @@ TYPES = {"float": "float", "int": "int", "str": "str", "bool": "bool", "float[]"
 
 HEADER = '''"""Typed configuration sections: frozen dataclasses of the vehicle file (GENERATED).
 
-Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_drivers.config.SCHEMA``;
+Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_common.config.SCHEMA``;
 the tests check that this file is current. Field names are the keys' last segments, nested
 dataclasses follow the nesting of the keys (sibling sections with the same keys share one class,
 ``HydrodynamicsSurgeSwaySection``: a section's dotted path is given when it is built), optional keys
 are ``X | None`` (None when absent) and lists are tuples. Build them through
-:class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
+:class:`hindrax_common.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
 required key that a node did not declare among its parameters is absent from its configuration:
 reading it raises KeyError naming the key. Each field's unit and meaning: its key's ``Spec.doc`` in
 SCHEMA.

@@ -76,16 +76,17 @@ for pkg_dir in src/hindrax_msgs third_party/tf2_msgs; do
 done
 
 stop_ticking
-# The five ament_python packages, editable (colcon builds the same setup.py on the Pi: drivers and onboard there).
-step "hindrax_drivers, _onboard, _fit, _sim, _tools (editable)"
-pipq install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hindrax_onboard -e src/hindrax_fit \
-  -e src/hindrax_sim -e src/hindrax_tools >"build/editable-install.log" \
+# The seven ament_python packages, editable (colcon builds the same setup.py on the Pi: common, drivers, bringup and
+# onboard there).
+step "hindrax_common, _drivers, _bringup, _onboard, _fit, _sim, _tools (editable)"
+pipq install -q --no-deps --no-build-isolation -e src/hindrax_common -e src/hindrax_drivers -e src/hindrax_bringup \
+  -e src/hindrax_onboard -e src/hindrax_fit -e src/hindrax_sim -e src/hindrax_tools >"build/editable-install.log" \
   || { cat build/editable-install.log >&2; exit 1; }
 
 # Smoke check: the interfaces and rclpy import in the venv.
 step "import check"
-"$PY" -c 'import rclpy, tf2_msgs.msg, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_onboard, \
-  hindrax_fit, hindrax_sim, hindrax_tools'
+"$PY" -c 'import rclpy, tf2_msgs.msg, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_common, hindrax_drivers, \
+  hindrax_bringup, hindrax_onboard, hindrax_fit, hindrax_sim, hindrax_tools'
 progress_done
 echo "setup: ready in $VENV ($((SECONDS - t0)) s)"
 # The time into the measurements document the README quotes (RESULTS_DOC, from the Makefile): a warning if not.

@@ -3,13 +3,13 @@ serve its raw device data again through ptys and the emulated I2C bus to fresh d
 the drivers re-publish the same parsed messages (same values, same count)."""
 import pytest
 
-from hindrax_drivers.config import default_config_path
+from hindrax_common.config import default_config_path
 from hindrax_sim.graph.record_bag import record_simulated_run
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.recording.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_bringup.recording.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
                                                       i2c_transactions, recorded_parsed)
-from hindrax_drivers.recording.reader import iter_raw_device_data
-from hindrax_drivers.testing import ros_context
+from hindrax_bringup.recording.reader import iter_raw_device_data
+from hindrax_common.testing import ros_context
 
 pytestmark = pytest.mark.ros
 
@@ -65,12 +65,12 @@ def test_raw_device_data_replayed_through_fresh_drivers_reproduces_the_parsed_to
 
 
 def test_committed_simulator_bag_replays_through_fresh_drivers():
-    """The small bag committed under src/hindrax_drivers/test/data (recorded from the simulator by
+    """The small bag committed under src/hindrax_bringup/test/data (recorded from the simulator by
     ``python -m hindrax_sim.graph.record_bag``) drives fresh drivers to the same parsed
     messages: the regression guard for any change in a driver's parsing."""
     from pathlib import Path
 
-    bag = Path(__file__).resolve().parents[1] / "src" / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"
+    bag = Path(__file__).resolve().parents[1] / "src" / "hindrax_bringup" / "test" / "data" / "sim_drivers_3s"
     recorded = recorded_parsed(bag)
     assert all(len(recorded[t]) > 0 for t in PARSED_TOPICS)
     with ros_context() as ctx:
@@ -90,7 +90,7 @@ def test_the_replay_names_the_i2c_device_whose_recorded_reads_are_left():
     every recorded read was made leaves the list."""
     from pathlib import Path
 
-    bag = Path(__file__).resolve().parents[1] / "src" / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"
+    bag = Path(__file__).resolve().parents[1] / "src" / "hindrax_bringup" / "test" / "data" / "sim_drivers_3s"
     hw = ReplayHardware(bag, devices=("ms5837", "icm20948"))
     try:
         left = hw.i2c_reads_left()

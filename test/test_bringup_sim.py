@@ -8,8 +8,8 @@ from rclpy.parameter import Parameter
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import FluidPressure, Imu, Range
 
-from hindrax_drivers.config import default_config_path
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.config import default_config_path
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -104,7 +104,7 @@ def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
 
     from domain_coordinator import domain_id
 
-    from hindrax_drivers.testing import child_env, child_process, interrupt
+    from hindrax_common.testing import child_env, child_process, interrupt
 
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     # a domain of its own: the ESCs of this worker's earlier tests may still be in its domain's discovery caches,

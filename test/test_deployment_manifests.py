@@ -31,10 +31,13 @@ ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-y
                   "python3-pytest", "python3-hypothesis", "python3-lxml", "python3-ruamel.yaml"}
 ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs",
                 "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "rosgraph_msgs", "tf2_msgs",
-                "domain_coordinator", "action_msgs", "unique_identifier_msgs", "hindrax_msgs", "hindrax_drivers",
-                "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools", "sros2"}
-#: the Python packages, in their dependency order (msgs <- drivers <- onboard <- fit <- sim <- tools)
-PACKAGES = ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools")
+                "domain_coordinator", "action_msgs", "unique_identifier_msgs", "hindrax_msgs", "hindrax_common",
+                "hindrax_drivers", "hindrax_bringup", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools",
+                "sros2"}
+#: the Python packages, in their dependency order (msgs <- common <- drivers <- bringup <- onboard <- fit <- sim <-
+#: tools)
+PACKAGES = ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard", "hindrax_fit", "hindrax_sim",
+            "hindrax_tools")
 #: development tools inside a package that drive a higher package (none today; a package dependency back would be
 #: a cycle)
 DEV_TOOLS: set[str] = set()
@@ -114,8 +117,8 @@ def test_dockerfile_uses_rosdep_yaml_and_puts_hindrax_with_ros_in_every_process(
     assert "COPY rosdep.yaml /etc/ros/rosdep/hindrax.yaml" in text
     assert 'yaml file:///etc/ros/rosdep/hindrax.yaml" > /etc/ros/rosdep/sources.list.d/' in text
     assert "rosdep install --from-paths src --ignore-src" in text
-    # the config symlink of hindrax_drivers resolves inside the image
-    link = os.readlink(REPO / "src" / "hindrax_drivers" / "config")
+    # the config symlink of hindrax_common resolves inside the image
+    link = os.readlink(REPO / "src" / "hindrax_common" / "config")
     assert link == "../../ros_ws/config" and "COPY ros_ws/config /ws/ros_ws/config" in text
     assert "COPY docker/hindrax-exec.sh /usr/local/bin/hindrax" in text
     assert "/etc/profile.d/hindrax.sh" in text
@@ -167,12 +170,12 @@ def test_the_container_records_by_default(tmp_path):
         assert r.returncode == 0, r.stderr
         return r.stdout
     runs = tmp_path / "runs"
-    assert f"ROS2=launch hindrax_drivers vehicle.launch.xml record:=true output_dir:={runs}" in entry()
+    assert f"ROS2=launch hindrax_bringup vehicle.launch.xml record:=true output_dir:={runs}" in entry()
     assert "record:=false" in entry(HINDRAX_RECORD="0")
 
 
 def test_default_config_path_follows_hindrax_config(tmp_path, monkeypatch):
-    from hindrax_drivers.config import default_config_path
+    from hindrax_common.config import default_config_path
 
     f = tmp_path / "vehicle.yaml"
     f.write_text("x")

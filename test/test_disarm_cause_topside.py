@@ -26,9 +26,9 @@ from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.config import load_config
-from hindrax_drivers.gateway.operator_signing import create_key
-from hindrax_drivers.testing import child_process, interrupt, ros_context, wait_until
+from hindrax_common.config import load_config
+from hindrax_bringup.gateway.operator_signing import create_key
+from hindrax_common.testing import child_process, interrupt, ros_context, wait_until
 from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(600)]
@@ -46,7 +46,7 @@ def topside():
         lay.env = dict(lay.env, HINDRAX_KEYS_DIR=str(lay.tmp / "keys"))
         log = stack.enter_context(open(lay.tmp / "gateway.log", "w"))
         gateway = stack.enter_context(child_process(
-            [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config, "-p",
+            [lay.py, "-m", "hindrax_bringup.gateway.node", "--ros-args", "--params-file", lay.config, "-p",
              f"topside_domain_id:={top}", "-p", "topside_discovery_range:=LOCALHOST"], env=lay.env, stdout=log,
             stderr=subprocess.STDOUT))
         probe = rclpy.create_node("topside_operator", context=ctx)

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.layout.launch_xml import read_launch
+from hindrax_common.config import default_config_path, load_config
+from hindrax_bringup.layout.launch_xml import read_launch
 
 REPO = Path(__file__).resolve().parents[1]
 DOCKER = REPO / "docker"
@@ -57,7 +57,7 @@ def test_entrypoint_runs_the_launch_layout_on_the_tether(tmp_path):
     r = run_entrypoint(tmp_path, [], ROS_DOMAIN_ID="42")
     assert r.returncode == 0, r.stderr
     runs = tmp_path / "runs"
-    assert (f"RUN=ros2 launch hindrax_drivers vehicle.launch.xml record:=true output_dir:={runs} "
+    assert (f"RUN=ros2 launch hindrax_bringup vehicle.launch.xml record:=true output_dir:={runs} "
             "topside_domain_id:=42 topside_discovery_range:=SUBNET") in r.stdout
     # the vehicle's own processes: the internal domain, loopback only; only the gateway joins domain 42 (SUBNET)
     assert "RANGE=LOCALHOST" in r.stdout and "DOMAIN=0" in r.stdout and "SOURCED=11" in r.stdout
@@ -82,13 +82,13 @@ def test_the_launch_arguments_the_entrypoint_passes_are_declared_by_both_launch_
     share = lambda pkg: REPO / "src" / pkg  # noqa: E731
     cfg = tmp_path / "vehicle.yaml"
     cfg.write_text(default_config_path().read_text())
-    for launch in ("hindrax_drivers vehicle.launch.xml", "hindrax_onboard pool_test.launch.xml"):
+    for launch in ("hindrax_bringup vehicle.launch.xml", "hindrax_onboard pool_test.launch.xml"):
         for extra in ({}, {"HINDRAX_RECORD": "0", "HINDRAX_CONFIG": str(cfg)}):
             pkg, name, given = entrypoint_launch_arguments(tmp_path, HINDRAX_LAUNCH=launch, **extra)
             processes = read_launch(share(pkg) / "launch" / name, given, find_share=share)  # refuses undeclared ones
             nodes = [n for p in processes for n in p.node_names]  # the recorder alone or composed (pool test)
             assert ("recorder" in nodes) == (extra.get("HINDRAX_RECORD", "1") == "1"), (launch, extra, nodes)
-            assert all(p.parameters[0] == (cfg if extra else share("hindrax_drivers") / "config/hindrax.yaml")
+            assert all(p.parameters[0] == (cfg if extra else share("hindrax_common") / "config/hindrax.yaml")
                        for p in processes)
 
 
@@ -168,9 +168,9 @@ def test_image_layers_put_the_dependencies_before_the_sources():
     copy_src = next(i for i, r in idx.items() if ins[i][0] == "COPY" and r.split()[0] == "src")
     colcon = next(i for i, r in idx.items() if ins[i][0] == "RUN" and "colcon build" in r)
     manifests = [i for i, r in idx.items() if ins[i][0] == "COPY" and r.split()[0].endswith("/package.xml")]
-    assert len(manifests) == 3 and max(manifests) < rosdep_install < copy_src < colcon
+    assert len(manifests) == 5 and max(manifests) < rosdep_install < copy_src < colcon
     # the vehicle's packages only; the topside ones stay out of the build context (issue 75)
-    vehicle = {"hindrax_msgs", "hindrax_drivers", "hindrax_onboard"}
+    vehicle = {"hindrax_msgs", "hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard"}
     assert {idx[i].split()[0].split("/")[1] for i in manifests} == vehicle
     ignored = (REPO / ".dockerignore").read_text().split()
     topside = {p.parent.name for p in REPO.glob("src/*/package.xml")} - vehicle
@@ -192,7 +192,7 @@ def _ignored(path: str, patterns: list[str]) -> bool:
 def test_dockerignore_keeps_the_context_small_and_the_copied_files_in():
     patterns = [line.strip() for line in (REPO / ".dockerignore").read_text().splitlines()
                 if line.strip() and not line.startswith("#")]
-    for heavy in (".git", ".venv", "build", "runs", "ros_ws/install", "ros_ws/build", "src/hindrax_drivers/test"):
+    for heavy in (".git", ".venv", "build", "runs", "ros_ws/install", "ros_ws/build", "src/hindrax_bringup/test"):
         assert _ignored(heavy, patterns), heavy
     for kind, rest in instructions():
         if kind == "COPY":
@@ -300,12 +300,12 @@ def test_build_finds_this_hosts_group_ids(tmp_path):
 
 
 def test_both_units_silence_the_outputs_after_every_stop_with_the_installed_command():
-    """Issue 71.6: ``ExecStopPost=`` runs ``outputs_off`` (a console script of hindrax_drivers, no ROS) after a stop,
+    """Issue 71.6: ``ExecStopPost=`` runs ``outputs_off`` (a console script of hindrax_bringup, no ROS) after a stop,
     a crash or the watchdog's SIGKILL; the command exists where the units look for it."""
-    setup = (DOCKER.parent / "src/hindrax_drivers/setup.py").read_text()
-    assert '"outputs_off": "hindrax_drivers.guard.outputs_off:main"' in setup
+    setup = (DOCKER.parent / "src/hindrax_bringup/setup.py").read_text()
+    assert '"outputs_off": "hindrax_bringup.guard.outputs_off:main"' in setup
     for unit in ("hindrax.service", "hindrax-bare-metal.service"):
         text = (DOCKER / unit).read_text()
         (line,) = re.findall(r"^ExecStopPost=(.*)$", text, re.M)
-        assert "install/lib/hindrax_drivers/outputs_off" in line, (unit, line)
-    assert "rclpy" not in (DOCKER.parent / "src/hindrax_drivers/hindrax_drivers/guard/outputs_off.py").read_text()
+        assert "install/lib/hindrax_bringup/outputs_off" in line, (unit, line)
+    assert "rclpy" not in (DOCKER.parent / "src/hindrax_bringup/hindrax_bringup/guard/outputs_off.py").read_text()

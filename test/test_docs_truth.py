@@ -4,7 +4,7 @@ Each test reads the figure from the text and from its source of truth (package m
 a default argument), so a doc that drifts from the code fails here (issue 28 item 7):
 
 * the rclpy, Fast DDS and Python versions of docs/architecture.md §11 and of every docstring;
-* frames: ``hindrax_drivers/base/frames.py`` is the only module that spells the FLU/FRD and ENU/NED matrices out
+* frames: ``hindrax_common/base/frames.py`` is the only module that spells the FLU/FRD and ENU/NED matrices out
   (docs/architecture.md §2);
 * the blocking I2C waits that docs/architecture.md §10 lists: which drivers sleep, for how long;
 * the number of repeats of the failure table (docs/architecture.md §8.1) and of the safety benchmark.
@@ -18,12 +18,14 @@ import sys
 from pathlib import Path
 
 from hindrax_drivers.pca9685 import protocol as pca9685
-from hindrax_drivers.transport.i2c import I2CDevice
+from hindrax_common.transport.i2c import I2CDevice
 from hindrax_tools.benchmarks import safety
 
 ROOT = Path(__file__).resolve().parents[1]
 ARCH = (ROOT / "docs" / "architecture.md").read_text()
 DRIVERS = ROOT / "src" / "hindrax_drivers" / "hindrax_drivers"
+COMMON = ROOT / "src" / "hindrax_common" / "hindrax_common"
+BRINGUP = ROOT / "src" / "hindrax_bringup" / "hindrax_bringup"
 
 
 def _major_minor(version: str) -> str:
@@ -69,13 +71,13 @@ _FRAME_MATRICES = (
 
 
 def test_frames_py_is_the_only_module_that_spells_the_frame_matrices_out():
-    assert "the only place | `hindrax_drivers/base/frames.py`" in (ROOT / "docs" / "module_map.md").read_text()
-    frames = DRIVERS / "base" / "frames.py"
+    assert "the only place | `hindrax_common/base/frames.py`" in (ROOT / "docs" / "module_map.md").read_text()
+    frames = COMMON / "base" / "frames.py"
     assert all(p.search(re.sub(r"\s", "", frames.read_text())) for p in _FRAME_MATRICES)  # the check can see them
     code = [p for p in (ROOT / "src").rglob("*.py") if "test" not in p.relative_to(ROOT).parts and p != frames]
     offenders = [p.relative_to(ROOT).as_posix() for p in code
                  if any(pat.search(re.sub(r"\s", "", p.read_text())) for pat in _FRAME_MATRICES)]
-    assert not offenders, f"convert frames through hindrax_drivers/base/frames.py: {offenders}"
+    assert not offenders, f"convert frames through hindrax_common/base/frames.py: {offenders}"
 
 
 def test_the_blocking_i2c_waits_are_those_section_10_lists():
@@ -89,12 +91,12 @@ def test_the_blocking_i2c_waits_are_those_section_10_lists():
     assert f"{worst} ms over {retries} retries" in section
     # the drivers said never to block build their transports without backoff and sleep nowhere (with their base)
     for device in ("icm20948", "ms5837"):
-        text = (DRIVERS / device / "node.py").read_text() + (DRIVERS / "node_support" / "i2c_node.py").read_text()
+        text = (DRIVERS / device / "node.py").read_text() + (COMMON / "node_support" / "i2c_node.py").read_text()
         calls = re.findall(r"I2CDevice\([^)]*\)", text)
         assert calls and all("backoff_s=0.0" in c for c in calls), (device, calls)
         assert not re.search(r"\.sleep\(|write_sequence\(", text), device
     # the output guard retries once
-    assert re.search(r'I2CDevice\([^)]*"pca9685-guard", retries=1\)', (DRIVERS / "guard" / "node.py").read_text())
+    assert re.search(r'I2CDevice\([^)]*"pca9685-guard", retries=1\)', (BRINGUP / "guard" / "node.py").read_text())
     assert "1 ms for the guard's one retry" in section
 
 

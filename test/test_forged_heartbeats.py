@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from hindrax_drivers.testing import ConditionTimeout, wait_until
+from hindrax_common.testing import ConditionTimeout, wait_until
 from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = pytest.mark.vehicle_launch
@@ -37,7 +37,7 @@ node = Node(name)
 if mode == "plain":
     qos = 10
 else:
-    from hindrax_drivers.node_support.liveness import heartbeat_qos
+    from hindrax_common.node_support.liveness import heartbeat_qos
     qos = heartbeat_qos()
 topics = ("supervisor/heartbeat", "esc/heartbeat")
 pubs = {t: node.create_publisher(Heartbeat, t, qos) for t in topics}

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from hindrax_drivers.testing import wait_until
+from hindrax_common.testing import wait_until
 from hindrax_tools.benchmarks.safety import running_layout
 
 pytestmark = pytest.mark.vehicle_launch

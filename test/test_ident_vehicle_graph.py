@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import rclpy
 
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import child_env, ros_context, wait_until
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.testing import child_env, ros_context, wait_until
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_sim.hardware import VirtualHardware
 from hindrax_sim.node import SimulatorNode

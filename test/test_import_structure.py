@@ -1,12 +1,13 @@
 """Import structure of the project's Python packages (issue 14, "Pure cores, thin nodes, one direction"; issue 75,
 packages by where the code runs).
 
-Every module of ``hindrax_drivers``, ``hindrax_onboard``, ``hindrax_fit``, ``hindrax_sim`` and ``hindrax_tools`` is
-parsed with :mod:`ast` (nothing is imported), and the intra-project import graph is built from every ``import`` /
-``from ... import`` statement anywhere in the module, function-local imports included (a lazy import is still a
-dependency). ``from pkg import name`` is an edge to ``pkg.name`` when that is a module, else to ``pkg``; importing
-``a.b.c`` also imports the packages ``a`` and ``a.b`` (their ``__init__``), so those are edges too, except to the
-importing module's own ancestor packages (Python initialises them before the module runs).
+Every module of ``hindrax_common``, ``hindrax_drivers``, ``hindrax_bringup``, ``hindrax_onboard``, ``hindrax_fit``,
+``hindrax_sim`` and ``hindrax_tools`` is parsed with :mod:`ast` (nothing is imported), and the intra-project import
+graph is built from every ``import`` / ``from ... import`` statement anywhere in the module, function-local imports
+included (a lazy import is still a dependency). ``from pkg import name`` is an edge to ``pkg.name`` when that is a
+module, else to ``pkg``; importing ``a.b.c`` also imports the packages ``a`` and ``a.b`` (their ``__init__``), so
+those are edges too, except to the importing module's own ancestor packages (Python initialises them before the
+module runs).
 
 Rules checked:
 
@@ -15,20 +16,22 @@ Rules checked:
   modules and by the entry points that start nodes (:data:`ENTRY_POINTS`); pure functions that offline tools
   need live in pure modules that the nodes import too.
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
-  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.process.conditions``;
-- the packages in one order, msgs <- drivers <- onboard <- fit <- sim <- tools (:data:`PACKAGE_ORDER`): no module
-  imports a higher package, each package.xml's ``exec_depend`` names exactly the project packages its modules
-  import, and the vehicle's build (msgs, drivers, onboard: :data:`VEHICLE_PACKAGES`) runs no topside code;
-- rooms in layers (:data:`LAYERS`), one strict order across the packages: the drivers' seven (pure helpers <
-  configuration < transports < node support < devices < allocation, safety, gateway and recording < launch layouts)
-  < estimation < vehicle < control < the shared per-DOF model < online identification < the composed processes
-  < fit < bag input < assessment < the virtual pool < the graph in one process < tools; no module imports a module
-  of a higher layer, without exceptions, and no module is loose at a package's root but its public surface
-  (:data:`ROOT_MODULES`); every room of the drivers has a layer of its own;
+  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_common.process.conditions``;
+- the packages in one order, msgs <- common <- drivers <- bringup <- onboard <- fit <- sim <- tools
+  (:data:`PACKAGE_ORDER`): no module imports a higher package, each package.xml's ``exec_depend`` names exactly the
+  project packages its modules import, and the vehicle's build (msgs, common, drivers, bringup, onboard:
+  :data:`VEHICLE_PACKAGES`) runs no topside code;
+- rooms in layers (:data:`LAYERS`), one strict order across the packages: the driver level's seven (common: pure
+  helpers < configuration < transports < node support; drivers: devices; bringup: allocation, safety, gateway and
+  recording < launch layouts) < estimation < vehicle < control < the shared per-DOF model < online identification
+  < the composed processes < fit < bag input < assessment < the virtual pool < the graph in one process < tools; no
+  module imports a module of a higher layer, without exceptions, and no module is loose at a package's root but its
+  public surface (:data:`ROOT_MODULES`); every room of the driver level has a layer of its own;
 - only the bag input room reads bags (:data:`BAG_READER`) and, outside the fit package, only the pipeline's faces
   are used (:data:`PIPELINE_FACES`);
 - each process of the vehicle's launch files can import at most :data:`VEHICLE_PROCESS_MAX_LINES` lines of project
-  code outside the drivers and messages; no package over :data:`PACKAGE_MAX_LINES` source lines;
+  code outside the driver-level packages (:data:`DRIVER_LEVEL`) and messages; no package over
+  :data:`PACKAGE_MAX_LINES` source lines;
 - the vehicle's shared physics is defined once (:data:`DEFINED_ONCE`): the angle wrap, the thrust lag, the thrust
   curve and the rigid-body mass matrix, each in its one module, and no other module writes their formulas out.
 
@@ -43,16 +46,20 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The Python packages, lowest first (hindrax_msgs, the generated interfaces, is below them all).
-PACKAGE_ORDER = ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools")
+PACKAGE_ORDER = ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard", "hindrax_fit",
+                 "hindrax_sim", "hindrax_tools")
 PACKAGES = {p: ROOT / "src" / p / p for p in PACKAGE_ORDER}
 #: What the vehicle's build installs (make ros-install, the image); the other packages are topside.
-VEHICLE_PACKAGES = ("hindrax_msgs", "hindrax_drivers", "hindrax_onboard")
+VEHICLE_PACKAGES = ("hindrax_msgs", "hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard")
+#: The driver level: what every vehicle process stands on, the devices, and the vehicle graph over them (the three
+#: packages hindrax_drivers was split into, issue 75).
+DRIVER_LEVEL = ("hindrax_common", "hindrax_drivers", "hindrax_bringup")
 
 #: Modules allowed to import node modules: the graph builders (the whole stack in one process; the driver nodes
 #: on replayed device data) and the entry points that start nodes (``hindrax bag play|record``).
 ENTRY_POINTS = frozenset({
     "hindrax_sim.graph.bringup",
-    "hindrax_drivers.recording.replay_devices",
+    "hindrax_bringup.recording.replay_devices",
     "hindrax_onboard.commands.bag.play",
     "hindrax_onboard.commands.bag.record",
 })
@@ -197,10 +204,10 @@ def graph() -> dict[str, set[str]]:
 def test_graph_covers_every_package(graph):
     """Sanity: the graph holds the known modules and edges (a broken parser would pass the rules vacuously)."""
     assert "hindrax_fit.bag_input.from_bag" in graph
-    assert "hindrax_drivers.recording.writer" in graph
+    assert "hindrax_bringup.recording.writer" in graph
     # function-local import
     assert "hindrax_sim.graph.bringup" in graph["hindrax_tools.commands.bringup"]
-    assert "hindrax_drivers.recording.recover" in graph["hindrax_drivers.recording.reader"]  # from . import x
+    assert "hindrax_bringup.recording.recover" in graph["hindrax_bringup.recording.reader"]  # from . import x
     assert {m.split(".")[0] for m in graph} == set(PACKAGE_ORDER) and len(graph) > 80
 
 
@@ -213,18 +220,18 @@ def test_node_modules_imported_only_by_nodes_and_entry_points(graph):
 
 
 #: The helpers for tests and benchmarks (waits, contexts, child environments, configuration parameters).
-TESTING = "hindrax_drivers.testing"
+TESTING = "hindrax_common.testing"
 
 
 def production_imports_of_testing(graph: dict[str, set[str]]) -> list[str]:
-    """``"importer -> hindrax_drivers.testing"`` for every production module importing the test helpers."""
+    """``"importer -> hindrax_common.testing"`` for every production module importing the test helpers."""
     return sorted(f"{src} -> {TESTING}" for src, deps in graph.items()
                   if TESTING in deps and src != TESTING and not any(
                       src == p or src.startswith(p + ".") for p in ENTRY_POINT_PACKAGES))
 
 
 def test_production_code_does_not_import_the_test_helpers(graph):
-    assert TESTING in graph and "hindrax_drivers.process.conditions" in graph[TESTING]  # the rule is not vacuous
+    assert TESTING in graph and "hindrax_common.process.conditions" in graph[TESTING]  # the rule is not vacuous
     assert production_imports_of_testing(graph) == []
 
 
@@ -265,14 +272,15 @@ def upward_package_imports(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_the_package_checker_sees_an_upward_import():
-    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_drivers.base.frames"},
+    graph = {"hindrax_onboard.control.law": {"hindrax_fit.fit.fit_core", "hindrax_common.base.frames"},
              "hindrax_fit.fit.fit_core": {"hindrax_onboard.vehicle.state"}}
     assert upward_package_imports(graph) == ["hindrax_onboard.control.law -> hindrax_fit.fit.fit_core"]
 
 
 def test_no_package_imports_a_higher_one_and_package_xml_says_which_it_imports(graph):
-    """msgs <- drivers <- onboard <- fit <- sim <- tools: no import back up, and each package.xml's exec_depend
-    names exactly the project packages its modules import (colcon's build order is the import order)."""
+    """msgs <- common <- drivers <- bringup <- onboard <- fit <- sim <- tools: no import back up, and each
+    package.xml's exec_depend names exactly the project packages its modules import (colcon's build order is the
+    import order)."""
     import xml.etree.ElementTree as ET
 
     assert "hindrax_onboard.identification.model.dof_model" in graph["hindrax_fit.fit.campaign_fit"]  # not vacuous
@@ -289,13 +297,14 @@ def test_no_package_imports_a_higher_one_and_package_xml_says_which_it_imports(g
 
 
 def test_the_vehicle_build_holds_no_topside_module():
-    """make ros-install and the image build msgs, drivers and onboard: none of their console scripts or launch files
-    runs a topside package's code."""
+    """make ros-install and the image build msgs, the driver level and onboard: none of their console scripts or
+    launch files runs a topside package's code."""
     import re
 
     for pkg in VEHICLE_PACKAGES[1:]:
         scripts = setup_kwargs(pkg)["entry_points"]["console_scripts"]
-        assert scripts and all(package_of(s.split("=")[1].strip()) in VEHICLE_PACKAGES for s in scripts), scripts
+        assert scripts or pkg == "hindrax_common", pkg
+        assert all(package_of(s.split("=")[1].strip()) in VEHICLE_PACKAGES for s in scripts), scripts
         for launch in (ROOT / "src" / pkg / "launch").glob("*.launch.xml"):
             used = set(re.findall(r'pkg="(hindrax_\w+)"', launch.read_text()))
             assert used <= set(VEHICLE_PACKAGES), f"{launch.name}: {sorted(used)}"
@@ -314,26 +323,28 @@ def test_the_vehicle_build_holds_no_topside_module():
 #: share below both; the simulator above the fit (it runs the campaign and fits it); the graph in one process above
 #: every node it composes; the tools on top.
 LAYERS = (
-    ("hindrax_drivers", 0),  # its public surface: the package alone
-    ("hindrax_drivers.base", 0),  # frames, PWM limits, thrust curve, device clocks, the device table: pure
-    ("hindrax_drivers.process", 0),  # the process's life, scheduling, systemd, DDS transport, waits
-    ("hindrax_drivers.cdr", 0),  # CDR without rclpy objects, message definitions
-    ("hindrax_drivers.config", 1),
-    ("hindrax_drivers.transport", 2),
-    ("hindrax_drivers.node_support", 3),  # base node, diagnostics, heartbeats, I2C and serial node bases
+    ("hindrax_common", 0),  # its public surface: the package alone
+    ("hindrax_common.base", 0),  # frames, PWM limits, thrust curve, device clocks, the device table: pure
+    ("hindrax_common.process", 0),  # the process's life, scheduling, systemd, DDS transport, waits
+    ("hindrax_common.cdr", 0),  # CDR without rclpy objects, message definitions
+    ("hindrax_common.config", 1),
+    ("hindrax_common.transport", 2),
+    ("hindrax_common.node_support", 3),  # base node, diagnostics, heartbeats, I2C and serial node bases
+    ("hindrax_common.testing", 3),  # the helpers of tests and benchmarks (their public surface)
+    ("hindrax_drivers", 4),
     ("hindrax_drivers.dvl75", 4),  # the devices: protocol, emulator, node
     ("hindrax_drivers.ping1d", 4),
     ("hindrax_drivers.ms5837", 4),
     ("hindrax_drivers.icm20948", 4),
     ("hindrax_drivers.pca9685", 4),
     ("hindrax_drivers.tf", 4),
-    ("hindrax_drivers.allocation", 5),  # over the ESC's protocol
-    ("hindrax_drivers.guard", 5),
-    ("hindrax_drivers.supervisor", 5),
-    ("hindrax_drivers.gateway", 5),  # over the allocation's bounds
-    ("hindrax_drivers.recording", 5),  # replays the devices' emulators
-    ("hindrax_drivers.layout", 6),  # launch layouts: composed processes, launch files, emulated devices, health
-    ("hindrax_drivers.testing", 6),  # the helpers of tests and benchmarks (their public surface)
+    ("hindrax_bringup", 5),
+    ("hindrax_bringup.allocation", 5),  # over the ESC's protocol
+    ("hindrax_bringup.guard", 5),
+    ("hindrax_bringup.supervisor", 5),
+    ("hindrax_bringup.gateway", 5),  # over the allocation's bounds
+    ("hindrax_bringup.recording", 5),  # replays the devices' emulators
+    ("hindrax_bringup.layout", 6),  # launch layouts: composed processes, launch files, emulated devices, health
     ("hindrax_onboard", 7),
     ("hindrax_onboard.estimation", 7),
     ("hindrax_onboard.vehicle", 8),
@@ -352,9 +363,10 @@ LAYERS = (
     ("hindrax_sim.graph", 17),  # the graph in one process, its executor, the runs on it
     ("hindrax_tools", 18),  # the command line, its commands, the benchmarks, progress and results doc
 )
-#: Modules that may sit at a package's root beside its public surface (``__init__``): the drivers' helpers for tests
-#: and benchmarks, the sim's root room, the tools' command line and its helpers, the composed processes.
-ROOT_MODULES = {"hindrax_drivers": {"testing"}, "hindrax_onboard": {"composition", "cli"}, "hindrax_fit": set(),
+#: Modules that may sit at a package's root beside its public surface (``__init__``): the helpers for tests and
+#: benchmarks (hindrax_common), the sim's root room, the tools' command line and its helpers, the composed processes.
+ROOT_MODULES = {"hindrax_common": {"testing"}, "hindrax_drivers": set(), "hindrax_bringup": set(),
+                "hindrax_onboard": {"composition", "cli"}, "hindrax_fit": set(),
                 "hindrax_tools": {
     "cli", "bench", "progress_run", "results_doc", "output_dirs"}}
 
@@ -380,18 +392,19 @@ def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
 
 def test_the_layer_checker_sees_an_upward_import():
     graph = {"hindrax_onboard.vehicle.x": {"hindrax_sim", "hindrax_sim.model"},
-             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_drivers.base.frames"},
-             "hindrax_drivers.base.frames": set()}
+             "hindrax_sim.model": {"hindrax_onboard.vehicle.x", "hindrax_common.base.frames"},
+             "hindrax_common.base.frames": set()}
     assert upward_imports(graph) == {("hindrax_onboard.vehicle.x", "hindrax_sim.model")}
     assert [layer_of(m) for m in (
-        "hindrax_drivers.base.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
+        "hindrax_common.base.frames", "hindrax_onboard.vehicle.state", "hindrax_onboard.control.node",
         "hindrax_onboard.identification.model.dof_model", "hindrax_onboard.identification.online.node",
         "hindrax_onboard.composition", "hindrax_fit.fit.fit_core", "hindrax_fit.bag_input.reader",
         "hindrax_fit.assessment.report", "hindrax_sim.campaign", "hindrax_sim.graph.bringup",
         "hindrax_tools.commands.run")] == [0, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18]
-    assert [layer_of(f"hindrax_drivers.{m}") for m in (
-        "base.frames", "config.loader", "transport.i2c", "node_support.liveness", "pca9685.core", "allocation.node",
-        "layout.composition", "testing")] == [0, 1, 2, 3, 4, 5, 6, 6]
+    assert [layer_of(m) for m in (
+        "hindrax_common.base.frames", "hindrax_common.config.loader", "hindrax_common.transport.i2c",
+        "hindrax_common.node_support.liveness", "hindrax_common.testing", "hindrax_drivers.pca9685.core",
+        "hindrax_bringup.allocation.node", "hindrax_bringup.layout.composition")] == [0, 1, 2, 3, 3, 4, 5, 6]
     with pytest.raises(ValueError):
         layer_of("hindrax_other.x")
 
@@ -407,7 +420,7 @@ def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
 
 
 def loose_modules(graph: dict[str, set[str]]) -> list[str]:
-    """Modules at the root of drivers, onboard, fit or tools that are neither the package nor in
+    """Modules at the root of the driver level, onboard, fit or tools that are neither the package nor in
     :data:`ROOT_MODULES`."""
     return sorted(m for m in graph if m.count(".") == 1 and package_of(m) in ROOT_MODULES
                   and m.split(".")[1] not in ROOT_MODULES[package_of(m)]
@@ -421,17 +434,17 @@ def test_every_module_is_in_a_room(graph):
     assert loose_modules(graph) == []
     assert {m for m in graph if m.count(".") == 1 and package_of(m) in ROOT_MODULES} >= {
         f"{p}.{m}" for p, ms in ROOT_MODULES.items() for m in ms}  # no stale allowance
-    # every room of the drivers has its own layer (none falls to the package's, the lowest)
-    rooms = {m.split(".")[1] for m in graph if package_of(m) == "hindrax_drivers" and m.count(".") >= 1}
-    named = {p.split(".")[1] for p, _ in LAYERS if package_of(p) == "hindrax_drivers" and "." in p}
-    assert rooms == named, f"hindrax_drivers rooms without a layer: {sorted(rooms - named)}, stale: {named - rooms}"
+    # every room of the driver level has its own layer (none falls to its package's)
+    rooms = {".".join(m.split(".")[:2]) for m in graph if package_of(m) in DRIVER_LEVEL and m.count(".") >= 1}
+    named = {p for p, _ in LAYERS if package_of(p) in DRIVER_LEVEL and "." in p}
+    assert rooms == named, f"driver-level rooms without a layer: {sorted(rooms - named)}, stale: {named - rooms}"
 
 
 # ------------------------------------------------------------------------------------------------ the fit's faces
 FIT = "hindrax_fit"
 #: The bag reader: within the identification rooms (the fit package and onboard's identification), only the bag
 #: input room imports it.
-BAG_READER = "hindrax_drivers.recording.reader"
+BAG_READER = "hindrax_bringup.recording.reader"
 #: What modules outside the fit package may import of it: the pipeline (read, fit, write), the yaml's reader and
 #: schema, the verdicts, reports and predictions, the bag reader. The adapters (``bag_input.from_bag``,
 #: ``bag_input.any_topics``), the fits of bags (``fit.fit_any``) and the writers' internals stay behind these faces.
@@ -490,21 +503,19 @@ def test_one_pipeline_reads_bags_and_writes_identification(graph):
 
 # ------------------------------------------------------------------------------------------------ what runs where
 #: The launch files the vehicle runs (the pool test includes the vehicle's).
-VEHICLE_LAUNCHES = (ROOT / "src" / "hindrax_drivers" / "launch" / "vehicle.launch.xml",
+VEHICLE_LAUNCHES = (ROOT / "src" / "hindrax_bringup" / "launch" / "vehicle.launch.xml",
                     ROOT / "src" / "hindrax_onboard" / "launch" / "pool_test.launch.xml")
-#: Lines (``wc -l``) of project code outside hindrax_drivers and hindrax_msgs that one process of the vehicle's
-#: launch files may import (issue 75: the identification process could import 11.3k, the topside fit among them).
+#: Lines (``wc -l``) of project code outside the driver level (:data:`DRIVER_LEVEL`) and hindrax_msgs that one process
+#: of the vehicle's launch files may import (issue 75: the identification process could import 11.3k, the topside fit
+#: among them).
 VEHICLE_PROCESS_MAX_LINES = 8_500
-#: Source lines (tests excluded) of one package at most (issue 75). hindrax_drivers is over it (26.4k) and has its
-#: own ceiling until it is split: it may not grow.
+#: Source lines (tests excluded) of one package at most (issue 75).
 PACKAGE_MAX_LINES = 15_000
-#: drivers: + signing, outputs_off (71), starvation (73), one vehicle per domain (74); to be split (issue 75)
-PACKAGE_CEILINGS = {"hindrax_drivers": 26_820}
 
 
 def class_path_edges(modules: dict[str, Path]) -> dict[str, set[str]]:
     """{module: modules it names as ``"package.module:Class"`` strings} (the composed processes import their nodes'
-    classes by name at run time, :mod:`hindrax_drivers.layout.composition`)."""
+    classes by name at run time, :mod:`hindrax_bringup.layout.composition`)."""
     import re
 
     out: dict[str, set[str]] = {}
@@ -551,21 +562,21 @@ def vehicle_processes() -> dict[str, str]:
 
 def test_each_vehicle_process_imports_at_most_its_share_of_project_code(graph):
     """Each process of the vehicle's launch files can import at most :data:`VEHICLE_PROCESS_MAX_LINES` lines of
-    project code outside the drivers and messages; online identification imports no fit core and no report."""
+    project code outside the driver level and messages; online identification imports no fit core and no report."""
     modules = _modules(PACKAGES)
     named = class_path_edges(modules)
     full = {m: deps | named.get(m, set()) for m, deps in graph.items()}
     processes = vehicle_processes()
-    assert {"hindrax_drivers/sensors_node", "hindrax_onboard/ident_record_node",
+    assert {"hindrax_bringup/sensors_node", "hindrax_onboard/ident_record_node",
             "hindrax_onboard/controller_node"} <= set(processes)  # not vacuous
     sizes = {}
     for proc, entry in processes.items():
         closure = process_closure(full, entry)
         sizes[proc] = sum(len(modules[m].read_text(encoding="utf-8").splitlines()) for m in closure
-                          if package_of(m) not in ("hindrax_drivers", "hindrax_msgs"))
+                          if package_of(m) not in (*DRIVER_LEVEL, "hindrax_msgs"))
         if proc == "hindrax_onboard/ident_record_node":  # the classes named by string are followed
             assert {"hindrax_onboard.identification.online.node", "hindrax_onboard.control.node",
-                    "hindrax_drivers.recording.recorder_node"} <= closure
+                    "hindrax_bringup.recording.recorder_node"} <= closure
             assert not {"hindrax_fit.fit.fit_core", "hindrax_fit.assessment.report"} & closure
     print("project lines each vehicle process can import:", sizes)
     assert sizes["hindrax_onboard/ident_record_node"] > 1000  # the count is not vacuous
@@ -583,16 +594,16 @@ def test_no_package_is_over_its_size():
     sizes = {pkg: package_lines(pkg) for pkg in PACKAGE_ORDER}
     print("source lines per package:", sizes)
     assert all(n > 1000 for n in sizes.values())  # the count is not vacuous
-    over = {p: n for p, n in sizes.items() if n > PACKAGE_CEILINGS.get(p, PACKAGE_MAX_LINES)}
-    assert not over, f"packages over {PACKAGE_MAX_LINES} source lines (PACKAGE_CEILINGS for a pending split): {over}"
+    over = {p: n for p, n in sizes.items() if n > PACKAGE_MAX_LINES}
+    assert not over, f"packages over {PACKAGE_MAX_LINES} source lines: {over}"
 
 
 # ------------------------------------------------------------------------------------------------ defined once
 #: name -> the one module (path under src/) that defines it.
 DEFINED_ONCE = {
-    "wrap_angle": "hindrax_drivers/hindrax_drivers/base/frames.py",
+    "wrap_angle": "hindrax_common/hindrax_common/base/frames.py",
     "ThrustLag": "hindrax_onboard/hindrax_onboard/vehicle/thrust_lag.py",
-    "ThrustCurve": "hindrax_drivers/hindrax_drivers/base/thrust_curve.py",
+    "ThrustCurve": "hindrax_common/hindrax_common/base/thrust_curve.py",
     "rigid_body_mass_matrix": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
     "skew": "hindrax_onboard/hindrax_onboard/vehicle/rigid_body.py",
 }
@@ -654,12 +665,12 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
 # ------------------------------------------------------------------------------------------------ configuration
 #: The configuration's modules (the package: schema per section, validation, loading, typed sections; the nodes'
 #: parameter declarations).
-CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config.sections", "hindrax_drivers.config.loader",
-                  "hindrax_drivers.config.typed_sections", "hindrax_drivers.config.node_parameters")
+CONFIG_MODULES = ("hindrax_common.config", "hindrax_common.config.sections", "hindrax_common.config.loader",
+                  "hindrax_common.config.typed_sections", "hindrax_common.config.node_parameters")
 #: Device drivers and safety nodes' packages: the configuration imports none of them, not even through another
-#: module; the hardware limits it checks live in ``hindrax_drivers.base.hardware_limits``, below the driver too.
-DRIVER_PACKAGES = tuple(f"hindrax_drivers.{p}" for p in (
-    "pca9685", "dvl75", "icm20948", "ms5837", "ping1d", "transport", "guard", "supervisor", "gateway"))
+#: module; the hardware limits it checks live in ``hindrax_common.base.hardware_limits``, below the driver too.
+DRIVER_PACKAGES = ("hindrax_drivers", "hindrax_common.transport", *(f"hindrax_bringup.{p}" for p in (
+    "guard", "supervisor", "gateway")))
 
 
 def driver_imports_of_config(graph: dict[str, set[str]]) -> list[str]:
@@ -678,13 +689,13 @@ def driver_imports_of_config(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_the_config_rule_sees_a_driver_import():
-    graph = {"hindrax_drivers.config": {"hindrax_drivers.base.hardware_limits", "hindrax_drivers.base.frames"},
-             "hindrax_drivers.base.frames": {"hindrax_drivers.pca9685.protocol"}}
-    assert driver_imports_of_config(graph) == ["hindrax_drivers.config -> hindrax_drivers.pca9685.protocol"]
+    graph = {"hindrax_common.config": {"hindrax_common.base.hardware_limits", "hindrax_common.base.frames"},
+             "hindrax_common.base.frames": {"hindrax_drivers.pca9685.protocol"}}
+    assert driver_imports_of_config(graph) == ["hindrax_common.config -> hindrax_drivers.pca9685.protocol"]
 
 
 def test_the_configuration_imports_no_driver(graph):
     assert all(m in graph for m in CONFIG_MODULES)
-    assert "hindrax_drivers.base.hardware_limits" in graph["hindrax_drivers.config.sections.esc"]
-    assert "hindrax_drivers.base.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
+    assert "hindrax_common.base.hardware_limits" in graph["hindrax_common.config.sections.esc"]
+    assert "hindrax_common.base.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
     assert driver_imports_of_config(graph) == []

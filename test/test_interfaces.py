@@ -12,7 +12,7 @@ import rclpy
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_common.testing import child_env, python_executable, ros_context, wait_until
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, RawDeviceData
 from hindrax_msgs.srv import SetArmed

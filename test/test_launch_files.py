@@ -22,7 +22,8 @@ import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools")
+PACKAGES = ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard", "hindrax_fit", "hindrax_sim",
+            "hindrax_tools")
 
 
 def setup_kwargs(pkg: str) -> dict:
@@ -138,7 +139,7 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
             assert el.get("scoped", "true") == "true", f"{path.name}: an unscoped <group>"
             if enabled:
                 elements[:0] = list(el)
-        elif el.tag == "set_env":  # the DDS transport (hindrax_drivers.process.dds_transport): its files must exist
+        elif el.tag == "set_env":  # the DDS transport (hindrax_common.process.dds_transport): its files must exist
             value = substitute(el.get("value"), args, packages)
             if el.get("name") == "FASTRTPS_DEFAULT_PROFILES_FILE":
                 assert Path(value).is_file(), f"{path.name}: DDS profile {value} does not exist"
@@ -166,13 +167,13 @@ def test_launch_file_executables_and_parameter_files_resolve(path, packages):
 
 
 def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
-    from hindrax_drivers.layout.composition import GROUPS, IDENT_GROUPS
+    from hindrax_bringup.layout.composition import GROUPS, IDENT_GROUPS
 
     root = REPO / "src"
-    vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
-    # every node runs once, alone (its own executable) or in a composed process (hindrax_drivers.layout.composition)
+    vehicle = dict.fromkeys(check_launch(root / "hindrax_bringup/launch/vehicle.launch.xml", packages))
+    # every node runs once, alone (its own executable) or in a composed process (hindrax_bringup.layout.composition)
     alone = {"allocation_node": "thrust_allocation"}  # executables named otherwise than their node
-    nodes = [n for pkg, exe in vehicle if pkg == "hindrax_drivers"
+    nodes = [n for pkg, exe in vehicle if pkg == "hindrax_bringup"
              for n in GROUPS.get(exe, (alone.get(exe, exe.removesuffix("_node")),))]
     for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
                  "output_guard"):
@@ -181,14 +182,14 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     # (docs/architecture.md §8, §10.1)
     assert GROUPS["actuation_node"] == ("thrust_allocation", "esc")
     for exe in ("supervisor_node", "output_guard_node"):
-        assert ("hindrax_drivers", exe) in vehicle and exe not in GROUPS
-    assert ("hindrax_drivers", "recorder_node") not in vehicle  # recording is optional there
-    recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
+        assert ("hindrax_bringup", exe) in vehicle and exe not in GROUPS
+    assert ("hindrax_bringup", "recorder_node") not in vehicle  # recording is optional there
+    recorded = check_launch(root / "hindrax_bringup/launch/vehicle.launch.xml", packages,
                             {"record": "true", "output_dir": "/ws/runs"})
-    assert ("hindrax_drivers", "recorder_node") in recorded
+    assert ("hindrax_bringup", "recorder_node") in recorded
     pool = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages)
     # the pool test records in the identification's process (hindrax_onboard.composition), never twice
-    assert ("hindrax_drivers", "recorder_node") not in pool and ("hindrax_onboard", "ident_record_node") in pool
+    assert ("hindrax_bringup", "recorder_node") not in pool and ("hindrax_onboard", "ident_record_node") in pool
     assert IDENT_GROUPS["ident_record_node"] == ("identification", "controller", "recorder")
     unrecorded = check_launch(root / "hindrax_onboard/launch/pool_test.launch.xml", packages, {"record": "false"})
     assert ("hindrax_onboard", "ident_control_node") in unrecorded
@@ -200,7 +201,7 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     # the controller is optional (off by default) in the vehicle, alone there
     assert IDENT_GROUPS["ident_control_node"] == ("identification", "controller")
     assert ("hindrax_onboard", "controller_node") not in vehicle
-    held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
+    held = check_launch(root / "hindrax_bringup/launch/vehicle.launch.xml", packages,
                         {"controller": "true", "model_file": "/ws/runs/x/identification.yaml"})
     assert ("hindrax_onboard", "controller_node") in held
 
@@ -211,7 +212,7 @@ def test_checker_rejects_a_missing_executable_and_a_missing_parameter_file(packa
     with pytest.raises(AssertionError, match="no_such_node"):
         check_launch(bad, packages)
     bad.write_text('<launch><node pkg="hindrax_drivers" exec="dvl75_node">'
-                   '<param from="$(find-pkg-share hindrax_drivers)/config/missing.yaml"/></node></launch>')
+                   '<param from="$(find-pkg-share hindrax_common)/config/missing.yaml"/></node></launch>')
     with pytest.raises(AssertionError, match="missing.yaml"):
         check_launch(bad, packages)
 
@@ -252,10 +253,10 @@ TESTED_BY_INSTALL_TEST = {
     "make ros-install",
     "source .venv/bin/activate && source ros_ws/install/setup.bash",
     "hindrax config check",
-    "ros_ws/install/lib/hindrax_drivers/allocation_node --ros-args --params-file "
-    "ros_ws/install/share/hindrax_drivers/config/hindrax.yaml",
+    "ros_ws/install/lib/hindrax_bringup/allocation_node --ros-args --params-file "
+    "ros_ws/install/share/hindrax_common/config/hindrax.yaml",
     "ros_ws/install/lib/hindrax_drivers/static_tf_node --ros-args --params-file "
-    "ros_ws/install/share/hindrax_drivers/config/hindrax.yaml",
+    "ros_ws/install/share/hindrax_common/config/hindrax.yaml",
 }
 
 
@@ -274,8 +275,8 @@ def test_every_readme_pi_command_is_a_tested_one():
 
 #: argument sets each launch file is read with below (the defaults, and what the vehicle and the pool day pass)
 READER_CASES = [
-    ("hindrax_drivers/launch/vehicle.launch.xml", {}),
-    ("hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/var/lib/hindrax/runs"}),
+    ("hindrax_bringup/launch/vehicle.launch.xml", {}),
+    ("hindrax_bringup/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/var/lib/hindrax/runs"}),
     ("hindrax_onboard/launch/pool_test.launch.xml", {}),
     ("hindrax_onboard/launch/pool_test.launch.xml", {"output_dir": "/tmp/runs", "foxglove": "true"}),
 ]
@@ -283,9 +284,9 @@ READER_CASES = [
 
 @pytest.mark.parametrize("rel,given", READER_CASES, ids=lambda c: str(c))
 def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packages):
-    """The pool-day test runs the process list of hindrax_drivers.layout.launch_xml through the project's runner; it
+    """The pool-day test runs the process list of hindrax_bringup.layout.launch_xml through the project's runner; it
     must be the one the launch file declares, read here by this module's own parser (check_launch)."""
-    from hindrax_drivers.layout.launch_xml import read_launch
+    from hindrax_bringup.layout.launch_xml import read_launch
 
     path = REPO / "src" / rel
     declared = check_launch(path, packages, given)
@@ -293,7 +294,7 @@ def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packag
     assert [(p.package, p.executable) for p in read] == declared
     # each node: its name, the vehicle file, respawn with a delay, exactly as the XML says
     xml_nodes = {}
-    for f in (path, REPO / "src/hindrax_drivers/launch/vehicle.launch.xml"):
+    for f in (path, REPO / "src/hindrax_bringup/launch/vehicle.launch.xml"):
         for el in ET.parse(f).getroot().iter("node"):
             xml_nodes[el.get("name") or el.get("exec")] = el  # a composed process has no name (its nodes keep theirs)
     for p in read:
@@ -305,14 +306,14 @@ def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packag
 
 
 def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_its_root(packages):
-    from hindrax_drivers.layout.launch_xml import read_launch
-    from hindrax_drivers.recording.selection import TopicSelection
+    from hindrax_bringup.layout.launch_xml import read_launch
+    from hindrax_bringup.recording.selection import TopicSelection
 
     for path in launch_files():
         for el in ET.parse(path).getroot().iter("node"):
             assert el.get("respawn") == "true" and float(el.get("respawn_delay", "0")) > 0, \
                 f"{path.name}: {el.get('name')} does not respawn after a delay"
-    read = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/x"},
+    read = read_launch(REPO / "src/hindrax_bringup/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/x"},
                        find_share=lambda pkg: REPO / "src" / pkg)
     pool = read_launch(REPO / "src/hindrax_onboard/launch/pool_test.launch.xml", {"output_dir": "/x"},
                        find_share=lambda pkg: REPO / "src" / pkg)
@@ -355,11 +356,11 @@ def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real
 def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_it(packages, tmp_path):
     """docs/deployment.md §1: the ESC (actuation_node), the supervisor, the output guard and the sensor drivers
     (whose rates the supervisor checks) ask for real-time scheduling (HINDRAX_REALTIME_PRIORITY, the guard highest,
-    the sensors lowest; hindrax_drivers/process/scheduling.py) and run at nice -5 through launch-prefix where it is
+    the sensors lowest; hindrax_common/process/scheduling.py) and run at nice -5 through launch-prefix where it is
     refused, nothing else does either, and the project's runner (pool-day test, bench) puts the prefix first and the
     variable in the environment as launch_ros does; the bare-metal unit and the compose file allow both."""
-    from hindrax_drivers.layout.launch_xml import read_launch
-    from hindrax_drivers.layout.process_runner import ProcessRunner
+    from hindrax_bringup.layout.launch_xml import read_launch
+    from hindrax_bringup.layout.process_runner import ProcessRunner
 
     read = read_launch(REPO / "src/hindrax_onboard/launch/pool_test.launch.xml", {},
                        find_share=lambda pkg: REPO / "src" / pkg)
@@ -374,7 +375,7 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
         assert argv[:len(p.launch_prefix) + 2] == [*p.launch_prefix, "/opt/x/" + p.executable, "--ros-args"]
     assert "LimitNICE=-5" in (REPO / "docker/hindrax-bare-metal.service").read_text()
     assert "nice: 25" in (REPO / "docker/compose.yaml").read_text()
-    from hindrax_drivers.process.scheduling import PRIORITY_ENV, PRIORITY_RANGE, requested_priority
+    from hindrax_common.process.scheduling import PRIORITY_ENV, PRIORITY_RANGE, requested_priority
     priority = {p.executable: requested_priority(dict(p.env)) for p in read}
     assert {e for e, v in priority.items() if v} == set(prefixed), priority
     assert priority["output_guard_node"] > priority["supervisor_node"] > priority["actuation_node"] \
@@ -396,8 +397,8 @@ def test_the_vehicle_launches_keep_the_vehicle_files_safety_timeouts(rel, given)
     """The launch files, where each safety node is a process of its own, set none of the single-process widenings:
     the ESC, the guard and the supervisor take esc.heartbeat_timeout_s, esc.guard_heartbeat_timeout_s,
     esc.watchdog_timeout_s and supervisor.rate_window_s from the vehicle file (0.2 s, not bringup's 2 s)."""
-    from hindrax_drivers.config import flatten
-    from hindrax_drivers.layout.launch_xml import read_launch
+    from hindrax_common.config import flatten
+    from hindrax_bringup.layout.launch_xml import read_launch
 
     processes = read_launch(REPO / "src" / rel, given, find_share=lambda pkg: REPO / "src" / pkg)
     seen: set[str] = set()

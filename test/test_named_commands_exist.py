@@ -13,7 +13,7 @@ import ast
 import re
 from pathlib import Path
 
-from hindrax_drivers.supervisor.disarm_cause import _NEXT_STEPS, _DEFAULT_STEP, _TRIP_STEP
+from hindrax_bringup.supervisor.disarm_cause import _NEXT_STEPS, _DEFAULT_STEP, _TRIP_STEP
 from hindrax_tools.cli import COMMANDS
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -62,7 +62,8 @@ def test_every_disarm_cause_names_commands_that_exist():
 
 def test_every_message_of_the_sources_names_commands_that_exist():
     bad = [f"{path.relative_to(SRC)}: {phrase}"
-           for package in ("hindrax_drivers/hindrax_drivers", "hindrax_onboard/hindrax_onboard",
+           for package in ("hindrax_common/hindrax_common", "hindrax_drivers/hindrax_drivers",
+                           "hindrax_bringup/hindrax_bringup", "hindrax_onboard/hindrax_onboard",
                            "hindrax_fit/hindrax_fit", "hindrax_sim/hindrax_sim", "hindrax_tools/hindrax_tools")
            for path in sorted((SRC / package).rglob("*.py"))
            for text in _messages(path) for phrase in unknown_commands(text)]

@@ -17,15 +17,15 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import DescribeParameters, ListParameters, SetParameters
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.allocation.node import ThrustAllocationNode
-from hindrax_drivers.config import OPTIONAL_PREFIXES, SCHEMA
+from hindrax_bringup.allocation.node import ThrustAllocationNode
+from hindrax_common.config import OPTIONAL_PREFIXES, SCHEMA
 from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.config.node_parameters import select_schema_keys
-from hindrax_drivers.node_support.esc_state import esc_state_values
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_common.config.node_parameters import select_schema_keys
+from hindrax_common.node_support.esc_state import esc_state_values
+from hindrax_common.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_drivers.tf.static_tf import TF_KEYS
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 
 
 @contextlib.contextmanager
@@ -86,7 +86,7 @@ def test_each_node_declares_only_its_own_keys_with_descriptions_and_ranges():
     with running(lambda c: ThrustAllocationNode(context=c, parameter_overrides=ALL),
                  lambda c: StaticTfNode(context=c, parameter_overrides=ALL),
                  lambda c: Ms5837Node(bus=EmulatedI2CBus({}), context=c, parameter_overrides=ALL)) as (nodes, call):
-        from hindrax_drivers.allocation.node import ALLOCATION_KEYS
+        from hindrax_bringup.allocation.node import ALLOCATION_KEYS
 
         for node_name, prefixes in (("thrust_allocation", ALLOCATION_KEYS), ("static_tf", TF_KEYS),
                                     ("ms5837", ("sensors.ms5837", "environment"))):
@@ -151,9 +151,9 @@ def test_read_only_and_invalid_changes_are_refused_with_a_reason_and_valid_ones_
 
 def test_a_writable_vehicle_key_cannot_be_declared_without_the_arm_lock():
     """Every key a node applies while running is read-only while armed: declaring one without a ``locked`` check (the
-    ESC's :class:`~hindrax_drivers.node_support.esc_state.ArmedWatch`) is a programming error, caught before any
+    ESC's :class:`~hindrax_common.node_support.esc_state.ArmedWatch`) is a programming error, caught before any
     parameter exists."""
-    from hindrax_drivers.config.node_parameters import declare_vehicle_parameters
+    from hindrax_common.config.node_parameters import declare_vehicle_parameters
 
     with ros_context() as ctx:
         node = rclpy.create_node("lockless", context=ctx)
@@ -174,7 +174,7 @@ def test_without_overrides_the_node_takes_the_shipped_vehicle_file_and_still_onl
 
 
 def test_node_specific_parameters_are_described_too():
-    from hindrax_drivers.recording.recorder_node import RecorderNode
+    from hindrax_bringup.recording.recorder_node import RecorderNode
     from hindrax_sim.node import SimulatorNode
 
     rclpy_own = {"use_sim_time", "start_type_description_service"}  # declared by rclpy itself
@@ -196,7 +196,7 @@ def test_bringup_passes_its_safety_timeouts_as_read_only_parameters_ros2_param_g
     and described with its allowed range; the vehicle file keeps its own 0.2 s."""
     from rcl_interfaces.srv import GetParameters
 
-    from hindrax_drivers.config import default_config_path, load_config
+    from hindrax_common.config import default_config_path, load_config
     from hindrax_sim.graph.bringup import build_graph
 
     shipped = load_config(default_config_path()).esc
@@ -250,11 +250,11 @@ def test_bringup_passes_its_safety_timeouts_as_read_only_parameters_ros2_param_g
 def test_a_bad_node_parameter_stops_the_node_with_one_line(factory, name, value, line):
     from rclpy.parameter import Parameter
 
-    from hindrax_drivers.config import ConfigError
-    from hindrax_drivers.guard.node import OutputGuardNode
+    from hindrax_common.config import ConfigError
+    from hindrax_bringup.guard.node import OutputGuardNode
     from hindrax_drivers.pca9685.emulator import Pca9685Emulator
     from hindrax_drivers.pca9685.node import EscNode
-    from hindrax_drivers.supervisor.node import SupervisorNode
+    from hindrax_bringup.supervisor.node import SupervisorNode
 
     make = {"esc": lambda **kw: EscNode(bus=EmulatedI2CBus({0x40: Pca9685Emulator()}), **kw),
             "output_guard": lambda **kw: OutputGuardNode(bus=EmulatedI2CBus({}), **kw),
@@ -268,11 +268,11 @@ def test_a_bad_node_parameter_stops_the_node_with_one_line(factory, name, value,
 def test_the_parameters_a_running_vehicle_node_accepts_are_the_documented_ones():
     """docs/threat_model.md §5: at run time only the allocation's thrusters.* and the MS5837's surface pressure are
     writable (each behind the arm lock and its checks); every rclpy built-in and every other parameter is read-only."""
-    from hindrax_drivers.guard.node import OutputGuardNode
+    from hindrax_bringup.guard.node import OutputGuardNode
     from hindrax_drivers.pca9685.emulator import Pca9685Emulator
     from hindrax_drivers.pca9685.node import EscNode
-    from hindrax_drivers.supervisor.node import SupervisorNode
-    from hindrax_drivers.transport.gpio import EmulatedGpioLine
+    from hindrax_bringup.supervisor.node import SupervisorNode
+    from hindrax_common.transport.gpio import EmulatedGpioLine
 
     factories = {
         "thrust_allocation": lambda c: ThrustAllocationNode(context=c, parameter_overrides=ALL),

@@ -27,8 +27,8 @@ import pytest
 pytestmark = pytest.mark.xdist_group("one_input_path")
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = tuple(ROOT / "src" / p / p for p in ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_sim",
-                                                "hindrax_tools"))
+PACKAGES = tuple(ROOT / "src" / p / p for p in ("hindrax_common", "hindrax_drivers", "hindrax_bringup",
+                                                "hindrax_onboard", "hindrax_fit", "hindrax_sim", "hindrax_tools"))
 
 #: Modules that read the ``use_sim_time`` parameter, with what they choose by it (never how an input arrives).
 CLOCK_READERS = {
@@ -89,7 +89,7 @@ def _defines_an_executor(tree: ast.Module) -> bool:
 
 #: (module, function) that take a message outside an executor, each with why it is not a second input path.
 TAKERS = {
-    ("hindrax_drivers/node_support/liveness.py", "fresh"): "before a stale verdict only, the beats already waiting on "
+    ("hindrax_common/node_support/liveness.py", "fresh"): "before a stale verdict only, the beats already waiting on "
     "the same subscription, through the same identity check and handler (a starved receiver's tick can run before the "
     "callbacks of beats that arrived meanwhile), aged from their send stamps (docs/architecture.md §8)",
 }
@@ -142,7 +142,7 @@ def test_the_checks_see_what_they_look_for():
     """The checks above find what they forbid (else a green run would mean nothing): the ESC's clock read is found,
     and a polled subscription written the old way is caught by each rule."""
     assert set(CLOCK_READERS) <= set(_modules())
-    old = ast.parse("from hindrax_drivers.polled_input import PolledInputs\n"
+    old = ast.parse("from hindrax_common.polled_input import PolledInputs\n"
                     "if node.get_parameter('use_sim_time').value:\n"
                     "    node.create_subscription(Imu, 'imu/data_raw', cb, 10)\n"
                     "else:\n"

@@ -14,7 +14,7 @@ import signal
 
 import pytest
 
-from hindrax_drivers.testing import ConditionTimeout
+from hindrax_common.testing import ConditionTimeout
 from hindrax_tools.benchmarks.safety import _UnitLayout, partial_freeze_stop_s, running_layout
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros]
@@ -47,7 +47,7 @@ def test_a_killed_unit_on_a_persisting_gpio_is_silenced_by_the_stop_command():
     import sys
     import time
 
-    from hindrax_drivers.testing import wait_until
+    from hindrax_common.testing import wait_until
 
     with running_layout("hindrax-persist-", int(os.environ["ROS_DOMAIN_ID"]), layout=_UnitLayout) as lay:
         hw = lay.hw
@@ -61,7 +61,7 @@ def test_a_killed_unit_on_a_persisting_gpio_is_silenced_by_the_stop_command():
         held_until = time.monotonic() + 1.0
         wait_until(lambda: time.monotonic() > held_until or not hw.thrust(), 5, None, "a second after the kill")
         assert hw.thrust() and not hw.line.is_high(), "the persisting line was expected to keep the outputs on"
-        run = subprocess.run([sys.executable, "-m", "hindrax_drivers.guard.outputs_off"], capture_output=True,
+        run = subprocess.run([sys.executable, "-m", "hindrax_bringup.guard.outputs_off"], capture_output=True,
                              text=True, timeout=60, env=dict(lay.env, HINDRAX_CONFIG=str(lay.config)))
         assert run.returncode == 0, run.stdout + run.stderr
         assert "driven high (outputs off) and released" in run.stdout and "asleep" in run.stdout, run.stdout
@@ -75,7 +75,7 @@ def test_the_guard_refuses_to_arm_when_its_line_would_keep_its_level_when_freed(
     from hindrax_msgs.srv import SetArmed
     from std_srvs.srv import Trigger
 
-    from hindrax_drivers.testing import wait_until
+    from hindrax_common.testing import wait_until
 
     with running_layout("hindrax-persist-arm-", int(os.environ["ROS_DOMAIN_ID"]), layout=_UnitLayout) as lay:
         lay.hw.line.persist = True

@@ -1,10 +1,10 @@
 """A pool day of the installed launch layout on emulated devices (docs/deployment.md §9).
 
 The vehicle runs ``ros2 launch hindrax_onboard pool_test.launch.xml``; ``launch`` is not installable here, so the
-process list is read from the *installed* launch file (hindrax_drivers/layout/launch_xml.py; test/test_launch_files.py
+process list is read from the *installed* launch file (hindrax_bringup/layout/launch_xml.py; test/test_launch_files.py
 checks that it is the list the file declares) and started, executable by executable from the colcon install
-(test/conftest.py), by the project's runner (hindrax_drivers/layout/process_runner.py: launch_ros's command line,
-respawn after the file's delay, SIGINT on stop). The devices are emulated (hindrax_drivers/layout/emulated_devices.py):
+(test/conftest.py), by the project's runner (hindrax_bringup/layout/process_runner.py: launch_ros's command line,
+respawn after the file's delay, SIGINT on stop). The devices are emulated (hindrax_bringup/layout/emulated_devices.py):
 DVL-75 and Ping1D on pseudo-terminals behind stable paths, the I2C devices on an emulated bus every I2C driver process
 reaches through a socket.
 
@@ -34,12 +34,12 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, Imu, Range
 
-from hindrax_drivers.config import load_config
-from hindrax_drivers.layout.emulated_devices import EmulatedDevices
-from hindrax_drivers.layout.launch_xml import read_launch
-from hindrax_drivers.layout.process_runner import ProcessRunner
+from hindrax_common.config import load_config
+from hindrax_bringup.layout.emulated_devices import EmulatedDevices
+from hindrax_bringup.layout.launch_xml import read_launch
+from hindrax_bringup.layout.process_runner import ProcessRunner
 from hindrax_tools.benchmarks.rig import Rig
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
 
@@ -59,7 +59,7 @@ class Day:
                             arguments, find_share=install.share)
         self.processes = [p for p in procs if only is None or set(p.node_names) & set(only)]
         # node -> the label of the process that runs it (a composed process runs several:
-        # hindrax_drivers.layout.composition)
+        # hindrax_bringup.layout.composition)
         self.process_of = {n: p.label for p in self.processes for n in p.node_names}
         self.runner = ProcessRunner(
             self.processes, command=lambda p: [*prefix, str(install.executable(p.package, p.executable))],
@@ -142,7 +142,7 @@ def messages_in(bag: Path, topic: str) -> int:
 
 def test_pool_day(colcon_install, tmp_path):
     install = colcon_install
-    cfg = load_config(install.share("hindrax_drivers") / "config" / "hindrax.yaml")
+    cfg = load_config(install.share("hindrax_common") / "config" / "hindrax.yaml")
     runs = tmp_path / "runs"
     args = {"output_dir": str(runs)}
     with EmulatedDevices(cfg, tmp_path / "devices", serve_i2c=False) as dev:
@@ -219,11 +219,11 @@ def test_pool_day(colcon_install, tmp_path):
 
 def test_esc_starts_without_its_bus(colcon_install, tmp_path):
     install = colcon_install
-    cfg = load_config(install.share("hindrax_drivers") / "config" / "hindrax.yaml")
+    cfg = load_config(install.share("hindrax_common") / "config" / "hindrax.yaml")
     channels = [t.esc_channel for t in cfg.thrusters.thrusters]
     neutral_us = cfg.thrusters.pulse_width_neutral_us
     with EmulatedDevices(cfg, tmp_path / "devices", serve_i2c=False) as dev:
-        with Day(install, dev, "hindrax_drivers/vehicle.launch.xml", {}, only={"esc"}) as day:
+        with Day(install, dev, "hindrax_bringup/vehicle.launch.xml", {}, only={"esc"}) as day:
             # no /dev/i2c-1: the ESC process keeps running and says so on /diagnostics, again and again
             day.wait(lambda: len(day.seen("hindrax/esc_pca9685", min_level=2)) >= 2 or day.state("esc").exit_codes,
                      "ESC reporting its missing bus")
@@ -317,7 +317,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     from domain_coordinator import domain_id
 
     from diagnostic_msgs.msg import DiagnosticStatus
-    from hindrax_drivers.testing import child_env
+    from hindrax_common.testing import child_env
     from hindrax_sim.graph.graph_campaign import parse_prompt
     from hindrax_sim.live_pool import LivePool
     from hindrax_sim.truth import load_truth
@@ -328,7 +328,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     machines = [m for m, _ in lines]
     assert machines[0] == "vehicle" and "topside" in machines and (("vehicle", STOP_LAUNCH) in lines), lines
     # the vehicle file of this vehicle: the installed one, its oscillator measured (`hindrax esc calibrate --write`)
-    doc = yaml.safe_load((install.share("hindrax_drivers") / "config" / "hindrax.yaml").read_text())
+    doc = yaml.safe_load((install.share("hindrax_common") / "config" / "hindrax.yaml").read_text())
     doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True
     vehicle_file = tmp_path / "hindrax.yaml"
     vehicle_file.write_text(yaml.safe_dump(doc))
@@ -551,12 +551,12 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     between ESC heartbeats, as this probe sees them, go into the failure message."""
     from geometry_msgs.msg import WrenchStamped
 
-    from hindrax_drivers.node_support.liveness import heartbeat_qos
+    from hindrax_common.node_support.liveness import heartbeat_qos
     from hindrax_msgs.msg import Heartbeat, ThrusterPwm
     from hindrax_msgs.srv import SetArmed
 
     install = colcon_install
-    doc = yaml.safe_load((install.share("hindrax_drivers") / "config" / "hindrax.yaml").read_text())
+    doc = yaml.safe_load((install.share("hindrax_common") / "config" / "hindrax.yaml").read_text())
     doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True  # `hindrax esc calibrate --write` done
     vehicle_file = tmp_path / "hindrax.yaml"
     vehicle_file.write_text(yaml.safe_dump(doc))
@@ -564,7 +564,7 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     neutral = cfg.thrusters.pulse_width_neutral_us
     timeout_s = cfg.esc.guard_heartbeat_timeout_s
     with EmulatedDevices(cfg, tmp_path / "devices") as dev, \
-            Day(install, dev, "hindrax_drivers/vehicle.launch.xml", {"config": str(vehicle_file)}) as day:
+            Day(install, dev, "hindrax_bringup/vehicle.launch.xml", {"config": str(vehicle_file)}) as day:
         pwm: list[tuple[float, bool, float]] = []
         beats: list[float] = []
         guard: list[tuple[float, int, str]] = []

@@ -23,7 +23,7 @@ import pytest
 import yaml
 from domain_coordinator import domain_id
 
-from hindrax_drivers.testing import wait_until
+from hindrax_common.testing import wait_until
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(2400)]
 

@@ -25,13 +25,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DRIVERS = ROOT / "src" / "hindrax_drivers"
+#: the driver level's package directories (what the pure cores and their tests import)
+DRIVERS = os.pathsep.join(str(ROOT / "src" / p) for p in ("hindrax_common", "hindrax_drivers", "hindrax_bringup"))
 TARGET = (3, 12)
 
 #: the test files of the pure cores; each imports the core, numpy and the packages below, never rclpy or messages
 PURE_CORE_TESTS = [f"src/hindrax_drivers/test/{name}.py" for name in (
     "test_esc_core", "test_esc_chip", "test_pca9685", "test_icm20948_core", "test_icm20948_protocol",
-    "test_ms5837_protocol", "test_ms5837_core", "test_ping1d_protocol", "test_thrust_curve", "test_allocation")]
+    "test_ms5837_protocol", "test_ms5837_core", "test_ping1d_protocol")] + [
+    "src/hindrax_common/test/test_thrust_curve.py", "src/hindrax_bringup/test/test_allocation.py"]
 #: what those files import besides the standard library (ament_index_python: the configuration finds the shipped
 #: vehicle file with it; a pure-Python wheel; smbus2: an I2C burst over 32 bytes is an i2c_rdwr of smbus2.i2c_msg);
 #: versions from constraints.txt
@@ -95,11 +97,11 @@ def test_pure_core_tests_pass_under_python_3_12_when_present(tmp_path):
     vpy = _core_venv(python, tmp_path)
     ran = subprocess.run([str(vpy), "-c", "import sys, importlib.util as u; print(sys.version_info[:2], "
                           "u.find_spec('rclpy') is None, u.find_spec('hindrax_msgs') is None)"],
-                         capture_output=True, text=True, timeout=60, env={"PYTHONPATH": str(DRIVERS)})
+                         capture_output=True, text=True, timeout=60, env={"PYTHONPATH": DRIVERS})
     want = TARGET if found else sys.version_info[:2]
     assert ran.stdout.strip() == f"{want} True True", ran.stdout + ran.stderr  # that Python, and no ROS in reach
     (tmp_path / "pytest.ini").write_text("[pytest]\n")  # not the repository's: no xdist, no conftest, no ROS domain
-    env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "HOME": str(tmp_path), "PYTHONPATH": str(DRIVERS),
+    env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "HOME": str(tmp_path), "PYTHONPATH": DRIVERS,
            "MPLBACKEND": "Agg", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     res = subprocess.run([str(vpy), "-m", "pytest", "-q", "-c", str(tmp_path / "pytest.ini"), "--rootdir",
                           str(ROOT), "--noconftest", "-p", "no:cacheprovider", "--import-mode=importlib",

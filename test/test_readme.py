@@ -6,7 +6,7 @@ import re
 import subprocess
 from pathlib import Path
 
-from hindrax_drivers.testing import child_env, python_executable
+from hindrax_common.testing import child_env, python_executable
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")

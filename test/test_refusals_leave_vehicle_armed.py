@@ -20,8 +20,8 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.serialization import serialize_message
 
-from hindrax_drivers.recording.writer import BagWriter
-from hindrax_drivers.testing import wait_until
+from hindrax_bringup.recording.writer import BagWriter
+from hindrax_common.testing import wait_until
 from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_tools.benchmarks.safety import running_layout
 

@@ -2,16 +2,16 @@
 installed executables run from the install space with the installed vehicle file.
 
 Built once per session in a copy of the repository's ros_ws + src (test/conftest.py; about 50 s on 2 idle cores).
-Checks: the vehicle's build installs hindrax_msgs, hindrax_drivers and hindrax_onboard only (no fit, simulator or
-tools: those are the topside's, here the venv's editable installs), every node's console script is installed in
-lib/<package>, the install's `hindrax` (hindrax_onboard's) is on PATH after sourcing it, finds the installed vehicle
-file without --config, and without hindrax_tools lists the vehicle's commands and answers a topside one in a line,
-the launch files, the Foxglove layout and the virtual pool's truth files are in share/ (so the
-venv's simulator_node runs on them), installed allocation_node answers a wrench and
-installed static_tf_node publishes /tf_static (both started with `--ros-args --params-file <installed
-hindrax.yaml>`), a driver whose device is absent keeps running and reports the error on /diagnostics;
-a topside `colcon build --symlink-install` up to the tools puts the `hindrax` wrapper on PATH, and colcon at the
-repository root sees the six packages and none of the third_party stand-ins.
+Checks: the vehicle's build installs hindrax_msgs, hindrax_common, hindrax_drivers, hindrax_bringup and hindrax_onboard
+only (no fit, simulator or tools: those are the topside's, here the venv's editable installs), every node's console
+script is installed in lib/<package>, the install's `hindrax` (hindrax_onboard's) is on PATH after sourcing it, finds
+the installed vehicle file without --config, and without hindrax_tools lists the vehicle's commands and answers a
+topside one in a line, the launch files, the Foxglove layout and the virtual pool's truth files are in share/ (so the
+venv's simulator_node runs on them), installed allocation_node answers a wrench and installed static_tf_node publishes
+/tf_static (both started with `--ros-args --params-file <installed hindrax.yaml>`), a driver whose device is absent
+keeps running and reports the error on /diagnostics; a topside `colcon build --symlink-install` up to the tools puts the
+`hindrax` wrapper on PATH, and colcon at the repository root sees the eight packages and none of the third_party
+stand-ins.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.testing import ros_context, wait_until
 
 
 @contextlib.contextmanager
@@ -49,9 +49,9 @@ VENV = Path(sys.prefix)
 # the colcon build (about 50 s on 2 idle cores, 100-200 s measured with the machine shared) runs once per session
 pytestmark = pytest.mark.timeout(1200)
 
-DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
-                "recorder_node", "player_node", "static_tf_node", "supervisor_node", "output_guard_node",
-                "sensors_node", "actuation_node"]  # composed processes (vehicle.launch)
+DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "static_tf_node"]
+BRINGUP_NODES = ["allocation_node", "recorder_node", "player_node", "supervisor_node", "output_guard_node",
+                 "sensors_node", "actuation_node"]  # composed processes (vehicle.launch)
 ONBOARD_NODES = ["identification_node", "controller_node", "ident_control_node", "ident_record_node"]
 #: what the vehicle's build must not install (topside packages)
 TOPSIDE = ("hindrax_fit", "hindrax_sim", "hindrax_tools")
@@ -67,24 +67,29 @@ def test_every_node_and_hindrax_are_installed(install):
     inst, env = install
     for node in DRIVER_NODES:
         assert os.access(inst / "lib" / "hindrax_drivers" / node, os.X_OK), node
+    for node in BRINGUP_NODES:
+        assert os.access(inst / "lib" / "hindrax_bringup" / node, os.X_OK), node
     for node in ONBOARD_NODES:
         assert os.access(inst / "lib" / "hindrax_onboard" / node, os.X_OK), node
-    installed = sorted(p.name for pkg in ("hindrax_drivers", "hindrax_onboard") for p in (inst / "lib" / pkg).iterdir())
+    installed = sorted(p.name for pkg in ("hindrax_drivers", "hindrax_bringup", "hindrax_onboard")
+                       for p in (inst / "lib" / pkg).iterdir())
     print("installed executables:", " ".join(installed))
     # the vehicle's build: no fit, simulator or tools code; its own `hindrax` (hindrax_onboard) and the PATH wrapper
     assert not [p for p in inst.rglob("*") if any(t in p.name for t in TOPSIDE)], "topside code in the install"
     assert os.access(inst / "bin" / "hindrax", os.X_OK) and os.access(inst / "lib" / "hindrax_onboard" / "hindrax",
                                                                      os.X_OK)
     # the installed packages are the ones imported, not the repository's
-    r = subprocess.run(["python3", "-c", "import hindrax_drivers, hindrax_onboard; print(hindrax_drivers.__file__); "
-                        "print(hindrax_onboard.__file__)"], env=env, capture_output=True, text=True, timeout=60)
+    r = subprocess.run(["python3", "-c", "import hindrax_common, hindrax_drivers, hindrax_bringup, hindrax_onboard; "
+                        "print(hindrax_common.__file__); print(hindrax_drivers.__file__); "
+                        "print(hindrax_bringup.__file__); print(hindrax_onboard.__file__)"],
+                       env=env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and all(line.startswith(str(inst)) for line in r.stdout.split()), r.stdout + r.stderr
 
 
 def test_share_holds_vehicle_file_launch_files_and_layout(install):
     inst, _ = install
     share = inst / "share"
-    installed_cfg = share / "hindrax_drivers" / "config" / "hindrax.yaml"
+    installed_cfg = share / "hindrax_common" / "config" / "hindrax.yaml"
     assert installed_cfg.read_text() == (REPO / "ros_ws" / "config" / "hindrax.yaml").read_text()
     launches = sorted(p.name for p in share.glob("*/launch/*.launch.xml"))
     assert launches == sorted(p.name for p in REPO.glob("src/*/launch/*.launch.xml")) and launches
@@ -103,7 +108,7 @@ def test_installed_hindrax_is_on_path_and_finds_the_installed_vehicle_file(insta
     r = subprocess.run(["hindrax", "config", "check"], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert r.stdout.startswith(f"{inst / 'share' / 'hindrax_drivers' / 'config' / 'hindrax.yaml'}: OK"), r.stdout
+    assert r.stdout.startswith(f"{inst / 'share' / 'hindrax_common' / 'config' / 'hindrax.yaml'}: OK"), r.stdout
 
 
 #: runs the installed ``lib/hindrax_onboard/hindrax`` as the vehicle has it: the venv's editable hindrax_tools
@@ -135,7 +140,7 @@ def test_the_vehicles_hindrax_lists_its_commands_and_answers_a_topside_one_in_a_
     assert {"config", "health", "keys", "esc", "thruster-test", "arm", "bag", "decode"} <= listed, r.stdout
     assert not {"ident", "run", "pool", "control", "allocate"} & listed, r.stdout
     r = vehicle_hindrax("config", "check")
-    assert r.returncode == 0 and r.stdout.startswith(f"{inst / 'share' / 'hindrax_drivers' / 'config'}"), r.stderr
+    assert r.returncode == 0 and r.stdout.startswith(f"{inst / 'share' / 'hindrax_common' / 'config'}"), r.stderr
     r = vehicle_hindrax("ident", "bag", "/var/lib/hindrax/runs/x")
     assert r.returncode == 1 and r.stdout == ""
     assert r.stderr == ("`hindrax ident bag` is not a vehicle command: topside commands run on the topside PC "
@@ -143,7 +148,7 @@ def test_the_vehicles_hindrax_lists_its_commands_and_answers_a_topside_one_in_a_
 
 
 def _start(inst, env, exe, *ros_args):
-    params = inst / "share" / "hindrax_drivers" / "config" / "hindrax.yaml"
+    params = inst / "share" / "hindrax_common" / "config" / "hindrax.yaml"
     return subprocess.Popen([str(exe), "--ros-args", "--params-file", str(params), *ros_args], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
@@ -171,7 +176,7 @@ def test_installed_allocation_answers_a_wrench_and_static_tf_is_latched(install)
     inst, env = install
     with graph() as (ctx, node, spin):
         env = dict(env, ROS_DOMAIN_ID=str(ctx.get_domain_id()))
-        alloc = _start(inst, env, inst / "lib" / "hindrax_drivers" / "allocation_node")
+        alloc = _start(inst, env, inst / "lib" / "hindrax_bringup" / "allocation_node")
         tf = _start(inst, env, inst / "lib" / "hindrax_drivers" / "static_tf_node")
         try:
             pwm, tfs = [], []
@@ -235,12 +240,12 @@ def test_truth_files_are_installed_and_the_installed_simulator_runs(install, tmp
 
     inst, env = install
     repo_truth = REPO / "ros_ws" / "config" / "truth"
-    installed_truth = inst / "share" / "hindrax_drivers" / "config" / "truth"
+    installed_truth = inst / "share" / "hindrax_common" / "config" / "truth"
     rel = lambda root: sorted(str(p.relative_to(root)) for p in root.rglob("*.yaml"))  # noqa: E731
     assert rel(installed_truth) == rel(repo_truth) and "scenarios/none.yaml" in rel(installed_truth)
     # a vehicle file mounted elsewhere (the image's HINDRAX_CONFIG): the simulator still finds the installed truth
     mounted = tmp_path / "mounted.yaml"
-    shutil.copy2(inst / "share" / "hindrax_drivers" / "config" / "hindrax.yaml", mounted)
+    shutil.copy2(inst / "share" / "hindrax_common" / "config" / "hindrax.yaml", mounted)
     r = subprocess.run(["python3", "-c", "from hindrax_sim.truth import truth_dir, default_truth_path; "
                         "print(truth_dir()); print(default_truth_path().is_file())"],
                        env=dict(env, HINDRAX_CONFIG=str(mounted)), cwd=tmp_path, capture_output=True, text=True,
@@ -275,11 +280,11 @@ def test_symlink_install_keeps_hindrax_on_path(colcon_tools, tmp_path):
     assert r.returncode == 0 and ": OK" in r.stdout.splitlines()[0], r.stdout + r.stderr
 
 
-def test_colcon_at_the_repository_root_sees_the_six_packages_and_no_stand_in():
+def test_colcon_at_the_repository_root_sees_the_eight_packages_and_no_stand_in():
     # third_party/tf2_msgs would overlay ROS's tf2_msgs with a stand-in lacking what tf2_ros needs
     r = subprocess.run([str(VENV / "bin" / "colcon"), "--log-base", "/dev/null", "list", "--names-only"], cwd=REPO,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert sorted(r.stdout.split()) == ["hindrax_drivers", "hindrax_fit", "hindrax_msgs", "hindrax_onboard",
-                                        "hindrax_sim", "hindrax_tools"], r.stdout
+    assert sorted(r.stdout.split()) == ["hindrax_bringup", "hindrax_common", "hindrax_drivers", "hindrax_fit",
+                                        "hindrax_msgs", "hindrax_onboard", "hindrax_sim", "hindrax_tools"], r.stdout
     assert (REPO / "third_party" / "COLCON_IGNORE").is_file()

@@ -21,9 +21,9 @@ import sys
 
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.testing import own_domain_env
+from hindrax_common.config import default_config_path, load_config
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_common.testing import own_domain_env
 from hindrax_fit.assessment.results import read_identification
 
 pytestmark = pytest.mark.ros

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_drivers.testing import child_env
+from hindrax_common.testing import child_env
 
 pytestmark = pytest.mark.ros
 
@@ -50,7 +50,7 @@ def env(**extra):
 
 vehicle_env = env(ROS_STATIC_PEERS="")
 procs = {
-    "gateway": subprocess.Popen([sys.executable, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
+    "gateway": subprocess.Popen([sys.executable, "-m", "hindrax_bringup.gateway.node", "--ros-args", "--params-file",
                                  config, "-p", f"topside_domain_id:={TOPSIDE}", "-p",
                                  "topside_discovery_range:=SUBNET"],
                                 env=vehicle_env,
@@ -60,7 +60,7 @@ procs = {
                                 env=env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTRTPS_DEFAULT_PROFILES_FILE="")),
 }
 
-from hindrax_drivers.process.proc_sockets import child_pids as children, udp_sockets
+from hindrax_common.process.proc_sockets import child_pids as children, udp_sockets
 
 def udp(pid):
     return sorted({a for a, _ in udp_sockets(pid)})

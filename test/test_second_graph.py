@@ -16,7 +16,7 @@ import rclpy
 from hindrax_msgs.msg import Heartbeat
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.testing import child_env, ros_context, wait_until
+from hindrax_common.testing import child_env, ros_context, wait_until
 
 pytestmark = pytest.mark.ros
 

@@ -16,8 +16,8 @@ import sys
 import pytest
 from domain_coordinator import domain_id
 
-from hindrax_drivers.testing import child_env, ros_context, wait_until
-from hindrax_drivers.transport.shared_emulation import SOCKET_ENV
+from hindrax_common.testing import child_env, ros_context, wait_until
+from hindrax_common.transport.shared_emulation import SOCKET_ENV
 from hindrax_tools.benchmarks.safety import PROCESSES, _config_file, _Hardware
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros]
@@ -29,7 +29,7 @@ def test_a_second_vehicles_esc_and_supervisor_refuse_to_start(tmp_path):
     from hindrax_msgs.msg import Heartbeat
     from rclpy.executors import SingleThreadedExecutor
 
-    from hindrax_drivers.node_support.liveness import heartbeat_qos
+    from hindrax_common.node_support.liveness import heartbeat_qos
 
     procs: list[subprocess.Popen] = []
     hardware: dict[str, _Hardware] = {}

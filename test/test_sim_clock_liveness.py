@@ -19,8 +19,8 @@ import time
 import pytest
 from rosgraph_msgs.msg import Clock
 
-from hindrax_drivers.node_support.liveness import heartbeat_qos
-from hindrax_drivers.testing import wait_until
+from hindrax_common.node_support.liveness import heartbeat_qos
+from hindrax_common.testing import wait_until
 from hindrax_tools.benchmarks.participant_churn import hardware_priority
 from hindrax_tools.benchmarks.safety import _Layout, running_layout
 from hindrax_msgs.msg import Heartbeat

@@ -12,8 +12,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rosgraph_msgs.msg import Clock
 
-from hindrax_drivers.config import default_config_path
-from hindrax_drivers.testing import child_env, child_process, interrupt, ros_context, wait_until
+from hindrax_common.config import default_config_path
+from hindrax_common.testing import child_env, child_process, interrupt, ros_context, wait_until
 
 
 class NodeProbe:

@@ -22,17 +22,17 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Range
 
-from hindrax_drivers.config import default_config_path
-from hindrax_drivers.base.device_clock import DeviceClockSync
+from hindrax_common.config import default_config_path
+from hindrax_common.base.device_clock import DeviceClockSync
 from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_drivers.dvl75.node import Dvl75Node
 from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl, format_sentence, parse_line
 from hindrax_drivers.dvl75.report import DvlReportBuilder
 from hindrax_drivers.dvl75.stream import DvlStreamDecoder
-from hindrax_drivers.base.frames import quaternion_from_euler_ned, quaternion_marine_to_ros
-from hindrax_drivers.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
+from hindrax_common.base.frames import quaternion_from_euler_ned, quaternion_marine_to_ros
+from hindrax_common.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
                                      ros_context, wait_until)
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl, RawDeviceData
 
 pytestmark = pytest.mark.ros

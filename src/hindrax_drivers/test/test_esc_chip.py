@@ -6,8 +6,8 @@ import pytest
 
 from hindrax_drivers.pca9685.chip import EscChip, channel_runs
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.i2c import I2CDevice, I2CError
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.i2c import I2CDevice, I2CError
 
 COUNT_US = 1.24  # prescale 30 at 25 MHz (datasheet §7.3.5)
 

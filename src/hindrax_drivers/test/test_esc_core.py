@@ -32,7 +32,7 @@ def make(arming_time_s=1.0, calibrated=True, n=2):
     clock = Clock()
     out = EscOutput(range(n), [False] * n, [0.0] * n, 1100, 1500, 1900)
     core = EscCore(out, arming_time_s=arming_time_s, watchdog_timeout_s=0.2, oscillator_calibrated=calibrated,
-                   clock=clock)
+                   clock=clock, period_s=0.02)
     return core, clock
 
 
@@ -211,10 +211,36 @@ def test_watchdog_on_ros_time():
     assert d.reason.startswith("watchdog")
 
 
-def test_steady_watchdog_trip_drops_the_command():
-    core, _clock = armed_commanding()
-    core.watchdog_trip("steady-clock watchdog")
-    assert core.decide(10.0, 0.02).output_state == OUTPUT_NEUTRAL and core.watchdog_trips == 1
+def test_the_core_decides_the_steady_watchdog_trip():
+    """ROS time stopped (``decide`` at the command's own ROS time never trips): the core's steady-clock check trips
+    after 0.2 s (the timeout, default watchdog_timeout_s) of 20 ms ticks without a command, drops the command and
+    says why; a command restarts it, and disarmed it never trips."""
+    core, clock = armed_commanding()
+    for _ in range(10):  # 0.2 s: not beyond the timeout
+        clock.t += 0.02
+        assert core.steady_check(clock.t) == "" and core.decide(10.0, 0.02).output_state == OUTPUT_COMMANDING
+    clock.t += 0.02
+    assert core.steady_check(clock.t) == "steady-clock watchdog: no command for 0.2 s"
+    d = core.decide(10.0, 0.02)
+    assert d.output_state == OUTPUT_NEUTRAL and d.reason == "steady-clock watchdog: no command for 0.2 s"
+    assert core.watchdog_trips == core.steady_watchdog_trips == 1 and core.command is None and core.armed
+    assert core.on_command(10.0, [1700.0, 1700.0], True) == "" and core.last_command_s == clock.t
+    clock.t += 0.02
+    assert core.steady_check(clock.t) == "" and core.decide(10.0, 0.02).output_state == OUTPUT_COMMANDING
+    core.disarm("disarmed")
+    clock.t += 5.0
+    assert core.steady_check(clock.t) == "" and core.steady_watchdog_trips == 1
+
+
+def test_the_core_hands_out_no_settable_state():
+    """What the core decides (armed, output state, the held command, the watchdogs) changes only through its methods:
+    no caller can arm it or give it a command by assignment."""
+    core, _clock = make()
+    for name, value in (("armed", True), ("output_state", OUTPUT_COMMANDING), ("command", np.full(2, 1700.0)),
+                        ("watchdog_s", 1e9), ("steady_watchdog_s", 1e9), ("steady_watchdog_trips", 0)):
+        with pytest.raises(AttributeError):
+            setattr(core, name, value)
+    assert not core.armed and core.output_state == OUTPUT_UNKNOWN and core.command is None
 
 
 def test_chip_lost_is_unknown_and_disarmed():

@@ -14,8 +14,8 @@ from std_msgs.msg import Float64
 
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode, EscOutput
-from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
@@ -120,7 +120,7 @@ def test_output_state_is_latched_for_late_subscribers_and_follows_arming(esc):
     """esc/output_state (esc_state.py): a subscriber that joins after the ESC started gets the current state at once
     (transient local), then one message per change of armed or output state and one a second without a change,
     not one per output tick."""
-    from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+    from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 
     node, probe, spin = esc["node"], esc["probe"], esc["spin"]
     wait_until(lambda: node.output_state == ThrusterPwm.OUTPUT_NEUTRAL, 5, spin, "neutral confirmed")
@@ -281,7 +281,7 @@ def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc
     Now its commands are held at neutral (it may be a foreign one) while the ESC stays armed; once named the
     allocation commands again; once named as a stranger it disarms. (The graph is stood in: discovery's timing
     cannot be forced.)"""
-    from hindrax_drivers.node_support import liveness as graph_module
+    from hindrax_common.node_support import liveness as graph_module
 
     node, emu = esc["node"], esc["emu"]
     arm(esc)
@@ -313,7 +313,7 @@ def test_a_forged_supervisor_heartbeat_disarms_and_refuses_arming(esc):
     supervisor's. The ESC takes the heartbeats through their identity check (one live publisher, node
     ``supervisor``, boot_id and seq): a forger beside the real one disarms it and arming is refused with the reason;
     once the forger is gone the ESC arms again."""
-    from hindrax_drivers.node_support.liveness import HeartbeatPublisher
+    from hindrax_common.node_support.liveness import HeartbeatPublisher
 
     node, emu, probe = esc["node"], esc["emu"], esc["probe"]
     arm(esc)
@@ -376,7 +376,7 @@ def test_i2c_errors_are_retried_and_reported(esc):
 
 def test_sigterm_path_writes_neutral():
     """run_node (the process entry point) closes the node on external shutdown: neutral on the wire."""
-    from hindrax_drivers.node_support.node_common import run_node
+    from hindrax_common.node_support.node_common import run_node
 
     emu = Pca9685Emulator()
     bus = EmulatedI2CBus({0x40: emu})
@@ -385,11 +385,15 @@ def test_sigterm_path_writes_neutral():
     def factory():
         node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0,
                                                                        "esc.oscillator_calibrated": True}))
-        node.armed = True
-        node.command = np.full(8, 1700.0)
-        node.core.command_t_s = node.get_clock().now().nanoseconds * 1e-9
-        node.watchdog_s = 1e9
         node._peer_verdicts = lambda: ("", "")  # this test is about the shutdown path only
+
+        def drive():  # in the executor, through the node's inputs: arm once allowed, then 1700 us every 20 ms
+            if node.armed:
+                node.on_command(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+            elif not node.arm_refusal():
+                node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+
+        node.create_timer(0.02, drive)
         holder["node"] = node
         return node
 
@@ -662,7 +666,7 @@ def test_fault4_restart_never_resumes_the_previous_process_outputs():
     """A previous process died armed at 1700 us: the new node's start-up puts only nothing (no pulses) or neutral
     on the wire, sampled after every I2C transaction (before the fix RESTART resumed 1700 us first)."""
     from hindrax_drivers.pca9685 import protocol as pca
-    from hindrax_drivers.transport.i2c import I2CDevice
+    from hindrax_common.transport.i2c import I2CDevice
 
     emu = Pca9685Emulator()
     bus = EmulatedI2CBus({0x40: emu})
@@ -801,6 +805,10 @@ def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
             fake["t"] += PERIOD_S
             node.steady_check()
         assert node.steady_watchdog_trips == 1 and node.command is None
+        assert node.core.reason == "steady-clock watchdog: no command for 0.2 s"  # the core's decision
+        for name in ("armed", "output_state", "command", "watchdog_s", "steady_watchdog_s"):
+            with pytest.raises(AttributeError):  # the node only wires ROS: the core's state is not settable here
+                setattr(node, name, 1)
         node.destroy_node()
 
 
@@ -863,7 +871,7 @@ def test_the_read_back_goes_to_raw_pca9685_in_the_batches_of_the_writes():
 
     from hindrax_msgs.msg import RawDeviceData
 
-    from hindrax_drivers.node_support.node_common import raw_transactions
+    from hindrax_common.node_support.node_common import raw_transactions
 
     with ros_context() as ctx:
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0, "esc.readback_interval_s": 0.25}, ctx=ctx)
@@ -1033,7 +1041,7 @@ def test_an_oscillator_marked_calibrated_without_a_measurement_of_this_board_war
     """Issue 71.8: `hindrax health` reads the ESC's /diagnostics: WARN with the operator's check (on a real chip;
     the emulated one here is taken as real)."""
     import hindrax_drivers.pca9685.node as esc_node
-    from hindrax_drivers.config.sections.esc import board_id
+    from hindrax_common.config.sections.esc import board_id
 
     monkeypatch.setattr(esc_node, "real_chip", lambda _bus: True)
     with ros_context() as ctx:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-from hindrax_drivers.node_support.esc_state import (OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, EscStateLatch,
+from hindrax_common.node_support.esc_state import (OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, EscStateLatch,
                                                     armed_after, esc_state_qos, esc_state_values, read_esc_state)
 from hindrax_drivers.pca9685 import core
 from hindrax_msgs.msg import ThrusterPwm

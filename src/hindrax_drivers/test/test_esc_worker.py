@@ -11,8 +11,8 @@ import pytest
 from hindrax_drivers.pca9685.chip import EscChip
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.worker import CONFIGURE, NEUTRAL, READBACK, WRITE, ChipJob, ChipWorker
-from hindrax_drivers.testing import wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 
 COUNT_US = 1.24  # prescale 30 at 25 MHz (datasheet §7.3.5)
 NEUTRAL_US = np.full(8, 1500.0)
@@ -201,7 +201,8 @@ def _armed_link(call_timeout_s=0.15):
 
     worker, emu, bus = _worker(call_timeout_s=call_timeout_s)
     core = EscCore(EscOutput(range(8), [False] * 8, [0.0] * 8, 1100, 1500, 1900), arming_time_s=0.0,
-                   watchdog_timeout_s=1.0, oscillator_calibrated=True, clock=worker.clock, guard_confirm_s=0.0)
+                   watchdog_timeout_s=1.0, oscillator_calibrated=True, clock=worker.clock, period_s=0.02,
+                   guard_confirm_s=0.0)
     link = ChipLink(core, worker, _Diag(), lambda text: None, lambda: 1100.0, readback_interval_s=1e9)
     link.configure()
     assert worker.wait_idle(5)

@@ -5,7 +5,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from hindrax_drivers.base import frames
+from hindrax_common.base import frames
 
 finite = st.floats(-1e3, 1e3, allow_nan=False)
 vec3 = st.lists(finite, min_size=3, max_size=3)

@@ -16,9 +16,9 @@ from hindrax_drivers.icm20948.core import imu_config_from_settings
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.ms5837 import protocol as ms
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
-from hindrax_drivers.transport.emulated_i2c import (EmulatedI2CBus, ManualClock,
+from hindrax_common.transport.emulated_i2c import (EmulatedI2CBus, ManualClock,
                                                     RegisterPointerEmulator)
-from hindrax_drivers.transport.i2c import I2CDevice, I2CError, RegisterWrite
+from hindrax_common.transport.i2c import I2CDevice, I2CError, RegisterWrite
 
 
 class RecordingDevice:

@@ -18,8 +18,8 @@ from hindrax_drivers.icm20948.core import (MAG_ATTEMPTS, BankedRegisters, DataRe
                                            StartupSequence, chip_reset_problems, diagnostic_values,
                                            imu_config_from_settings, mag_mode_for_rate, read_poll)
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus, ManualClock
-from hindrax_drivers.transport.i2c import I2CDevice
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus, ManualClock
+from hindrax_common.transport.i2c import I2CDevice
 
 ADDRESS = 0x69
 CONFIG = imu_config_from_settings(4.0, 500.0, 4, 50.0)

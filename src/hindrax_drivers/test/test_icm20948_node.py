@@ -17,9 +17,9 @@ from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.icm20948.core import STILL_STD_FACTOR, GyroBias
 from hindrax_drivers.icm20948.node import Icm20948Node
-from hindrax_drivers.node_support.node_common import unbatch_raw
-from hindrax_drivers.testing import config_parameters, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.node_support.node_common import unbatch_raw
+from hindrax_common.testing import config_parameters, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
 
 pytestmark = pytest.mark.ros

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from hindrax_drivers.icm20948 import protocol as icm
 from hindrax_drivers.icm20948.emulator import Ak09916Emulator, Icm20948Emulator
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus, ManualClock
-from hindrax_drivers.transport.i2c import RegisterWrite
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus, ManualClock
+from hindrax_common.transport.i2c import RegisterWrite
 
 G = 9.80665
 

@@ -16,8 +16,8 @@ from std_srvs.srv import Trigger
 
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
 from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.testing import config_parameters, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import config_parameters, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
 
 pytestmark = pytest.mark.ros
@@ -53,7 +53,7 @@ class Rig:
         for the node to take it."""
         from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-        from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
+        from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
         if self._esc is None:
             self._esc = self.probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
         msg = DiagnosticStatus(values=[KeyValue(key="output_state", value=str(output_state)),
@@ -100,7 +100,7 @@ def test_published_values_equal_truth_within_quantisation(rig, emu_variant, conf
     assert r.emu.zero_reads == 0  # every ADC read came after the conversion time
     assert sleeps == []
     # The wire: D1 (0x48, OSR 4096), ADC read, D2 (0x58), ADC read, in that order (docs/devices.md §3.1).
-    from hindrax_drivers.node_support.node_common import raw_transactions  # a cycle's transactions come in one message
+    from hindrax_common.node_support.node_common import raw_transactions  # a cycle's transactions come in one message
 
     seq = [(d, reg) for m in r.raw for d, _address, reg, _data in raw_transactions(m)]
     write, read = RawDeviceData.DIRECTION_HOST_TO_DEVICE, RawDeviceData.DIRECTION_DEVICE_TO_HOST

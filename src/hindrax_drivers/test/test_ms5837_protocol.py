@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from hindrax_drivers.ms5837 import protocol as ms
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator, invert_to_raw
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus, ManualClock
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus, ManualClock
 
 CAL_30BA = ms.Calibration.from_coefficients(ms.EXAMPLE_COEFFICIENTS_30BA, ms.EXAMPLE_WORD0_30BA)
 CAL_02BA = ms.Calibration.from_coefficients(ms.EXAMPLE_COEFFICIENTS_02BA, ms.EXAMPLE_WORD0_02BA)

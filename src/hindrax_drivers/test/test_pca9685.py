@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from hindrax_drivers.pca9685 import protocol as pca
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator, WriteLogEntry
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus, ManualClock
-from hindrax_drivers.transport.i2c import I2CDevice
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus, ManualClock
+from hindrax_common.transport.i2c import I2CDevice
 
 ADDR = 0x40
 

@@ -19,15 +19,15 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
 
-from hindrax_drivers.config import default_config_path
+from hindrax_common.config import default_config_path
 from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dTruth
 from hindrax_drivers.ping1d.node import Ping1dNode
 from hindrax_drivers.ping1d.protocol import Ping1dId, encode_frame
 from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
 from hindrax_drivers.ping1d.protocol import Profile
-from hindrax_drivers.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
+from hindrax_common.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
                                      ros_context, wait_until)
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import RawDeviceData
 
 pytestmark = pytest.mark.ros

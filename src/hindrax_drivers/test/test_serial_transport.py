@@ -31,8 +31,8 @@ from hindrax_drivers.ping1d.protocol import (
     decode_message,
     request_frame,
 )
-from hindrax_drivers.transport.pty_device import PtyDevice
-from hindrax_drivers.transport.serial_transport import SerialTransport, SerialTransportError
+from hindrax_common.transport.pty_device import PtyDevice
+from hindrax_common.transport.serial_transport import SerialTransport, SerialTransportError
 
 WAIT_S = 3.0
 

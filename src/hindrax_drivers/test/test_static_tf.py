@@ -11,8 +11,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_drivers.tf.static_tf import vehicle_transforms
 
@@ -79,7 +79,7 @@ def test_node_latches_on_tf_static_with_the_static_broadcaster_qos_and_frame_ids
 
 def test_a_missing_geometry_key_stops_the_node_with_one_line(tmp_path, monkeypatch):
     """With no vehicle file to fall back on, a key the overrides lack is reported as missing (key, allowed)."""
-    from hindrax_drivers.config import ConfigError
+    from hindrax_common.config import ConfigError
 
     params = [p for p in config_parameters() if p.name != "sensors.dvl75.position_frd_m"]
     monkeypatch.setenv("HINDRAX_CONFIG", str(tmp_path / "absent.yaml"))

@@ -17,7 +17,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hindrax_drivers.config import DOFS
+from hindrax_common.config import DOFS
 from hindrax_fit.assessment.predict import ModelError, load_model
 from hindrax_fit.assessment.results import (IdentificationFileError, build_document,
                                                              write_identification)

@@ -2,7 +2,7 @@
 cross-channel inputs.
 
 The bag is written here: a pilot's heave commands (geometry_msgs/WrenchStamped, held steps up to +-110 N, 20 Hz)
-through the vehicle file's own thrust allocation (:class:`~hindrax_drivers.allocation.core.AllocationCore`, which
+through the vehicle file's own thrust allocation (:class:`~hindrax_bringup.allocation.core.AllocationCore`, which
 clips heave at its vertical thrusters' limits, about 62 N) into ``allocation/status`` (requested and achieved
 wrench, as the allocation node publishes it). The vehicle moves under the ACHIEVED force: its heave truth of the
 vehicle file (rigid + added inertia, quadratic and linear damping per direction, net buoyancy) driven through the
@@ -18,8 +18,8 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
 from hindrax_fit.assessment import pipeline, results
 from hindrax_fit.bag_input import any_topics
 from hindrax_onboard.identification.model.dof_model import truth_parameters
@@ -39,7 +39,7 @@ def write_heave_bag(path, cfg, steps, seconds: float, top_n: float, seed: int = 
     from nav_msgs.msg import Odometry
     from rclpy.serialization import serialize_message
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_msgs.msg import AllocationStatus
 
     rng = np.random.default_rng(seed)

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_fit.fit.calibration import joint_estimate, scale_prior_stds
 from hindrax_onboard.identification.model.dof_model import parameter_names, rigid_inertia
 from hindrax_fit.assessment.results import build_results
@@ -148,7 +148,7 @@ def test_sensitivities_are_measured_by_refits_and_carried_into_the_intervals(cfg
     G Cov(s) G^T into each parameter's variance."""
     from scipy import signal
 
-    from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
+    from hindrax_bringup.allocation.matrix import thrust_allocation_matrix
     from hindrax_fit.fit.calibration import attach_thrust_sensitivities
     from hindrax_onboard.identification.model.campaign_record import CampaignRecord
 

@@ -158,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "_import_error", None):
         print(f"hindrax: this command is unavailable ({args._import_error})", file=sys.stderr)
         return 1
-    from hindrax_drivers.process.dds_transport import loopback_transport  # stdlib only; --help never gets here
+    from hindrax_common.process.dds_transport import loopback_transport  # stdlib only; --help never gets here
 
     try:
         loopback_transport()  # before any command creates a participant

@@ -2,8 +2,8 @@
 recorder.
 
 ``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their names (``identification``, ``controller``),
-read the same vehicle file and are spun by one executor (:func:`hindrax_drivers.layout.composition.run_group`; the
-node list is :data:`hindrax_drivers.layout.composition.IDENT_GROUPS`, this module maps it to classes).
+read the same vehicle file and are spun by one executor (:func:`hindrax_bringup.layout.composition.run_group`; the
+node list is :data:`hindrax_bringup.layout.composition.IDENT_GROUPS`, this module maps it to classes).
 ``ident_record_node`` (recording on, the default): the same two and the recorder (the other nodes ignore keys they do
 not declare).
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from hindrax_drivers.layout.composition import IDENT_GROUPS, NODE_CLASSES as DRIVER_CLASSES, run_group
+from hindrax_bringup.layout.composition import IDENT_GROUPS, NODE_CLASSES as DRIVER_CLASSES, run_group
 
 __all__ = ["NODE_CLASSES", "ident_control_main", "ident_record_main"]
 

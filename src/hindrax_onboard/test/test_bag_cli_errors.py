@@ -8,7 +8,7 @@ import pytest
 
 from hindrax_onboard.cli import main as cli_main
 
-DATA = Path(__file__).resolve().parents[2] / "hindrax_drivers" / "test" / "data" / "sensors_4s" / "sensors_4s_0.mcap"
+DATA = Path(__file__).resolve().parents[2] / "hindrax_bringup" / "test" / "data" / "sensors_4s" / "sensors_4s_0.mcap"
 
 
 def _make(kind: str, tmp_path: Path) -> Path:

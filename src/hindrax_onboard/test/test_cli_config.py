@@ -5,7 +5,7 @@ from pathlib import Path
 
 import yaml
 
-from hindrax_drivers.config import default_config_path
+from hindrax_common.config import default_config_path
 
 HINDRAX = str(Path(sys.executable).with_name("hindrax"))
 
@@ -42,7 +42,7 @@ def test_usage_error_exits_2():
 
 
 def test_without_a_file_the_shipped_vehicle_file_is_checked():
-    from hindrax_drivers.config import default_config_path
+    from hindrax_common.config import default_config_path
 
     r = run("config", "check")
     assert r.returncode == 0 and r.stdout.startswith(f"{default_config_path()}: OK")
@@ -88,7 +88,7 @@ def test_update_vehicle_file_keeps_every_comment_key_order_and_other_value(tmp_p
     comment, the key order and every other value of the original stay as they were."""
     import pytest
 
-    from hindrax_drivers.config import ConfigError, load_config
+    from hindrax_common.config import ConfigError, load_config
     from hindrax_onboard.commands.common import update_vehicle_file
 
     conf = tmp_path / "hindrax.yaml"
@@ -140,7 +140,7 @@ def test_config_check_warns_when_the_vehicle_has_no_hardware_cut_off(tmp_path):
     """Issue 23: esc.output_enable_gpio null (the shipped file) -> a warning; wired -> none."""
     import yaml
 
-    from hindrax_drivers.config import default_config_path
+    from hindrax_common.config import default_config_path
 
     res = run("config", "check", str(default_config_path()))
     assert res.returncode == 0 and "no hardware cut-off" in res.stdout

@@ -5,7 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 
 HINDRAX = str(Path(sys.executable).with_name("hindrax"))
 
@@ -65,7 +65,7 @@ def test_config_check_warns_when_the_oscillator_was_not_measured_on_this_board(t
     records the board; the check warns when the record is absent or another board's."""
     import yaml
 
-    from hindrax_drivers.config.sections.esc import board_id
+    from hindrax_common.config.sections.esc import board_id
 
     doc = yaml.safe_load(default_config_path().read_text())
     esc = doc["/**"]["ros__parameters"]["esc"]

@@ -11,7 +11,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.testing import child_env, ros_context, wait_until
+from hindrax_common.testing import child_env, ros_context, wait_until
 
 pytestmark = pytest.mark.ros
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.control.law import (MIN_BANDWIDTH_FACTOR, UNCERTAINTY_Z, ControlInput, ControlSettings, Controller,
                                        FloorEstimator, ReferenceModel, design_gains)
 from hindrax_onboard.control.model import AxisModel, ControlModel, model_from_config

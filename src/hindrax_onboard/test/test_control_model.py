@@ -7,7 +7,7 @@ import math
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.control.model import VEHICLE_FILE, ModelFileError, load_model, model_from_config
 from hindrax_onboard.vehicle.vehicle_match import vehicle_parameters
 

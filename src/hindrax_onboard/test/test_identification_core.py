@@ -7,8 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.identification.online.core import (ARMED_GRACE_S, DISARMED, NEEDED_SENSORS, NOT_ARMED,
                                                       STARVED_WARN_TICKS, STATUS_PERIOD_S, IdentificationCore,
                                                       goal_problem)

@@ -6,8 +6,8 @@ import stat
 import subprocess
 import sys
 
-from hindrax_drivers.gateway.operator_signing import load_key
-from hindrax_drivers.testing import child_env
+from hindrax_bringup.gateway.operator_signing import load_key
+from hindrax_common.testing import child_env
 
 
 def keys(tmp_path, *args):

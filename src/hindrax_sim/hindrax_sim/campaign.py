@@ -4,7 +4,7 @@ The campaign logic is the :class:`~..identification.online.executive.Executive` 
 drives on the ROS graph, :mod:`..identification.online.node`); here its plant is a
 :class:`~hindrax_sim.simulator.Simulator` stepped in this process: each control tick
 (``identification.estimate_rate_hz``; the simulator steps in between) the wrench is allocated
-(:class:`~hindrax_drivers.allocation.core.AllocationCore`), its pulse widths drive the simulator's thrusters, the thrust
+(:class:`~hindrax_bringup.allocation.core.AllocationCore`), its pulse widths drive the simulator's thrusters, the thrust
 curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and the sensor samples the simulator
 produced during the tick go to the executive. At the end or on abort every thruster is commanded neutral. The
 simulator's truth (position, attitude) goes into the record for tests and plots only; the executive never sees it.
@@ -22,8 +22,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_common.base import frames
+from hindrax_common.config import DOFS, VehicleConfig
 
 from hindrax_onboard.identification.model.campaign_record import CampaignRecord
 from hindrax_onboard.identification.online.executive import CampaignAbort, Executive, TickInput

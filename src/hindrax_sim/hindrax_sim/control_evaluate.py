@@ -34,10 +34,10 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.base import frames
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS, VehicleConfig
+from hindrax_common.base.frames import wrap_angle
 
 from hindrax_onboard.control.maneuvers import HoldController, dof_authority
 from .simulator import Simulator

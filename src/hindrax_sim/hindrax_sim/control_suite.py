@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 from typing import Callable, Sequence
 
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.config import VehicleConfig
 
 from hindrax_fit.fit.calibration import apply_thrust_calibration
 from .campaign import Campaign

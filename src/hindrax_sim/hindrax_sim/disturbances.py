@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.config import VehicleConfig
 
 from .model import damping_vector, rotation_matrix_from_quaternion
 from .truth import Disturbances

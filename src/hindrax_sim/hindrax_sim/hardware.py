@@ -1,9 +1,9 @@
 """Virtual hardware: the device emulators driven by the simulator (docs/architecture.md §6).
 
 In simulation the real driver code reads real bytes and registers: the DVL-75 and Ping1D emulators are served
-on pseudo-terminals (:class:`~hindrax_drivers.transport.pty_device.PtyDevice`, so the drivers' pyserial path
+on pseudo-terminals (:class:`~hindrax_common.transport.pty_device.PtyDevice`, so the drivers' pyserial path
 runs), and the MS5837, ICM-20948 (+ AK09916) and PCA9685 emulators sit on one
-:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` that the I2C drivers use in place of
+:class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` that the I2C drivers use in place of
 ``smbus2.SMBus``. Each emulator's truth source is a *measured* sensor sample of the vehicle at the moment the
 emulated device samples (an MS5837 conversion start, an ICM-20948 data-rate tick, a DVL ping, through
 :meth:`~hindrax_sim.simulator.Simulator.measure`: noise, bias and the DVL's dropouts from
@@ -22,12 +22,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hindrax_drivers.base import devices as device_table
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.base import devices as device_table
+from hindrax_common.config import VehicleConfig
 from hindrax_drivers.dvl75.emulator import DvlTruth
 from hindrax_drivers.ping1d.emulator import Ping1dTruth
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.pty_device import PtyDevice
 
 from .simulator import Simulator
 
@@ -62,7 +62,7 @@ class SerialLockStep:
 
     Args:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
-        transport: the driver's :class:`~hindrax_drivers.transport.serial_transport.SerialTransport`.
+        transport: the driver's :class:`~hindrax_common.transport.serial_transport.SerialTransport`.
         wait_s: wall time :meth:`settled` reads for before it answers False, s.
         ready: extra start-up condition for :meth:`startup_done` (the driver's start-up commands are sent).
     """
@@ -117,7 +117,7 @@ class SerialLockStep:
 
 
 class VirtualHardware:
-    """Emulators of every device of :data:`~hindrax_drivers.base.devices.DEVICES`, fed by ``sim`` (module docstring);
+    """Emulators of every device of :data:`~hindrax_common.base.devices.DEVICES`, fed by ``sim`` (module docstring);
     a device's truth adapter is the method ``_<name>_truth`` (an output has none).
 
     Attributes: ``emulators`` (device name -> emulator), ``i2c_bus`` (EmulatedI2CBus with the I2C devices at their

@@ -8,9 +8,9 @@ the emulators of :class:`~hindrax_sim.hardware.VirtualHardware` there, fed by a
 :class:`~hindrax_sim.simulator.Simulator` that this process steps to keep up with the wall clock. The
 simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers, so wrench -> allocation -> ESC
 process -> I2C -> thrust -> motion -> sensors -> drivers is the vehicle's path, with a simulated vehicle at its end.
-The devices are reached as :class:`~hindrax_drivers.layout.emulated_devices.EmulatedDevices` are
+The devices are reached as :class:`~hindrax_bringup.layout.emulated_devices.EmulatedDevices` are
 (serial ports behind stable symlinks, the I2C bus over a Unix socket:
-:class:`~hindrax_drivers.layout.emulated_devices.DriverEndpoints`), which hold a vehicle at rest instead.
+:class:`~hindrax_bringup.layout.emulated_devices.DriverEndpoints`), which hold a vehicle at rest instead.
 
 Why a process of its own: the I2C emulators answer inside the drivers' bus calls, from a Python thread; in a busy
 process (a test's probe nodes, a campaign client) those answers wait for the interpreter lock for tens of
@@ -44,10 +44,10 @@ from typing import Mapping
 
 import numpy as np
 
-from hindrax_drivers.config import load_config
-from hindrax_drivers.layout.emulated_devices import DriverEndpoints
-from hindrax_drivers.process.scheduling import HARDWARE_STAND_IN_PRIORITY, PRIORITY_ENV, apply_realtime_priority
-from hindrax_drivers.transport.socket_i2c import I2CSocketServer
+from hindrax_common.config import load_config
+from hindrax_bringup.layout.emulated_devices import DriverEndpoints
+from hindrax_common.process.scheduling import HARDWARE_STAND_IN_PRIORITY, PRIORITY_ENV, apply_realtime_priority
+from hindrax_common.transport.socket_i2c import I2CSocketServer
 
 from .campaign import PoolOperator
 from hindrax_onboard.identification.online.executive import calibration_forces, float_buoyancy, inclining_load
@@ -67,7 +67,7 @@ class LivePoolServer:
     config_path: the vehicle file (the nodes' view; the emulated PCA9685 runs at its ``esc.oscillator_hz``).
     directory: where the I2C socket goes. truth: the pool's truth file (None: the shipped default), seed: the sensor
     noise seed (None: ``simulation.seed``). Every emulator, the stepping and the operator's forces share one lock.
-    Raises :class:`~hindrax_drivers.config.ConfigError` for a bad vehicle file.
+    Raises :class:`~hindrax_common.config.ConfigError` for a bad vehicle file.
     """
 
     def __init__(self, config_path: str | os.PathLike, directory: str | os.PathLike, truth: str | None = None,
@@ -140,7 +140,7 @@ class LivePoolServer:
 def take_hardware_priority() -> str:
     """Put every thread of this process under ``SCHED_FIFO`` :data:`HARDWARE_STAND_IN_PRIORITY`, so the emulated devices
     answer in microseconds whatever the load, as the vehicle's hardware does. A nice value cannot do that: it ranks
-    a process only within its own session (:mod:`hindrax_drivers.process.scheduling`). Call it before the devices'
+    a process only within its own session (:mod:`hindrax_common.process.scheduling`). Call it before the devices'
     threads start: they inherit it. Not with ``SCHED_RESET_ON_FORK``: the kernel applies that to every new thread too,
     and the serving threads would run ``SCHED_OTHER``; the process starts no other process. Refused (no
     ``CAP_SYS_NICE``): nice -10 if permitted. Returns the one line that says which."""
@@ -192,7 +192,7 @@ class LivePool(DriverEndpoints):
     config_path: the vehicle file; directory: a folder for the socket (default: a new temporary
     one); env: the child's environment (default: this one); truth: as :class:`LivePoolServer`. Use
     as a context manager. The driver-facing methods are those of
-    :class:`~hindrax_drivers.layout.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`,
+    :class:`~hindrax_bringup.layout.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`,
     :meth:`env`). Raises RuntimeError when the process does not come up within 60 s or does not
     answer within 10 s.
     """

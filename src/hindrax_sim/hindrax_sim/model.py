@@ -40,7 +40,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_common.config import DOFS, VehicleConfig
 
 from hindrax_onboard.vehicle.rigid_body import rigid_body_mass_matrix, skew
 
@@ -99,7 +99,7 @@ def euler_from_rotation_matrix(r) -> np.ndarray:
 
 # --------------------------------------------------------------------------------------------- the model
 class VehicleModel:
-    """Fossen 6-DOF model built from a :class:`~hindrax_drivers.config.VehicleConfig` (module docstring).
+    """Fossen 6-DOF model built from a :class:`~hindrax_common.config.VehicleConfig` (module docstring).
 
     Parameters: ``config`` (every physical parameter comes from it: mass, volume, water density, gravity,
     r_g, r_b, inertia, added-mass matrix, damping); ``surface_fraction`` optional free-surface model

@@ -11,7 +11,7 @@ Subscribes (default pulse-width source)
 Publishes
     ``/clock`` (rosgraph_msgs/Clock) at ``simulation.clock_rate_hz`` of simulated time; ``sim/odometry``
     (nav_msgs/Odometry): pose of base_link in odom (ENU, origin at the pool corner on the surface), twist
-    in base_link (FLU), converted with :mod:`hindrax_drivers.base.frames`; covariances zero (exact ground
+    in base_link (FLU), converted with :mod:`hindrax_common.base.frames`; covariances zero (exact ground
     truth); ``sim/wrench`` (geometry_msgs/WrenchStamped, base_link FLU): the true thruster wrench about
     base_link; ``sim/contact`` (diagnostic_msgs/DiagnosticArray): one status per pool face
     (``sim/contact/<face>``, WARN while touching, value ``since_s``), on every change and once per
@@ -58,10 +58,10 @@ from rclpy.qos import QoSProfile
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig
-from hindrax_drivers.node_support.node_common import load_node_config, run_node
-from hindrax_drivers.node_support.vehicle_node import VehicleNode
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig
+from hindrax_common.node_support.node_common import load_node_config, run_node
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
@@ -87,7 +87,7 @@ class SimulatorNode(VehicleNode):
     """Thin rclpy node over :class:`Simulator` (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters, see
-    :func:`~hindrax_drivers.node_support.node_common.load_node_config`).
+    :func:`~hindrax_common.node_support.node_common.load_node_config`).
     pulse_width_source: optional callable replacing the ThrusterPwm subscription, called before
     every step: the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685 emulator; None
     keeps the previous ones).

@@ -20,7 +20,7 @@ How the command acts (``actuation``):
 * ``"wrench"``: the commanded wrench acts on the vehicle directly (``external_wrench_frd``: no thrusters, so the
   truth is the configured hydrodynamics) ``delay_s`` after it is commanded, like an actuation delay;
 * ``"thrusters"``: the commanded wrench goes through the vehicle's thrust allocation
-  (:class:`hindrax_drivers.allocation.core.AllocationCore`: saturation, curve inversion) to the simulated
+  (:class:`hindrax_bringup.allocation.core.AllocationCore`: saturation, curve inversion) to the simulated
   thrusters, so the truth's thrust lag, ESC latency, thrust scales and reverse asymmetry, battery sag, inflow loss
   and deadband (``ros_ws/config/truth``) make the real force differ from the recorded command, as on a real
   vehicle; ``delay_s`` adds a transport delay before the allocation.
@@ -29,7 +29,7 @@ With ``"thrusters"`` the bag also holds ``/allocation/status`` hindrax_msgs/msg/
 per allocated command, as the allocation node publishes it: the requested and the achieved wrench (its thrusters'
 limits: saturation), header stamp = the command's stamp, received when it is allocated.
 
-The bag (:class:`hindrax_drivers.recording.writer.BagWriter`) holds, REP-103 FLU (:mod:`hindrax_drivers.base.frames`):
+The bag (:class:`hindrax_bringup.recording.writer.BagWriter`) holds, REP-103 FLU (:mod:`hindrax_common.base.frames`):
 
 * ``/wrench`` geometry_msgs/msg/WrenchStamped, ``base_link``, at ``control_hz`` (the commanded wrench, stamped at
   the command time);
@@ -59,10 +59,10 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import FluidPressure, Imu
 from tf2_msgs.msg import TFMessage
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import VehicleConfig
-from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+from hindrax_common.base import frames
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import VehicleConfig
+from hindrax_bringup.recording.writer import BagWriter, WriterOptions
 from hindrax_msgs.msg import AllocationStatus
 
 from .simulator import Simulator, fill_odometry, fill_wrench

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.config import VehicleConfig
 
 __all__ = ["FACES", "ContactState", "FreeSurface", "Pool"]
 

@@ -51,10 +51,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig, or_default
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig, or_default
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.base.frames import wrap_angle
 
 from .pool import Pool
 

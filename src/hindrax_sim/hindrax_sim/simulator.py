@@ -1,7 +1,7 @@
 """The virtual pool: vehicle model + thrusters + pool + sensors, stepped at a fixed rate. No ROS.
 
 :class:`Simulator` owns a :class:`~.model.VehicleModel`, :class:`~.thrusters.Thrusters`, a :class:`~.pool.Pool`
-and a :class:`~.sensors.SensorSuite`, all built from one :class:`~hindrax_drivers.config.VehicleConfig`.
+and a :class:`~.sensors.SensorSuite`, all built from one :class:`~hindrax_common.config.VehicleConfig`.
 ``step(pulse_widths_us)`` advances one integration step; identification tests drive it directly, the ROS
 node (:mod:`.node`) wraps it.
 
@@ -27,8 +27,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig
 
 from .model import VehicleModel, euler_from_rotation_matrix, rotation_matrix_from_quaternion
 from .pool import ContactState, Pool

@@ -1,12 +1,12 @@
 """Simulated thrusters: pulse width -> thrust (cubic curves) -> first-order lag -> body wrench. Pure numpy.
 
 * Geometry: ``config.thrusters`` positions (FRD, m, relative to the CG) and unit directions; the thrust
-  allocation matrix ``B_cg = [d_i; r_i x d_i]`` (6, n) is :func:`hindrax_drivers.allocation.matrix.
+  allocation matrix ``B_cg = [d_i; r_i x d_i]`` (6, n) is :func:`hindrax_bringup.allocation.matrix.
   thrust_allocation_matrix` ([Hindrax-Drag] eq. 9), i.e. the wrench about the CG. The model's reference point is
   the body origin CO with the CG at r_g, so the wrench about CO is ``[F; T_cg + r_g x F]``
   (``matrix_co``; identical when r_g = 0, as in the Hindrax file).
-* Thrust: the allocation's :class:`hindrax_drivers.base.thrust_curve.ThrustCurve`
-  (:func:`hindrax_drivers.allocation.from_config.thrust_curve_from_config`: ``thrusters.curve_negative``,
+* Thrust: the allocation's :class:`hindrax_common.base.thrust_curve.ThrustCurve`
+  (:func:`hindrax_bringup.allocation.from_config.thrust_curve_from_config`: ``thrusters.curve_negative``,
   ``curve_positive``, the pulse-width range and the deadband) ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4).
   The pulse widths are those on the wire (``hindrax_msgs/ThrusterPwm``: what the ESC output wrote). A thruster
   configured ``reversed`` has its pulse width mirrored about neutral by the ESC node and a reversed
@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hindrax_drivers.allocation.from_config import thrust_curve_from_config
-from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
-from hindrax_drivers.config import VehicleConfig
+from hindrax_bringup.allocation.from_config import thrust_curve_from_config
+from hindrax_bringup.allocation.matrix import thrust_allocation_matrix
+from hindrax_common.config import VehicleConfig
 
 from hindrax_onboard.vehicle.rigid_body import skew
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag

@@ -57,7 +57,7 @@ from typing import Any, Mapping
 import yaml
 from ament_index_python.packages import get_package_share_directory
 
-from hindrax_drivers.config import ConfigError, VehicleConfig, default_config_path, flatten, validate_flat
+from hindrax_common.config import ConfigError, VehicleConfig, default_config_path, flatten, validate_flat
 
 __all__ = ["Disturbances", "Truth", "TruthError", "default_truth_path", "truth_dir", "load_truth",
            "truth_from_mapping", "with_floor_gradient", "DISTURBANCE_SCHEMA"]
@@ -69,15 +69,15 @@ class TruthError(ValueError):
 
 def truth_dir() -> Path:
     """The truth files: ``truth/`` beside the vehicle file in use (the repository's ``ros_ws/config/truth``, or
-    ``share/hindrax_drivers/config/truth`` of a colcon install); when the vehicle file is elsewhere
-    (``HINDRAX_CONFIG`` naming a mounted file), the installed ``share/hindrax_drivers/config/truth``. Raises
+    ``share/hindrax_common/config/truth`` of a colcon install); when the vehicle file is elsewhere
+    (``HINDRAX_CONFIG`` naming a mounted file), the installed ``share/hindrax_common/config/truth``. Raises
     :class:`TruthError` naming the places searched when neither exists."""
     beside = default_config_path().parent / "truth"
     if beside.is_dir():
         return beside
     searched = [beside]
     try:
-        installed = Path(get_package_share_directory("hindrax_drivers")) / "config" / "truth"
+        installed = Path(get_package_share_directory("hindrax_common")) / "config" / "truth"
         if installed.is_dir():
             return installed
         searched.append(installed)

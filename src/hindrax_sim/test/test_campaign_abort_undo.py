@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim.campaign import Campaign
 from hindrax_onboard.identification.online.core import IdentificationCore
 from hindrax_onboard.identification.online.executive import TickInput

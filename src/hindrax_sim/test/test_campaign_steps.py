@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import ConfigError, default_config_path, load_config
+from hindrax_common.config import ConfigError, default_config_path, load_config
 from hindrax_fit.fit.calibration import thrust_scales
 from hindrax_sim.campaign import Campaign, PoolOperator
 from hindrax_onboard.identification.online.executive import THRUST_STEPS, Executive, TickInput, expand_calibration
@@ -75,7 +75,7 @@ def _without_float(cfg, tmp_path):
     """The shipped vehicle file without the optional calibration.float_* keys."""
     import yaml
 
-    from hindrax_drivers.config import ros_parameters_from_yaml
+    from hindrax_common.config import ros_parameters_from_yaml
 
     params = ros_parameters_from_yaml(yaml.safe_load(default_config_path().read_text()))
     for k in ("float_mass_kg", "float_volume_m3"):

@@ -14,8 +14,8 @@ from nav_msgs.msg import Odometry
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_msgs.msg import ControllerStatus, ControlSetpoint, ManeuverStatus
 from hindrax_msgs.srv import SetArmed
 
@@ -159,7 +159,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
 
     import yaml
 
-    from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable
+    from hindrax_common.testing import child_env, child_process, interrupt, python_executable
 
     other = tmp_path / "identification.yaml"
     other.write_text(yaml.safe_dump({"schema_version": 1, "provenance": {"configuration_sha256": "0" * 64},
@@ -202,7 +202,7 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
     from hindrax_onboard.control.node import ControllerNode
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
+    from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
 
     with ros_context() as ctx:
         node = ControllerNode(config=load_config(default_config_path()), context=ctx, model_file="")

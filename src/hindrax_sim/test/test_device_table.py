@@ -1,4 +1,4 @@
-"""The device table (hindrax_drivers.base.devices) is the one list of devices: every path that builds devices (the
+"""The device table (hindrax_common.base.devices) is the one list of devices: every path that builds devices (the
 composed processes, ``hindrax health``, the pool-day emulators, the drive replay, the simulator's virtual hardware,
 bringup) has exactly the table's devices, and a device added to the table alone appears in bringup, the replay and the
 simulator."""
@@ -11,20 +11,20 @@ from types import SimpleNamespace
 import pytest
 from rclpy.node import Node
 
-from hindrax_drivers.base import devices
-from hindrax_drivers.layout.composition import GROUPS, NODE_CLASSES
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.layout.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, EmulatedDevices
-from hindrax_drivers.layout.health import STATUS_OF_NODE
-from hindrax_drivers.recording import replay_devices
-from hindrax_drivers.testing import ros_context
+from hindrax_common.base import devices
+from hindrax_bringup.layout.composition import GROUPS, NODE_CLASSES
+from hindrax_common.config import default_config_path, load_config
+from hindrax_bringup.layout.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, EmulatedDevices
+from hindrax_bringup.layout.health import STATUS_OF_NODE
+from hindrax_bringup.recording import replay_devices
+from hindrax_common.testing import ros_context
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_sim.hardware import VirtualHardware
 from hindrax_sim.simulator import Simulator
 from hindrax_sim.truth import truth_from_mapping
 from hindrax_msgs.msg import RawDeviceData
 
-BAG = Path(__file__).resolve().parents[2] / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"
+BAG = Path(__file__).resolve().parents[2] / "hindrax_bringup" / "test" / "data" / "sim_drivers_3s"
 NAMES = {"dvl75", "ping1d", "ms5837", "icm20948", "pca9685"}
 SERIAL = {d.name for d in devices.DEVICES if d.transport == devices.SERIAL}
 I2C = {d.name for d in devices.DEVICES if d.transport == devices.I2C}

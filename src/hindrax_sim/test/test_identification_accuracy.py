@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim.campaign import Campaign
 from hindrax_fit.fit.campaign_fit import identify_all_with_errors
 from hindrax_sim.truth import load_truth

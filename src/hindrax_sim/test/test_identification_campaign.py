@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim.campaign import Campaign
 from hindrax_fit.fit.campaign_fit import identify_dof
 from hindrax_onboard.control.maneuvers import PoolBox, dof_authority, level_ladder

@@ -12,10 +12,10 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient
 from sensor_msgs.msg import Imu, Range
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.base import frames
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_onboard.identification.online.executive import ordered_samples
 from hindrax_onboard.vehicle.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
@@ -232,7 +232,7 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
 def test_node_parameters_are_described_read_only_and_checked():
     from rclpy.parameter import Parameter
 
-    from hindrax_drivers.config import ConfigError
+    from hindrax_common.config import ConfigError
     from hindrax_onboard.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
@@ -255,7 +255,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
     parameter -> status 1 with one line naming key, value and allowed range."""
     import subprocess
 
-    from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable
+    from hindrax_common.testing import child_env, child_process, interrupt, python_executable
 
     cmd = [python_executable(), "-m", "hindrax_onboard.identification.online.node", "--ros-args", "--params-file",
            str(default_config_path())]
@@ -330,7 +330,7 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
     flag is known while idle from the ESC's latched ``esc/output_state``."""
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
+    from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
     from hindrax_onboard.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
 
     cfg = load_config(default_config_path())

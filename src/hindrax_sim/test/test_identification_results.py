@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import DOFS, default_config_path, load_config
+from hindrax_common.config import DOFS, default_config_path, load_config
 from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         regressor_matrix, truth_parameters)
 from hindrax_fit.assessment.report import write_report

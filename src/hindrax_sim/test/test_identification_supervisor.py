@@ -19,12 +19,12 @@ from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_bringup.supervisor.node import SupervisorNode
+from hindrax_common.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_onboard.identification.online.node import IdentificationNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm

@@ -8,7 +8,7 @@ from rclpy.executors import Executor, TimeoutException
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_sim.graph.ordered_executor import LeanWaitExecutor
 
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.estimation.priors import priors_from_config
 from hindrax_sim.campaign import Campaign
 from hindrax_onboard.identification.model.dof_model import (parameter_names, rigid_inertia,

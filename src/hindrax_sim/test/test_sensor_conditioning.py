@@ -9,8 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.base import frames
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim.campaign import Campaign
 from hindrax_fit.fit.campaign_fit import rate_bias_against_angle
 from hindrax_onboard.vehicle.fusion import smooth_with_rate

@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 import serial
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.dvl75 import protocol as dvl
 from hindrax_drivers.pca9685 import protocol as pca
-from hindrax_drivers.testing import wait_until
+from hindrax_common.testing import wait_until
 from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
-from hindrax_drivers.transport.i2c import I2CDevice
-from hindrax_drivers.transport.pty_device import PtyDevice
-from hindrax_drivers.transport.serial_transport import SerialTransport
+from hindrax_common.transport.i2c import I2CDevice
+from hindrax_common.transport.pty_device import PtyDevice
+from hindrax_common.transport.serial_transport import SerialTransport
 from hindrax_sim.hardware import HANDOFF_TIMEOUT_S, SerialLockStep, VirtualHardware
 from hindrax_sim.simulator import Simulator
 

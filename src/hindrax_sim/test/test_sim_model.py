@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import DOFS, default_config_path, load_config
+from hindrax_common.base import frames
+from hindrax_common.config import DOFS, default_config_path, load_config
 from hindrax_sim import model as mdl
 from hindrax_sim.simulator import PulseWidthError, Simulator
 from hindrax_sim.thrusters import Thrusters

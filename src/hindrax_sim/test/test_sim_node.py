@@ -13,9 +13,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import child_env, child_process, python_executable, ros_context, wait_until
+from hindrax_common.base import frames
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.testing import child_env, child_process, python_executable, ros_context, wait_until
 from hindrax_sim.node import SimulatorNode, time_msg
 from hindrax_msgs.msg import ThrusterPwm
 

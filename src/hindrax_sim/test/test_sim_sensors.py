@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim import sensors as sn
 from hindrax_sim.model import rotation_matrix_from_quaternion
 from hindrax_sim.pool import Pool

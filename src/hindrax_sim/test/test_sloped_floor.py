@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.dvl75.protocol import BEAM_TILT_RAD
 from hindrax_onboard.vehicle.state import SensorState
 from hindrax_onboard.vehicle.signals import samples_from_dvl
@@ -93,7 +93,7 @@ def test_dvl_emulator_reports_the_simulated_beam_ranges():
     import serial
 
     from hindrax_drivers.dvl75 import protocol as dvl
-    from hindrax_drivers.testing import wait_until
+    from hindrax_common.testing import wait_until
     from hindrax_sim.hardware import VirtualHardware
 
     vehicle = load_config(default_config_path())

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.vehicle.uncertainty import measurement_settings
 from hindrax_onboard.identification.online.estimators import OnlineDofEstimator
 from hindrax_sim.simulator import Simulator
@@ -94,7 +94,8 @@ def test_no_node_or_estimator_names_a_truth_only_key():
     names ``simulation.sensors.*`` or ``disturbances.*``, by string or as ``cfg.simulation.sensors``: docstrings
     aside, they are not read."""
     offenders = []
-    roots = [SRC / p / p for p in ("hindrax_drivers", "hindrax_onboard", "hindrax_fit", "hindrax_tools")]
+    roots = [SRC / p / p for p in ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard",
+                                   "hindrax_fit", "hindrax_tools")]
     for root in roots:
         for path in root.rglob("*.py"):
             rel = path.relative_to(root).as_posix()
@@ -131,7 +132,7 @@ def test_estimators_tune_from_the_declared_noise(vehicle):
 def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp_path):
     """``hindrax run --truth FILE``'s graph: the simulator and the emulators get the truth, every node the vehicle
     file (their parameters hold no truth-only key and the vehicle's thrust lag)."""
-    from hindrax_drivers.testing import ros_context
+    from hindrax_common.testing import ros_context
     from hindrax_sim.graph.bringup import build_graph
 
     p = tmp_path / "truth.yaml"

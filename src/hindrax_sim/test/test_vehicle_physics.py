@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hindrax_drivers.allocation.from_config import thrust_curve_from_config
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_bringup.allocation.from_config import thrust_curve_from_config
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.base.frames import wrap_angle
 from hindrax_sim.thrusters import Thrusters
 from hindrax_onboard.vehicle.rigid_body import rigid_body_mass_matrix
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag

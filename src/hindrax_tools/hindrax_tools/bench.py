@@ -20,10 +20,10 @@ import time
 from pathlib import Path
 
 from hindrax_tools import results_doc
-from hindrax_drivers.process.dds_transport import loopback_transport
+from hindrax_common.process.dds_transport import loopback_transport
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-loopback_transport()  # the vehicle's transport (hindrax_drivers.process.dds_transport)
+loopback_transport()  # the vehicle's transport (hindrax_common.process.dds_transport)
 
 #: benchmark name -> the modules of :mod:`hindrax_tools.benchmarks` whose rows form its
 #: section, each with ``run(quick)``; a section's first module is named like it

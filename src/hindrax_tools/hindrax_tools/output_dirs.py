@@ -2,7 +2,7 @@
 
 A result (``hindrax run``'s campaign, ``hindrax ident bag``'s identification) is never written into a folder that
 holds another one: the default folder is new, ``<root>/<input>_YYYY_MM_DD-HH_MM_SS`` (the recorder's bag naming,
-:mod:`hindrax_drivers.recording.bag_dir`, created atomically with ``os.mkdir``), and when that name is taken (two
+:mod:`hindrax_bringup.recording.bag_dir`, created atomically with ``os.mkdir``), and when that name is taken (two
 runs in the same second) the next free ``_1``, ``_2``, ... is used and one line says so. A folder named with
 ``--out`` must be new or empty, or the command refuses in one line. ``<root>/latest`` is moved (atomically: a new
 symbolic link renamed over the old) only when a result is complete, so it never points at an interrupted run.
@@ -13,7 +13,7 @@ import datetime as _dt
 import os
 from pathlib import Path
 
-from hindrax_drivers.recording.bag_dir import bag_dir_name, new_bag_dir
+from hindrax_bringup.recording.bag_dir import bag_dir_name, new_bag_dir
 
 __all__ = ["OutputDirError", "explicit_result_dir", "new_result_dir", "point_latest"]
 

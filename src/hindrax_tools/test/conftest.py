@@ -51,8 +51,8 @@ def ballast_goal_on_the_graph(tmp_path_factory) -> SimpleNamespace:
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from std_srvs.srv import Trigger
 
-    from hindrax_drivers.config import default_config_path
-    from hindrax_drivers.testing import ros_context, wait_until
+    from hindrax_common.config import default_config_path
+    from hindrax_common.testing import ros_context, wait_until
     from hindrax_sim.graph.bringup import build_graph
     from hindrax_sim.graph.graph_campaign import VirtualOperator
     from hindrax_onboard.identification.online import executive

@@ -8,9 +8,9 @@ import pytest
 
 from hindrax_drivers.pca9685 import protocol as p
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.i2c import I2CDevice
-from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.i2c import I2CDevice
+from hindrax_common.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
 
 def test_socket_bus_serves_the_emulated_bus(tmp_path):
@@ -44,7 +44,7 @@ def _values(directory):
     """A parameter-file writer that also keeps what it wrote, to read the values back."""
     import yaml
 
-    from hindrax_drivers.layout.launch_xml import write_parameter_file
+    from hindrax_bringup.layout.launch_xml import write_parameter_file
 
     written = []
 
@@ -62,15 +62,15 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     inc.write_text('<launch><arg name="rec" default="false" description="d"/><arg name="dir" default="runs" '
                    'description="d"/>'
                    '<node pkg="hindrax_drivers" exec="esc_node" name="esc">'
-                   '<param from="$(find-pkg-share hindrax_drivers)/config/hindrax.yaml"/>'
+                   '<param from="$(find-pkg-share hindrax_common)/config/hindrax.yaml"/>'
                    '<remap from="wrench" to="pilot/wrench"/></node>'
-                   '<node pkg="hindrax_drivers" exec="recorder_node" name="recorder" if="$(var rec)">'
+                   '<node pkg="hindrax_bringup" exec="recorder_node" name="recorder" if="$(var rec)">'
                    '<param name="output_dir" value="$(var dir)"/></node></launch>')
     outer = tmp_path / "outer.launch.xml"
     outer.write_text(f'<launch><arg name="out" default="x" description="d"/>'
                      f'<include file="{inc}"><arg name="rec" value="true"/><arg name="dir" value="$(var out)/bags"/>'
                      f'</include><group><let name="g" value="sensors"/>'
-                     f'<node pkg="hindrax_drivers" exec="$(var g)_node" respawn="true"/></group>'
+                     f'<node pkg="hindrax_bringup" exec="$(var g)_node" respawn="true"/></group>'
                      f'<node pkg="hindrax_drivers" exec="static_tf_node" unless="true"/>'
                      f'<node pkg="foxglove_bridge" exec="foxglove_bridge" if="false"/></launch>')
     esc, rec, group = launch_processes(outer, {"out": "/data"})
@@ -78,14 +78,14 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     assert (esc.label, esc.module) == ("esc", "hindrax_drivers.pca9685.node:main")
     # the remap reaches the process (the bench's former reader of its own dropped it)
     assert esc.process.ros_arguments(write) == ["--ros-args", "-r", "__node:=esc", "--params-file",
-                                   str(package_share("hindrax_drivers") / "config/hindrax.yaml"),
+                                   str(package_share("hindrax_common") / "config/hindrax.yaml"),
                                    "-r", "wrench:=pilot/wrench"]
     args = rec.process.ros_arguments(write)
     assert args[:4] == ["--ros-args", "-r", "__node:=recorder", "--params-file"]
     assert written == [{"output_dir": "/data/bags"}]
     # a composed process has no name: its nodes keep theirs; its row is the executable without _node
     assert (group.process.name, group.label, group.module) == (
-        None, "sensors", "hindrax_drivers.layout.composition:sensors_main")
+        None, "sensors", "hindrax_bringup.layout.composition:sensors_main")
     with pytest.raises(ValueError, match="outt"):
         launch_processes(outer, {"outt": "/data"})
     outer.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
@@ -101,7 +101,7 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
     entries = [p.module for p in procs]
     # the identification node, the controller and the recorder, in one process (hindrax_onboard.composition)
     assert "hindrax_onboard.composition:ident_record_main" in entries
-    assert not [p for p in procs if p.module.startswith("hindrax_drivers.recording")]  # recorded once
+    assert not [p for p in procs if p.module.startswith("hindrax_bringup.recording")]  # recorded once
     controller = next(p for p in procs if p.module == "hindrax_onboard.composition:ident_record_main")
     assert controller.process.node_names == ("identification", "controller", "recorder")
     write, written = _values(tmp_path)
@@ -185,7 +185,7 @@ def test_node_processes_import_neither_the_pool_nor_scipy():
     import subprocess
     import sys
 
-    from hindrax_drivers.testing import child_env
+    from hindrax_common.testing import child_env
     from hindrax_tools.benchmarks.launch_layout import launch_processes, package_share
     from hindrax_tools.benchmarks.stack import LAUNCH_FILE
 
@@ -208,7 +208,7 @@ def test_node_processes_import_neither_the_pool_nor_scipy():
 _PROFILED_NODE = r"""
 from rclpy.node import Node
 
-from hindrax_drivers.node_support.node_common import run_node
+from hindrax_common.node_support.node_common import run_node
 
 
 class ProfiledProbe(Node):
@@ -240,7 +240,7 @@ def test_a_profiled_node_process_writes_its_profile_although_it_ends_itself(tmp_
     import subprocess
     import threading
 
-    from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
+    from hindrax_common.testing import child_env, child_process, interrupt, python_executable, wait_until
     from hindrax_tools.benchmarks.launch_node import PROFILE_ENV
 
     (tmp_path / "profiled_probe.py").write_text(_PROFILED_NODE)

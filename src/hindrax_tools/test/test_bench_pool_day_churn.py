@@ -5,8 +5,8 @@ the gap of each heartbeat is its own, and a silent one is infinite."""
 from __future__ import annotations
 
 import pytest
-from hindrax_drivers.gateway.interface import INTERFACE
-from hindrax_drivers.node_support.liveness import HEARTBEAT_NAMES
+from hindrax_bringup.gateway.interface import INTERFACE
+from hindrax_common.node_support.liveness import HEARTBEAT_NAMES
 
 from hindrax_tools.benchmarks.participant_churn import (INTERNAL_TOPICS, _Watch,
                                                         subscriber_argv, topside_topics)

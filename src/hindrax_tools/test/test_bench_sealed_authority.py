@@ -1,13 +1,13 @@
 """The safety bench's authority rows (hindrax_tools.benchmarks.sealed_authority) count what
 they claim: a UDP socket
-on every address (read from /proc by hindrax_drivers.process.proc_sockets) and an accepted unsigned request are counted;
+on every address (read from /proc by hindrax_common.process.proc_sockets) and an accepted unsigned request are counted;
 loopback and multicast sockets and refused requests are not."""
 from __future__ import annotations
 
 import os
 import socket
 
-from hindrax_drivers.process.proc_sockets import parse_udp_table, reachable_from_network, udp_sockets
+from hindrax_common.process.proc_sockets import parse_udp_table, reachable_from_network, udp_sockets
 
 from hindrax_tools.benchmarks.sealed_authority import exposure_row, signing_rows
 

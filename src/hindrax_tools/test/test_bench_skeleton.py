@@ -10,8 +10,8 @@ import subprocess
 import pytest
 import rclpy
 
-from hindrax_drivers.layout.launch_xml import write_parameter_file
-from hindrax_drivers.testing import (child_env, child_process, python_executable, ros_context,
+from hindrax_bringup.layout.launch_xml import write_parameter_file
+from hindrax_common.testing import (child_env, child_process, python_executable, ros_context,
                                      wait_until)
 from hindrax_tools.benchmarks import stack
 from hindrax_tools.benchmarks.launch_layout import launch_processes, package_share

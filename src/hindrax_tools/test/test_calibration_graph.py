@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import ConfigError, default_config_path, load_config, ros_parameters_from_yaml
+from hindrax_common.config import ConfigError, default_config_path, load_config, ros_parameters_from_yaml
 from hindrax_tools import cli
 from hindrax_onboard.identification.online import executive
 from hindrax_sim.graph.graph_campaign import VirtualOperator, parse_prompt

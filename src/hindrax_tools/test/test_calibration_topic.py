@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_onboard.identification.model import calibration_topic
 from hindrax_onboard.identification.model.dof_model import parameter_names
@@ -89,7 +89,7 @@ def _write_campaign_bag(path, cfg, calibration_msg, cut_s=None):
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import FluidPressure, Imu
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
 
     n = len(cfg.thrusters.thrusters)
@@ -233,7 +233,7 @@ def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recor
     recorder on: no calibration message while the step runs; when it ends the node publishes the scale it measured
     (its record's numbers, exactly); a subscriber that arrives afterwards still gets it (transient local), and the
     bag holds it."""
-    from hindrax_drivers.recording.reader import BagReader
+    from hindrax_bringup.recording.reader import BagReader
 
     run = ballast_goal_on_the_graph
     assert run.calibration_before_end == []  # nothing before the step's result exists

@@ -8,7 +8,7 @@ import subprocess
 import pytest
 from domain_coordinator import domain_id
 
-from hindrax_drivers.testing import child_env, python_executable
+from hindrax_common.testing import child_env, python_executable
 
 pytestmark = pytest.mark.ros
 
@@ -44,7 +44,7 @@ def test_health_refuses_an_undeclared_launch_argument_in_one_line():
 def test_bringup_without_sim_says_the_vehicle_runs_the_launch_file():
     from hindrax_tools.commands.bringup import VEHICLE_NOTICE
 
-    assert "ros2 launch hindrax_drivers vehicle.launch.xml" in VEHICLE_NOTICE
+    assert "ros2 launch hindrax_bringup vehicle.launch.xml" in VEHICLE_NOTICE
     help_text = hindrax("bringup", "--help").stdout
     assert "the vehicle runs the launch" in " ".join(help_text.split())
     # a configuration error stops it after the notice (no hardware is opened here)

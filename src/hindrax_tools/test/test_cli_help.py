@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-HEAVY = ("numpy", "scipy", "rclpy", "yaml", "mcap", "hindrax_drivers")
+HEAVY = ("numpy", "scipy", "rclpy", "yaml", "mcap", "hindrax_common", "hindrax_drivers", "hindrax_bringup")
 
 _PROBE = """
 import json, sys

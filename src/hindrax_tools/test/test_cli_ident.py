@@ -16,7 +16,7 @@ import shutil
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_onboard.estimation.thruster_fit import point_reflection
 from hindrax_fit.assessment.results import read_identification

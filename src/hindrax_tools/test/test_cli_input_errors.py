@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from hindrax_drivers.testing import child_env
+from hindrax_common.testing import child_env
 from hindrax_tools import cli
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_sim import control_evaluate as ev
 from hindrax_onboard.control.model import ControlModel, model_from_config

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.identification.online.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band,
                                                             design_signal, steady_speed)
 

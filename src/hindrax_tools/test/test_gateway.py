@@ -29,12 +29,12 @@ import yaml
 from domain_coordinator import domain_id
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.config import default_config_path
-from hindrax_drivers.gateway.interface import relays
-from hindrax_drivers.gateway.operator_signing import Signer, create_key, load_key
-from hindrax_drivers.layout.launch_xml import read_launch
-from hindrax_drivers.layout.process_runner import ProcessRunner
-from hindrax_drivers.testing import child_env, ros_context, wait_until
+from hindrax_common.config import default_config_path
+from hindrax_bringup.gateway.interface import relays
+from hindrax_bringup.gateway.operator_signing import Signer, create_key, load_key
+from hindrax_bringup.layout.launch_xml import read_launch
+from hindrax_bringup.layout.process_runner import ProcessRunner
+from hindrax_common.testing import child_env, ros_context, wait_until
 
 REPO = Path(__file__).resolve().parents[3]
 WAIT_S = 60.0
@@ -185,7 +185,7 @@ def vehicle_file(tmp: Path, name: str) -> Path:
 
 def gateway_process(config: Path, topside: int):
     """The gateway's process as vehicle.launch.xml declares it."""
-    procs = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml",
+    procs = read_launch(REPO / "src/hindrax_bringup/launch/vehicle.launch.xml",
                         {"config": str(config), "topside_domain_id": str(topside)},
                         find_share=lambda pkg: REPO / "src" / pkg)
     (gateway,) = [p for p in procs if p.label == "gateway"]
@@ -333,7 +333,7 @@ class Topside:
 
 @pytest.fixture
 def topside(pool):
-    from hindrax_drivers.testing import ros_context
+    from hindrax_common.testing import ros_context
 
     with ros_context(pool["topside"]) as ctx:
         side = Topside(ctx, pool)

@@ -27,9 +27,9 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.recording.reader import BagReader
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
+from hindrax_bringup.recording.reader import BagReader
 from hindrax_fit.assessment.pipeline import OverlappedFits, _ready, identify_bag
 from hindrax_fit.bag_input import from_bag
 from hindrax_fit.fit.campaign_fit import fit_dofs
@@ -68,7 +68,7 @@ def write_surge_campaign_bag(path, cfg, seed: int = 5, walk_m_s: float = 0.0, tr
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import FluidPressure
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
 
     rng = np.random.default_rng(seed)

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_onboard.identification.model.dof_model import truth_parameters
 from hindrax_fit.assessment.pipeline import fit_bags
@@ -190,7 +190,7 @@ def _small_bag(path, seconds=30.0, wrench_frame="base_link", child_frame="base_l
     from nav_msgs.msg import Odometry
     from rclpy.serialization import serialize_message
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
 
     with BagWriter(path, WriterOptions(fsync=False)) as w:
         w.add_topic("/wrench", "geometry_msgs/msg/WrenchStamped")
@@ -291,7 +291,7 @@ def test_thruster_widths_need_the_vehicle_file_and_go_through_its_thrust_model(t
     the vehicle's); with it, neutral widths give zero force and the thrust lag is reported."""
     from rclpy.serialization import serialize_message
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_msgs.msg import Dvl, ThrusterPwm
 
     cfg = load_config(default_config_path())
@@ -324,7 +324,7 @@ def test_unknown_esc_output_is_missing_force_not_neutral_thrust(tmp_path):
     is cut out of the fitted spans: no chunk covers it, no force is held across it, and it is counted."""
     from rclpy.serialization import serialize_message
 
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_msgs.msg import Dvl, ThrusterPwm
 
     cfg = load_config(default_config_path())

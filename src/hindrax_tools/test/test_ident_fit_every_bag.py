@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from hindrax_drivers.config import default_config_path
-from hindrax_drivers.recording.reader import BagReader
+from hindrax_common.config import default_config_path
+from hindrax_bringup.recording.reader import BagReader
 from hindrax_tools import cli
 from hindrax_fit.bag_input.any_topics import ACCEPTED
 

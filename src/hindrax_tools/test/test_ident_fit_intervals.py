@@ -19,7 +19,7 @@ import pytest
 import yaml
 from scipy import signal, stats
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_fit.fit import fit_core
 from hindrax_sim.piloted_bag import PilotSettings, write_piloted_bag

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_sim.piloted_bag import PilotSettings, write_piloted_bag
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import FluidPressure
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import child_env
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.testing import child_env
 from hindrax_fit.bag_input.from_bag import BagContentError, record_from_messages
 from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 
@@ -152,9 +152,9 @@ def test_bag_record_is_the_messages_record_by_either_decoder(tmp_path, monkeypat
     topic from the bag's own definitions); both give the record of the rclpy messages themselves."""
     from rclpy.serialization import serialize_message
 
-    from hindrax_drivers.recording import reader
-    from hindrax_drivers.recording.msgtypes import TypeNotInstalledError
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_bringup.recording import reader
+    from hindrax_bringup.recording.msgtypes import TypeNotInstalledError
+    from hindrax_bringup.recording.writer import BagWriter, WriterOptions
     from hindrax_fit.bag_input.from_bag import record_from_bag
 
     cfg = load_config(default_config_path())

@@ -32,7 +32,7 @@ import json
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import DOFS, default_config_path, load_config
+from hindrax_common.config import DOFS, default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_onboard.estimation.least_squares import EstimationError
 from hindrax_onboard.estimation.priors import (Geometry, PriorInputs, added_mass_priors, empirical_priors,

@@ -4,7 +4,7 @@ import io
 import sys
 import threading
 
-from hindrax_drivers.testing import wait_until
+from hindrax_common.testing import wait_until
 from hindrax_tools import progress_run
 from hindrax_sim.progress_line import ProgressLine, Ticker
 from hindrax_tools.results_doc import duration_rows, record_duration

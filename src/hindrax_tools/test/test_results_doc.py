@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from hindrax_drivers.testing import child_env, python_executable
+from hindrax_common.testing import child_env, python_executable
 from hindrax_tools.results_doc import ResultsDocError, markdown_table, write_section
 
 

@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.testing import child_process, own_domain_env, wait_until
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_common.testing import child_process, own_domain_env, wait_until
 from hindrax_tools import cli
 from hindrax_onboard.commands import decode
 

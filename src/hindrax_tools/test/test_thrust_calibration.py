@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_fit.fit.calibration import apply_thrust_calibration, calibration_section, thrust_scales
 from hindrax_onboard.identification.online.executive import Executive
@@ -59,7 +59,7 @@ def _rows(cfg, a_v=0.93, b_v=0.87, a_h=0.98, b_h=0.84):
 def test_steps_measure_each_direction_and_the_wrench_is_rebuilt_per_thruster():
     from scipy import signal
 
-    from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
+    from hindrax_bringup.allocation.matrix import thrust_allocation_matrix
     from hindrax_fit.fit.calibration import scale_model
 
     cfg = load_config(default_config_path())

@@ -10,7 +10,7 @@ import shutil
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_onboard.estimation.thruster_fit import fit_thruster_curve, point_reflection
 from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,

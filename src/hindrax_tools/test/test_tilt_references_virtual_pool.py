@@ -26,9 +26,9 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.base import frames
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_sim.simulator import Simulator
 from hindrax_sim.truth import truth_dir

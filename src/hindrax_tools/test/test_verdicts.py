@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_onboard.identification.model.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         truth_parameters)
 from hindrax_fit.assessment.verdicts import (apply_verdicts, assess_dof,

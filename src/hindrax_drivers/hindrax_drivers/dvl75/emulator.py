@@ -4,7 +4,7 @@ Layer 2 of the DVL-75 driver (docs/architecture.md §2): it speaks the DVL's ASC
 device side, driven by a *truth source* (simulator, bag replay or test script), with fault injection
 in its API.  It does no I/O and reads no clock: the host's bytes come in through
 :meth:`Dvl75Emulator.feed_host_bytes` and the device's bytes come out of
-:meth:`Dvl75Emulator.poll` ``(t_s)``; :class:`hindrax_drivers.transport.pty_device.PtyDevice` serves
+:meth:`Dvl75Emulator.poll` ``(t_s)``; :class:`hindrax_common.transport.pty_device.PtyDevice` serves
 it on a pseudo-terminal so the real pyserial path runs against it.
 
 Behaviour (docs/devices.md §1.1-§1.6, especially the §1.6 checklist):
@@ -52,9 +52,9 @@ from typing import Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..base import frames
-from ..base.frames import wrap_angle
-from ..transport.pty_device import PeriodicSchedule, StreamFaults
+from hindrax_common.base import frames
+from hindrax_common.base.frames import wrap_angle
+from hindrax_common.transport.pty_device import PeriodicSchedule, StreamFaults
 from .protocol import (BEAM_TILT_RAD, DvlExtended, DvlGprmc, DvlLineFramer, DvlParseError,
                        DvlPositionDelta, beam_directions_frd, format_dvext, format_dvpdl,
                        format_dvtxt, format_gprmc, parse_command, parse_line)

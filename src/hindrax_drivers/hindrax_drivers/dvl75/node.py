@@ -58,10 +58,10 @@ from sensor_msgs.msg import Range
 
 from hindrax_msgs.msg import Dvl
 
-from ..config.typed_sections import SensorsDvl75Section
-from ..base.device_clock import DeviceClockSync
-from ..node_support.node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
-from ..node_support.serial_node import SerialDeviceNode, range_message
+from hindrax_common.config.typed_sections import SensorsDvl75Section
+from hindrax_common.base.device_clock import DeviceClockSync
+from hindrax_common.node_support.node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
+from hindrax_common.node_support.serial_node import SerialDeviceNode, range_message
 from .protocol import DvlExtended, DvlGprmc, DvlPositionDelta, DvlText, startup_commands
 from .report import DvlReport, DvlReportBuilder, altitude_range_m
 from .stream import DvlStreamDecoder

@@ -14,7 +14,7 @@ Conventions and sources
   v_CG = v_DVL - omega x r gives the base_link velocity; omega is taken from the ``$DVPDL`` angle
   deltas over ``dtu`` (small-angle: Euler-angle increments ~ body rotation increments). The position
   delta is corrected the same way (delta_p_CG = delta_p_DVL - delta_theta x r), so velocity equals
-  delta_position / delta_time. Conversion FRD -> FLU through :mod:`hindrax_drivers.base.frames` only.
+  delta_position / delta_time. Conversion FRD -> FLU through :mod:`hindrax_common.base.frames` only.
 - Validity (docs/architecture.md §8 "lost DVL lock"): a velocity is published only when ``$DVPDL`` confidence > 0,
   ``dtu`` > 0, and the latest ``$DVEXT`` (if one arrived within ``max_extended_age_s``) reports bottom
   lock. Otherwise velocity and delta position are NaN, ``velocity_valid`` is False and the covariance
@@ -47,7 +47,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..base.frames import frd_to_flu
+from hindrax_common.base.frames import frd_to_flu
 from .protocol import DvlExtended, DvlPositionDelta
 
 __all__ = ["DvlReport", "DvlReportBuilder", "UNKNOWN_COVARIANCE_3X3", "altitude_range_m"]

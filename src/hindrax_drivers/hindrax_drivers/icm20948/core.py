@@ -32,7 +32,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from ..transport.i2c import I2CError, RegisterWrite
+from hindrax_common.transport.i2c import I2CError, RegisterWrite
 from . import protocol as p
 from .mounting import mounting_rotation
 
@@ -62,7 +62,7 @@ MAG_PUBLISH_HZ = 20.0
 
 
 class I2CPort(Protocol):
-    """What the core needs of one device on the bus (:class:`~hindrax_drivers.transport.i2c.I2CDevice`)."""
+    """What the core needs of one device on the bus (:class:`~hindrax_common.transport.i2c.I2CDevice`)."""
 
     address: int
 

@@ -31,7 +31,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..transport.emulated_i2c import RegisterPointerEmulator, remote_io_error
+from hindrax_common.transport.emulated_i2c import RegisterPointerEmulator, remote_io_error
 from . import protocol as p
 
 __all__ = ["from_config", "Icm20948Emulator", "Ak09916Emulator", "ImuTruth"]

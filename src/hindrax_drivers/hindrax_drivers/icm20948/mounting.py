@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..base.frames import quaternion_from_euler_ned, rotation_matrix_from_quaternion
+from hindrax_common.base.frames import quaternion_from_euler_ned, rotation_matrix_from_quaternion
 
 __all__ = ["mounting_rotation"]
 

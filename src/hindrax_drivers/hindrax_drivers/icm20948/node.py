@@ -3,7 +3,7 @@ the messages. The start-up steps, each poll's reads, the data-ready, chip-reset 
 bias, the noise figures and the publishing rates are :mod:`hindrax_drivers.icm20948.core` (see its docstring).
 
 The start-up runs from ROS timers (datasheet waits as one-shot timers, not sleeps); a failure is an ERROR with the
-reason and is retried (:class:`~hindrax_drivers.node_support.i2c_node.I2cSensorNode`); a silent magnetometer is a WARN,
+reason and is retried (:class:`~hindrax_common.node_support.i2c_node.I2cSensorNode`); a silent magnetometer is a WARN,
 and no ``imu/mag``. Polls run at the achieved 1125 / (1 + div) Hz (100 Hz set -> 102.27 Hz); an I2C failure drops that
 poll, failures lasting :data:`REINIT_AFTER_S` restart the start-up; 2 s of bit-identical samples raise the ERROR
 ``stuck``. Publishes (reliable, depth 10; stamped after the poll's reads; frame ``imu_link``, base_link's orientation at
@@ -22,10 +22,10 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from std_msgs.msg import Header
 
-from ..node_support.i2c_node import I2cSensorNode
-from ..cdr.lean_cdr import imu_cdr
-from ..node_support.node_common import declare_frame_ids, load_node_config, run_node
-from ..transport.i2c import I2CDevice, I2CError
+from hindrax_common.node_support.i2c_node import I2cSensorNode
+from hindrax_common.cdr.lean_cdr import imu_cdr
+from hindrax_common.node_support.node_common import declare_frame_ids, load_node_config, run_node
+from hindrax_common.transport.i2c import I2CDevice, I2CError
 from . import protocol as p
 from .core import (BankedRegisters, DataReadyGate, FrozenBlockWatch, GyroBias, GyroBiasResult, ImuSettings,
                    MagnetometerWatch, MagNackFilter, PollFailures, StartupSequence, diagnostic_values, read_asleep,
@@ -200,7 +200,7 @@ class Icm20948Node(I2cSensorNode):
         if self.bias.add(stamp.nanoseconds * 1e-9, sample.gyro_rad_s, sample.accel_m_s2) is not None:
             self._bias_done(self.bias.result)
         stamp_msg = stamp.to_msg()
-        # REP-145, no orientation estimate; serialised by rosbags (hindrax_drivers.cdr.lean_cdr), published as bytes
+        # REP-145, no orientation estimate; serialised by rosbags (hindrax_common.cdr.lean_cdr), published as bytes
         acc = self.rotation @ sample.accel_m_s2
         gyr = self.rotation @ (sample.gyro_rad_s - self.bias.bias_rad_s)
         self.pub_imu.publish(imu_cdr(stamp.nanoseconds, self.frames["frame_id"], acc, gyr, self.settings.accel_cov,

@@ -25,7 +25,7 @@ from typing import Iterable, NamedTuple, Sequence
 
 import numpy as np
 
-from ..transport.i2c import RegisterWrite
+from hindrax_common.transport.i2c import RegisterWrite
 
 __all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
            "flatten_writes", "reset_wake_sequence", "configure_sequence",

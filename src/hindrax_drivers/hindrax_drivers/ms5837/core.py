@@ -14,7 +14,7 @@
   one faster than ``max_depth_rate_m_s`` not confirmed by the next sample (``implausible_depth``). Garbage ADC words
   pass the pressure window in about 4.5 % of random pairs; the rate gate needs two consecutive ones to agree.
 - Zero depth (:class:`ZeroDepth`): the surface pressure becomes the mean of the last :data:`ZERO_DEPTH_WINDOW_S`;
-  refused while the ESC may be thrusting (:class:`hindrax_drivers.node_support.esc_state.ArmedWatch`'s reason) and when
+  refused while the ESC may be thrusting (:class:`hindrax_common.node_support.esc_state.ArmedWatch`'s reason) and when
   that mean is further than ``zero_depth_margin_pa`` from the pressure the node started with (a zero taken at 1.5 m
   would move every depth, and the depth limits with it, 1.5 m down).
 """

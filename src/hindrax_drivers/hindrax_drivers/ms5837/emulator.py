@@ -1,6 +1,6 @@
 """TE MS5837-30BA / -02BA device emulator (command-exact, I2C address 0x76).
 
-For :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`; the device side of
+For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device side of
 docs/devices.md §3.1 and §3.8:
 
 * commands: reset (0x1E), PROM read (0xA0 + 2k, MSB first), D1/D2 conversions with OSR, ADC read

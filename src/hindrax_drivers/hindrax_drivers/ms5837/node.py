@@ -14,7 +14,7 @@ geometry_msgs/PoseWithCovarianceStamped (frame ``odom``, ``position.z = -depth_m
 §3), ``raw/ms5837`` (a cycle's I2C transactions in one message), ``/diagnostics``. Service ``pressure/zero_depth``
 (std_srvs/Trigger): the surface pressure becomes the mean of the last second, also in the node's
 ``environment.surface_pressure_pa`` parameter; it and a change of that parameter are refused while the ESC reports
-armed or has not reported (:class:`hindrax_drivers.node_support.esc_state.ArmedWatch`), with the same reason; a
+armed or has not reported (:class:`hindrax_common.node_support.esc_state.ArmedWatch`), with the same reason; a
 change of the parameter also passes zero_depth's checks: at the surface, and within
 ``sensors.ms5837.zero_depth_margin_pa`` of the mean reading
 (:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`).
@@ -32,10 +32,10 @@ from sensor_msgs.msg import FluidPressure, Temperature
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
-from ..node_support.esc_state import ArmedWatch
-from ..node_support.i2c_node import I2cSensorNode
-from ..node_support.node_common import declare_frame_ids, load_node_config, run_node
-from ..transport.i2c import I2CDevice, I2CError
+from hindrax_common.node_support.esc_state import ArmedWatch
+from hindrax_common.node_support.i2c_node import I2cSensorNode
+from hindrax_common.node_support.node_common import declare_frame_ids, load_node_config, run_node
+from hindrax_common.transport.i2c import I2CDevice, I2CError
 from . import protocol as p
 from .core import (TEMPERATURE_RESOLUTION_C, DepthGate, Plausibility, ZeroDepth, adc_problem, check_prom,
                    depth_covariance, diagnostic_values, pressure_variance_pa2, stamp_offset_s, temperature_warning)

@@ -1,8 +1,8 @@
 """The ESC's PCA9685 at the register level (no ROS): start-up, read-back and the channel block writes.
 
 :class:`EscChip` holds what the ESC node believes is in the chip's registers and talks to it through an injected
-:class:`~hindrax_drivers.transport.i2c.I2CDevice` (``smbus2`` on the Pi, the emulated bus in tests). Every method
-raises :class:`~hindrax_drivers.transport.i2c.I2CError` when the chip does not answer; what that means for the
+:class:`~hindrax_common.transport.i2c.I2CDevice` (``smbus2`` on the Pi, the emulated bus in tests). Every method
+raises :class:`~hindrax_common.transport.i2c.I2CError` when the chip does not answer; what that means for the
 outputs (UNKNOWN, disarm, retry) is :class:`.core.EscCore`'s. Registers and sequences: :mod:`.protocol`
 (datasheet §7.3, docs/devices.md §5.1).
 """
@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..transport.i2c import I2CDevice, I2CError
+from hindrax_common.transport.i2c import I2CDevice, I2CError
 from . import protocol as p
 
 __all__ = ["EscChip", "channel_runs"]

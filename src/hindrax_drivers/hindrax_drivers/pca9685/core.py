@@ -33,8 +33,8 @@ Rules (one test row each in ``test/test_esc_core.py``):
 * **Chip results**: a failed configure, read-back or neutral write is a lost chip; a failed thrust write drops the
   command (the node writes neutral); a read-back mismatch asks for a re-initialisation; a result of a job posted
   before the chip was lost changes nothing but what is known to be on the wire.
-* **Watchdog**: armed, a command older than ``watchdog_timeout_s`` (ROS time) gives neutral; so does
-  :meth:`EscCore.watchdog_trip` (the node's steady-clock watchdog for a stopped ROS clock).
+* **Watchdog**: armed, a command older than ``watchdog_timeout_s`` (ROS time) gives neutral; so does no command
+  for ``steady_watchdog_s`` of steady time (:meth:`EscCore.steady_check`: a stopped ROS clock).
 * **Output**: armed with a fresh valid command -> the command's widths through :class:`EscOutput` (reversal,
   trim, slew limit, PCA9685 counts rounded away from neutral outside the deadband); otherwise neutral.
 """
@@ -46,7 +46,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..process.dds_transport import UNNAMED_NODE
+from hindrax_common.process.dds_transport import UNNAMED_NODE
 
 __all__ = ["OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING", "RETRY_MIN_S", "RETRY_MAX_S", "GUARD_CONFIRM_S",
            "COMMAND_NODE", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "EscOutput", "EscCore", "EscDecision",
@@ -296,25 +296,29 @@ class EscDecision:
 
 
 class EscCore:
-    """The ESC's state machine (module docstring). ``output``: the :class:`EscOutput`; ``clock``: steady time, s.
+    """The ESC's state machine (module docstring). ``output``: the :class:`EscOutput`; ``clock``: steady time, s;
+    ``period_s``: the node's tick period, s; ``steady_watchdog_s``: the steady-clock watchdog's timeout, s (default
+    ``watchdog_timeout_s``). Its state is read-only outside: only its methods change it.
 
-    Times: ``clock()`` for the chip, the arming time and the retries; ROS time ``ros_t_s`` (passed in) for the
-    command watchdog, so that a simulation's held time holds the watchdog too."""
+    Times: ``clock()`` for the chip, the arming time, the retries and the steady-clock watchdog; ROS time
+    ``ros_t_s`` (passed in) for the command watchdog, so that a simulation's held time holds the watchdog too."""
 
     def __init__(self, output: EscOutput, *, arming_time_s: float, watchdog_timeout_s: float,
-                 oscillator_calibrated: bool, clock: Callable[[], float],
-                 guard_confirm_s: float = GUARD_CONFIRM_S) -> None:
+                 oscillator_calibrated: bool, clock: Callable[[], float], period_s: float,
+                 steady_watchdog_s: float | None = None, guard_confirm_s: float = GUARD_CONFIRM_S) -> None:
         self.output = output
         self.arming_time_s = float(arming_time_s)
-        self.watchdog_s = float(watchdog_timeout_s)
+        self._watchdog_s = float(watchdog_timeout_s)
+        self._steady = SteadyWatchdog(period_s, watchdog_timeout_s if steady_watchdog_s is None else steady_watchdog_s,
+                                      clock())
         self.oscillator_calibrated = bool(oscillator_calibrated)
         self.clock = clock
         self.guard_confirm_s = float(guard_confirm_s)
-        self.armed = False
-        self.output_state = OUTPUT_UNKNOWN
+        self._armed = False
+        self._output_state = OUTPUT_UNKNOWN
         #: why the output is neutral or unknown now ('' when nothing is wrong)
         self.reason = "PCA9685 not configured yet"
-        self.command: np.ndarray | None = None
+        self._command: np.ndarray | None = None
         self.command_t_s: float | None = None  # ROS time of the command's arrival, s
         self.neutral_confirmed_at: float | None = None
         self.neutral_on_wire_since: float | None = None
@@ -332,6 +336,17 @@ class EscCore:
         self.rejected_commands = 0
         self.last_written: np.ndarray = output.neutral()
 
+    # the decided state, read-only outside (the node, its diagnostics, the tests and the benches read it)
+    armed = property(lambda self: self._armed)
+    output_state = property(lambda self: self._output_state)
+    #: the held command's widths, us (None: none held)
+    command = property(lambda self: self._command)
+    watchdog_s = property(lambda self: self._watchdog_s)
+    steady_watchdog_s = property(lambda self: self._steady.timeout_s)
+    steady_watchdog_trips = property(lambda self: self._steady.trips)
+    #: ``clock()`` of the last command taken (the benches' reference for the steady-clock watchdog)
+    last_command_s = property(lambda self: self._steady.last_command_s)
+
     # ------------------------------------------------------------------ chip
     def chip_attempt(self) -> None:
         """The node is about to (re)configure the chip: neutral is no longer confirmed until it reads back."""
@@ -344,19 +359,19 @@ class EscCore:
         self.neutral_confirmed_at = self.clock()
         self.retry_s = RETRY_MIN_S
         self.stale_width_possible = False
-        self.output_state = OUTPUT_NEUTRAL
+        self._output_state = OUTPUT_NEUTRAL
         self.last_written = self.output.channel_neutral().copy()
         self.reason = "holding neutral, disarmed"
 
     def chip_lost(self, reason: str) -> bool:
         """The chip cannot be written or read back: UNKNOWN, disarmed, no command, retry scheduled. Returns True
         when this is a new outage (for the node's log and counters)."""
-        new = self.output_state != OUTPUT_UNKNOWN or self.armed
+        new = self._output_state != OUTPUT_UNKNOWN or self._armed
         if not np.allclose(self.last_written, self.output.channel_neutral()):
             self.stale_width_possible = True
-        self.output_state = OUTPUT_UNKNOWN
-        self.armed = False
-        self.command = None
+        self._output_state = OUTPUT_UNKNOWN
+        self._armed = False
+        self._command = None
         self.neutral_confirmed_at = None
         self.neutral_on_wire_since = None
         self.retry_s = min(RETRY_MAX_S, self.retry_s * 2.0) if self.last_attempt is not None else RETRY_MIN_S
@@ -369,8 +384,8 @@ class EscCore:
 
     def chip_mismatch(self, reason: str) -> None:
         """A read-back found the chip changed (brown-out reset): disarmed; the node re-initialises it."""
-        self.armed = False
-        self.command = None
+        self._armed = False
+        self._command = None
         self.reason = reason
 
     def wrote(self, widths_us: np.ndarray) -> None:
@@ -378,7 +393,7 @@ class EscCore:
         a write that lands while the chip counts as lost (a bus call that came back after the stuck bound) leaves a
         width that nothing confirmed: unless it is neutral, the chip is retried at every tick (module docstring)."""
         self.last_written = np.asarray(widths_us, dtype=float).copy()
-        self.stale_width_possible = self.output_state == OUTPUT_UNKNOWN and \
+        self.stale_width_possible = self._output_state == OUTPUT_UNKNOWN and \
             not np.allclose(self.last_written, self.output.channel_neutral())
 
     def retry_due(self) -> bool:
@@ -411,16 +426,16 @@ class EscCore:
             return self._lost(f"PCA9685 read-back failed: {error}", "i2c_error")
         if kind == READBACK and mismatch:
             message = f"PCA9685 read-back mismatch: {mismatch}; re-initialised at neutral" + \
-                (", disarmed (re-arm after esc.arming_time_s)" if self.armed else "")
+                (", disarmed (re-arm after esc.arming_time_s)" if self._armed else "")
             self.chip_mismatch(message)
             return ChipOutcome("reinit", message, "chip_reinit")
         if kind == WRITE and error:
-            self.command = None
+            self._command = None
             return ChipOutcome("write_failed", f"fault: {error}", "output_exception")
         if error:
             return self._lost(f"cannot write neutral: {error}", "i2c_error")
         if kind != READBACK:
-            self.output_state = output_state
+            self._output_state = output_state
         return ChipOutcome("done")
 
     def _lost(self, reason: str, count: str) -> ChipOutcome:
@@ -437,7 +452,7 @@ class EscCore:
             self.neutral_on_wire_since = None
         elif self.neutral_on_wire_since is None:
             self.neutral_on_wire_since = self.clock()
-        if refusal and self.armed:
+        if refusal and self._armed:
             self.heartbeat_disarms += 1
             self.disarm(refusal)
             return refusal
@@ -451,8 +466,8 @@ class EscCore:
         self.command_source = fault
         self.command_unnamed = "" if fault else unnamed
         if fault or unnamed:
-            self.command = None
-        if fault and self.armed:
+            self._command = None
+        if fault and self._armed:
             self.disarm(fault)
             return fault
         return ""
@@ -496,53 +511,65 @@ class EscCore:
         refusal = self.arm_refusal(bus_error)
         if refusal:
             return refusal
-        self.armed = True
-        self.output_state = OUTPUT_NEUTRAL
-        self.command = None  # thrust only from commands that arrive after arming
+        self._armed = True
+        self._output_state = OUTPUT_NEUTRAL
+        self._command = None  # thrust only from commands that arrive after arming
         self.reason = ""
         return ""
 
     def disarm(self, reason: str) -> None:
         """Disarm (always accepted): no thrust until a new arm request."""
-        self.armed = False
-        self.command = None
+        self._armed = False
+        self._command = None
         self.reason = reason
 
     # ------------------------------------------------------------------ commands and output
     def on_command(self, ros_t_s: float, widths_us: Sequence[float], armed: bool) -> str:
         """A ThrusterPwm command arrived at ROS time ``ros_t_s``. Returns the fault ('' when it is valid); a fault
-        drops the held command, so the next :meth:`decide` gives neutral with the reason."""
+        drops the held command, so the next :meth:`decide` gives neutral with the reason. Any command restarts the
+        steady-clock watchdog."""
+        self._steady.command(self.clock())
         fault = self.command_source or self.command_unnamed or \
             command_fault(widths_us, armed, len(self.output.channels), self.output.min_us, self.output.max_us)
         if fault:
             self.rejected_commands += 1
-            self.command = None
+            self._command = None
             self.command_t_s = ros_t_s
             self.reason = f"command rejected: {fault}"
             return fault
-        self.command = np.array(widths_us, dtype=float)
+        self._command = np.array(widths_us, dtype=float)
         self.command_t_s = ros_t_s
         if self.reason.startswith("command rejected") or self.reason.startswith("watchdog"):
             self.reason = ""
         return ""
 
-    def watchdog_trip(self, reason: str) -> None:
-        """The node's steady-clock watchdog fired (ROS time stopped): drop the command."""
+    def steady_check(self, t_s: float) -> str:
+        """The steady-clock watchdog at steady time ``t_s`` (every safety tick; it covers a ROS clock that stopped,
+        where :meth:`decide` stands still): armed with a command held and none for ``steady_watchdog_s`` of
+        executor-alive time (:class:`SteadyWatchdog`) drops the command. Returns the trip's reason ('' none)."""
+        if not self._steady.check(t_s, self._armed and self._command is not None):
+            return ""
         self.watchdog_trips += 1
-        self.command = None
+        self.output_fault(f"steady-clock watchdog: no command for {self._steady.timeout_s:g} s")
+        return self.reason
+
+    def output_fault(self, reason: str) -> None:
+        """Drop the command (neutral until the next one) with ``reason``: a steady-clock watchdog trip, or a fault in
+        the node's output path (which writes neutral)."""
+        self._command = None
         self.reason = reason
 
     def decide(self, ros_t_s: float, dt_s: float) -> EscDecision:
         """The widths to write now (``dt_s``: since the previous commanded write, for the slew limit). Applies the
         ROS-time watchdog. Raises :class:`ValueError` from :class:`EscOutput` (the node writes neutral)."""
-        if self.armed and self.command is not None and self.command_t_s is not None \
-                and ros_t_s - self.command_t_s > self.watchdog_s:
+        if self._armed and self._command is not None and self.command_t_s is not None \
+                and ros_t_s - self.command_t_s > self._watchdog_s:
             self.watchdog_trips += 1
             self.watchdog_trip_t_s = ros_t_s
-            self.command = None
-            self.reason = f"watchdog: no command for {self.watchdog_s:g} s"
-        if self.armed and self.command is not None:
-            widths = self.output.on_grid(self.output.target(self.command, dt_s))
+            self._command = None
+            self.reason = f"watchdog: no command for {self._watchdog_s:g} s"
+        if self._armed and self._command is not None:
+            widths = self.output.on_grid(self.output.target(self._command, dt_s))
             return EscDecision(widths, OUTPUT_COMMANDING, "armed, commanding")
         return EscDecision(self.output.neutral(), OUTPUT_NEUTRAL,
-                           "armed, neutral" if self.armed else "disarmed, neutral", self.reason)
+                           "armed, neutral" if self._armed else "disarmed, neutral", self.reason)

@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from ..transport.emulated_i2c import RegisterPointerEmulator
+from hindrax_common.transport.emulated_i2c import RegisterPointerEmulator
 from . import protocol as p
 
 __all__ = ["from_config", "Pca9685Emulator", "WriteLogEntry"]

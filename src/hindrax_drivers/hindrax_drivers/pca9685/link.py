@@ -24,7 +24,7 @@ __all__ = ["ChipLink"]
 
 class ChipLink:
     """``core``: the ESC's :class:`~.core.EscCore`; ``worker``: its :class:`~.worker.ChipWorker`; ``diag``: the
-    node's :class:`~hindrax_drivers.node_support.node_common.DeviceDiagnostics`; ``log_error(text)``; ``lights_us()``:
+    node's :class:`~hindrax_common.node_support.node_common.DeviceDiagnostics`; ``log_error(text)``; ``lights_us()``:
     the lights' width now, us; ``readback_interval_s``: ``esc.readback_interval_s``. Methods that take results return
     True when a result changed what is on the chip or its state (the node then publishes ``thrusters/pulse_width``).
     """

@@ -31,14 +31,15 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest
   guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign
   of life and release condition), ``esc/output_state`` (the same state, latched: on a change of
-  armed or output state and every 1 s, :mod:`hindrax_drivers.node_support.esc_state`; for nodes that need only
+  armed or output state and every 1 s, :mod:`hindrax_common.node_support.esc_state`; for nodes that need only
   "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on disarm,
   on an exception in the output path and on shutdown (:meth:`EscNode.close`; SIGINT/SIGTERM).
-- Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
-  ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`, default ``esc.watchdog_timeout_s``).
+- Node parameters outside the vehicle file (read-only, declared in
+  :mod:`hindrax_common.config.sections.esc`): ``heartbeat_timeout_s`` (default ``esc.heartbeat_timeout_s``),
+  ``steady_watchdog_timeout_s`` (default ``esc.watchdog_timeout_s``).
 
 The bus: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, or injected (an
-:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding a
+:class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` holding a
 :class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation).
 """
 from __future__ import annotations
@@ -55,20 +56,19 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from ..config import Spec
-from ..config.sections.esc import board_id, oscillator_problem
-from ..node_support.esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
-from ..cdr.lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
-from ..node_support.liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
-from ..node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config,
-                                        run_node)
-from ..config.node_parameters import declare_node_parameter
-from ..transport.i2c import open_smbus
-from ..transport.shared_emulation import SOCKET_ENV, open_shared_bus
+from hindrax_common.config.sections.esc import STEADY_WATCHDOG_TIMEOUT, board_id, oscillator_problem
+from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
+from hindrax_common.cdr.lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
+from hindrax_common.node_support.liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
+from hindrax_common.node_support.node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
+    load_node_config, run_node)
+from hindrax_common.config.node_parameters import declare_node_parameter
+from hindrax_common.transport.i2c import open_smbus
+from hindrax_common.transport.shared_emulation import SOCKET_ENV, open_shared_bus
 from . import protocol as p
-from ..node_support.vehicle_node import VehicleNode
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from .chip import EscChip
-from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, WRITE, EscCore, EscOutput, SteadyWatchdog
+from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, WRITE, EscCore, EscOutput
 from .peers import COMMAND_TOPIC, EscPeers
 from .link import ChipLink
 from .worker import ChipWorker
@@ -77,12 +77,6 @@ __all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_
            "DISARMED_REPEAT_S", "main"]
 
 _UNKNOWN, _NEUTRAL, _COMMANDING = ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT_NEUTRAL, ThrusterPwm.OUTPUT_COMMANDING
-#: node parameter ``steady_watchdog_timeout_s``: the steady-clock watchdog counts wall time (time.monotonic) during
-#: which the executor runs but no command arrives; it covers a ROS clock that stops (use_sim_time with a dead
-#: /clock), where the ROS-time watchdog and output tick stand still
-STEADY_WATCHDOG = Spec("float", "no command for this long of steady-clock time (the executor running) -> all neutral, "
-                       "s; default esc.watchdog_timeout_s, widened only by an in-process simulator that holds "
-                       "simulated time on purpose (hindrax bringup's stepped graph)", 0.02, 60.0)
 #: the output tick repeats ``thrusters/pulse_width`` (the last widths, a new stamp) only when none went out for this
 #: many output periods (ROS time; a step back repeats at once). Every confirmed write and change of state goes out at
 #: once, so no width is lost: the readers hold the last one (identification, bag fit, simulator). With the
@@ -103,7 +97,7 @@ class EscNode(VehicleNode):
     worker, smbus2); ``chip_thread``: False runs the chip jobs in the executor thread (a lock-step simulation)."""
 
     #: its process refuses to start beside another live ESC
-    #: (:func:`hindrax_drivers.node_support.vehicle_graph.refuse_live_peer`)
+    #: (:func:`hindrax_common.node_support.vehicle_graph.refuse_live_peer`)
     START_CHECK = "esc"
 
     def __init__(self, bus: Any = None, chip_thread: bool = True, **kwargs: Any):
@@ -111,9 +105,8 @@ class EscNode(VehicleNode):
         cfg = self.cfg = load_node_config(self, ("thrusters", "esc", "lights"))
         t, esc, lights = cfg.thrusters, cfg.esc, cfg.lights
         self.period_s = 1.0 / esc.output_rate_hz
-        #: steady-clock (time.monotonic) watchdog, s: parameter ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`)
-        self.steady_watchdog_s = float(declare_node_parameter(self, "steady_watchdog_timeout_s", STEADY_WATCHDOG,
-                                                              esc.watchdog_timeout_s))
+        steady_watchdog_s = float(declare_node_parameter(self, "steady_watchdog_timeout_s", STEADY_WATCHDOG_TIMEOUT,
+                                                         esc.watchdog_timeout_s))
         self.lights_off_us, self.lights_full_us = lights.pulse_width_off_us, lights.pulse_width_full_us
         self.lights_us = self.lights_off_us
         self.oscillator_hz = esc.oscillator_hz
@@ -125,7 +118,8 @@ class EscNode(VehicleNode):
                                             outputs_off=not esc.oscillator_calibrated)
         #: the decisions (arm, refuse, disarm, neutral, output state, reason): :mod:`.core`
         self.core = EscCore(self.output, arming_time_s=esc.arming_time_s, watchdog_timeout_s=esc.watchdog_timeout_s,
-                            oscillator_calibrated=esc.oscillator_calibrated, clock=lambda: time.monotonic())
+                            oscillator_calibrated=esc.oscillator_calibrated, clock=lambda: time.monotonic(),
+                            period_s=self.period_s, steady_watchdog_s=steady_watchdog_s)
         self.i2c_bus_number = int(esc.i2c_bus)
         self.raw = RawDataPublisher(self, "pca9685")
         chip = EscChip(int(esc.i2c_address), self.prescale, self.oscillator_hz, self.output.channels,
@@ -146,7 +140,6 @@ class EscNode(VehicleNode):
                              esc.readback_interval_s)
         self.clock_monitor = ClockStepMonitor(now_s)
         self._last_target_time = None
-        self.steady_watchdog = SteadyWatchdog(self.period_s, self.steady_watchdog_s, time.monotonic())
 
         prepare(ThrusterPwm, DiagnosticStatus)  # before the ticks: the first use would hold one (lean_cdr.prepare)
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
@@ -179,13 +172,14 @@ class EscNode(VehicleNode):
             self.output_timer = None
             self.steady_timer = self.create_timer(self.period_s, self._steady_and_output_tick, clock=steady)
 
-    # -- the core's and the peers' state, as the node's (read by the tests, the benches and the diagnostics)
-    armed = property(lambda self: self.core.armed, lambda self, v: setattr(self.core, "armed", bool(v)))
-    output_state = property(lambda self: self.core.output_state,
-                            lambda self, v: setattr(self.core, "output_state", int(v)))
-    command = property(lambda self: self.core.command, lambda self, v: setattr(self.core, "command", v))
+    # -- the core's state, read-only (read by the tests, the benches and the diagnostics; only the core changes it)
+    armed = property(lambda self: self.core.armed)
+    output_state = property(lambda self: self.core.output_state)
+    command = property(lambda self: self.core.command)
     arming_time_s = property(lambda self: self.core.arming_time_s)
-    watchdog_s = property(lambda self: self.core.watchdog_s, lambda self, v: setattr(self.core, "watchdog_s", v))
+    watchdog_s = property(lambda self: self.core.watchdog_s)
+    #: steady-clock (time.monotonic) watchdog, s: parameter ``steady_watchdog_timeout_s``
+    steady_watchdog_s = property(lambda self: self.core.steady_watchdog_s)
     oscillator_calibrated = property(lambda self: self.core.oscillator_calibrated)
     watchdog_trips = property(lambda self: self.core.watchdog_trips)
     heartbeat_disarms = property(lambda self: self.core.heartbeat_disarms)
@@ -194,9 +188,9 @@ class EscNode(VehicleNode):
     #: time.monotonic() since which neutral is confirmed on the chip AND the guard lets it through, or None
     neutral_on_wire_since = property(lambda self: self.core.neutral_on_wire_since)
     device = property(lambda self: self.chip_io.chip.device)
-    steady_watchdog_trips = property(lambda self: self.steady_watchdog.trips)
+    steady_watchdog_trips = property(lambda self: self.core.steady_watchdog_trips)
     #: time.monotonic() of the last command taken (the benches' reference for the steady watchdog)
-    _steady_command = property(lambda self: self.steady_watchdog.last_command_s)
+    _steady_command = property(lambda self: self.core.last_command_s)
 
     # -- the chip, through the worker and the link
     def _open_bus(self) -> Any:
@@ -222,7 +216,6 @@ class EscNode(VehicleNode):
         now = self.get_clock().now()
         self._take_results()
         fault = self.core.on_command(now.nanoseconds * 1e-9, msg.pulse_width_us, bool(msg.armed))
-        self.steady_watchdog.command(time.monotonic())
         if fault:
             self.diag.count("command_rejected")
             self.get_logger().error(f"command rejected, neutral: {fault}", throttle_duration_sec=1.0)
@@ -326,7 +319,7 @@ class EscNode(VehicleNode):
         except Exception as exc:  # noqa: BLE001 - any fault in the output path must end at neutral
             self.diag.count("output_exception")
             self.get_logger().error(f"output fault, writing neutral: {exc}", throttle_duration_sec=1.0)
-            self.command = None
+            self.core.output_fault(f"fault: {exc}")
             self._safe_neutral(f"fault: {exc}")
             self._publish_written(now)
 
@@ -353,15 +346,14 @@ class EscNode(VehicleNode):
         self.tick()
 
     def steady_check(self) -> None:
-        """The safety tick, then the steady-clock watchdog (:class:`.core.SteadyWatchdog`, parameter
-        ``steady_watchdog_timeout_s``)."""
+        """The safety tick, then the core's steady-clock watchdog (:meth:`.core.EscCore.steady_check`, parameter
+        ``steady_watchdog_timeout_s``): a trip is logged and neutral posted."""
         self.tick_gaps.tick()
         t = time.monotonic()
         self._safety_tick(t)
-        if self.steady_watchdog.check(t, self.armed and self.command is not None):
-            self.core.watchdog_trip(f"steady-clock watchdog: no command for {self.steady_watchdog_s:g} s")
-            self.get_logger().warn(f"steady-clock watchdog: no command for {self.steady_watchdog_s:g} s of wall "
-                                   f"time (ROS time stalled?), outputs neutral")
+        trip = self.core.steady_check(t)
+        if trip:
+            self.get_logger().warn(f"{trip} of wall time (ROS time stalled?), outputs neutral")
             self._after_disarm("steady-clock watchdog")
 
     def _safety_tick(self, t: float) -> None:
@@ -393,7 +385,7 @@ class EscNode(VehicleNode):
                                self.peers.guard_ack)
 
     def _publish_state(self) -> None:
-        """``esc/output_state`` when :class:`~hindrax_drivers.node_support.esc_state.EscStateLatch` says so: a change of
+        """``esc/output_state`` when :class:`~hindrax_common.node_support.esc_state.EscStateLatch` says so: a change of
         (armed, output state), or a second without one."""
         unknown = self.output_state == _UNKNOWN
         armed = self.armed and not unknown

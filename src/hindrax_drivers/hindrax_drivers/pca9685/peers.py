@@ -6,7 +6,7 @@ verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and
 :class:`~.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another node name
 is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
 (:class:`~.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
-:func:`.core.heartbeat_verdict`'s. Node parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s``
+:func:`.core.heartbeat_verdict`'s. Node parameter (read-only, config.sections.esc): ``heartbeat_timeout_s``
 (default ``esc.heartbeat_timeout_s``).
 """
 from __future__ import annotations
@@ -14,21 +14,16 @@ from __future__ import annotations
 import time
 from typing import Any, Callable
 
-from ..config import Spec
-from ..cdr.lean_cdr import Beat
-from ..node_support.liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames, heartbeat_ok,
-                                     simulated_now_s)
-from ..config.node_parameters import declare_node_parameter
+from hindrax_common.config.sections.esc import ESC_HEARTBEAT_TIMEOUT
+from hindrax_common.cdr.lean_cdr import Beat
+from hindrax_common.node_support.liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames,
+    heartbeat_ok, simulated_now_s)
+from hindrax_common.config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
-__all__ = ["EscPeers", "HEARTBEAT_TIMEOUT", "COMMAND_TOPIC"]
+__all__ = ["EscPeers", "COMMAND_TOPIC"]
 
 COMMAND_TOPIC = "thrusters/command_pulse_width"
-#: node parameter ``heartbeat_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
-HEARTBEAT_TIMEOUT = Spec("float", "the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
-                         "is older than this (steady clock), s; default esc.heartbeat_timeout_s, widened only where "
-                         "the three safety nodes share one executor thread (hindrax bringup: none can stall alone)",
-                         0.05, 10.0)
 
 
 class EscPeers:
@@ -42,8 +37,9 @@ class EscPeers:
     def __init__(self, node: Any, period_s: float, default_timeout_s: float, armed: Callable[[], bool],
                  on_bad_news: Callable[[], Any]) -> None:
         self._node = node
-        #: heartbeat timeout, s: parameter ``heartbeat_timeout_s`` (:data:`HEARTBEAT_TIMEOUT`)
-        self.timeout_s = float(declare_node_parameter(node, "heartbeat_timeout_s", HEARTBEAT_TIMEOUT,
+        #: heartbeat timeout, s: parameter ``heartbeat_timeout_s`` (:data:`~hindrax_common.config.sections.esc.
+        #: ESC_HEARTBEAT_TIMEOUT`)
+        self.timeout_s = float(declare_node_parameter(node, "heartbeat_timeout_s", ESC_HEARTBEAT_TIMEOUT,
                                                       default_timeout_s))
         #: live publishers of the commands (the command subscription's liveliness event, :meth:`on_liveliness`)
         self.command_publishers_alive = 0
@@ -66,7 +62,7 @@ class EscPeers:
     def tick(self) -> None:
         """Advance both ages to now (the safety tick and an arm request; the beats arrive by
         callbacks, a stale one's
-        waiting beats are taken first: :meth:`~hindrax_drivers.node_support.liveness.HeartbeatWatch.fresh`)."""
+        waiting beats are taken first: :meth:`~hindrax_common.node_support.liveness.HeartbeatWatch.fresh`)."""
         for kind, age in (("supervisor", self.supervisor_age), ("guard", self.guard_age)):
             age.tick()
             self.watches[kind].fresh(age, self.timeout_s)
@@ -104,7 +100,7 @@ class EscPeers:
     def on_guard_heartbeat(self, msg: Beat) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low). Once handled (a beat that is
         not OK has disarmed), the beat is what :attr:`guard_ack` acknowledges: the guard releases its outputs only
-        on an ESC beat at neutral that acknowledges one of its ERROR beats (:mod:`hindrax_drivers.guard.core`)."""
+        on an ESC beat at neutral that acknowledges one of its ERROR beats (:mod:`hindrax_bringup.guard.core`)."""
         self.guard_age.heard()
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:

@@ -3,7 +3,7 @@
 Registers and bits (MODE1/MODE2, LEDn_ON/OFF_L/H, ALL_LED, PRE_SCALE), the prescale formula,
 pulse width <-> ON/OFF counts, full-ON/full-OFF bits, the sleep / prescale / restart sequence as
 data, and the ESC conventions (1100-1900 us, 1500 us neutral; these limits, shared with the
-configuration check, are defined in :mod:`hindrax_drivers.base.hardware_limits` and re-exported here).
+configuration check, are defined in :mod:`hindrax_common.base.hardware_limits` and re-exported here).
 Sources: docs/devices.md §5.1 (NXP datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2
 (Blue Robotics Basic ESC [E1]-[E5]).
 
@@ -19,11 +19,11 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-from ..base.hardware_limits import (COUNTS_PER_PERIOD, ESC_ARMING_HOLD_S, ESC_DEADBAND_US, ESC_MAX_FREQUENCY_HZ,
-                                    ESC_MAX_US, ESC_MIN_FREQUENCY_HZ, ESC_MIN_US, ESC_NEUTRAL_US,
-                                    INTERNAL_OSCILLATOR_HZ, PRESCALE_MAX, PRESCALE_MIN, Pca9685Error, check_oscillator,
-                                    check_prescale, esc_prescale, frequency_for_prescale, prescale_for_frequency)
-from ..transport.i2c import RegisterWrite
+from hindrax_common.base.hardware_limits import (COUNTS_PER_PERIOD, ESC_ARMING_HOLD_S, ESC_DEADBAND_US,
+    ESC_MAX_FREQUENCY_HZ, ESC_MAX_US, ESC_MIN_FREQUENCY_HZ, ESC_MIN_US, ESC_NEUTRAL_US, INTERNAL_OSCILLATOR_HZ,
+    PRESCALE_MAX, PRESCALE_MIN, Pca9685Error, check_oscillator, check_prescale, esc_prescale, frequency_for_prescale,
+    prescale_for_frequency)
+from hindrax_common.transport.i2c import RegisterWrite
 
 __all__ = [
     "Pca9685Error", "ChannelRegisters", "led_register", "prescale_for_frequency",
@@ -31,7 +31,7 @@ __all__ = [
     "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse", "channel_block_for_pulses",
     "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "oscillator_from_measurement",
     "esc_prescale",
-    # the limits of hindrax_drivers.base.hardware_limits, re-exported for the driver's users
+    # the limits of hindrax_common.base.hardware_limits, re-exported for the driver's users
     "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX", "INTERNAL_OSCILLATOR_HZ", "ESC_MIN_US", "ESC_NEUTRAL_US",
     "ESC_MAX_US", "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ", "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S",
 ]

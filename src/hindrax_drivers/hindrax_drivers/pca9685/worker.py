@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..transport.i2c import I2CDevice, I2CError
+from hindrax_common.transport.i2c import I2CDevice, I2CError
 from .chip import EscChip
 from .core import CONFIGURE, NEUTRAL, READBACK, WRITE
 
@@ -60,7 +60,7 @@ class ChipJob:
 
 @dataclass
 class ChipResult:
-    """A job done: ``error`` ('' or the :class:`~hindrax_drivers.transport.i2c.I2CError` or open failure text),
+    """A job done: ``error`` ('' or the :class:`~hindrax_common.transport.i2c.I2CError` or open failure text),
     ``no_bus`` (the bus could not be opened), ``mismatch`` ('' or what the read-back found), ``wrote`` (the widths
     went to the chip), ``written_us`` (n,) the thruster widths on the chip decoded from the counts (after the job),
     ``duration_s`` (wall time of the job, s)."""

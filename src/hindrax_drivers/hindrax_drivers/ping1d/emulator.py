@@ -3,7 +3,7 @@
 Layer 2 of the Ping1D altimeter driver (docs/architecture.md §2).  The host's bytes go into
 :meth:`Ping1dEmulator.feed_host_bytes`; :meth:`Ping1dEmulator.poll` ``(t_s)`` returns the device's
 bytes up to time ``t_s``.  Serve it on a pty with
-:class:`hindrax_drivers.transport.pty_device.PtyDevice` so the real pyserial path runs.
+:class:`hindrax_common.transport.pty_device.PtyDevice` so the real pyserial path runs.
 
 Behaviour (docs/devices.md §2.1-§2.6, the §2.6 checklist):
 - Frames are extracted with :class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer`, so auto-baud
@@ -40,7 +40,7 @@ from typing import Callable, Dict, List, Optional, Union
 
 import numpy as np
 
-from ..transport.pty_device import PeriodicSchedule, StreamFaults
+from hindrax_common.transport.pty_device import PeriodicSchedule, StreamFaults
 from .protocol import (Ack, ContinuousStart, ContinuousStop, DeviceId, DeviceInformation, Distance,
                        DistanceSimple, FirmwareVersion, GainSetting, GeneralInfo, GeneralRequest,
                        ModeAuto, Nack, PcbTemperature, Ping1dFramer, Ping1dId, Ping1dMessage,

@@ -43,9 +43,9 @@ from typing import Any, Iterable, List, Optional, Tuple
 from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
 
-from ..config.typed_sections import SensorsPing1dSection
-from ..node_support.node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node
-from ..node_support.serial_node import SerialDeviceNode, range_message
+from hindrax_common.config.typed_sections import SensorsPing1dSection
+from hindrax_common.node_support.node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node
+from hindrax_common.node_support.serial_node import SerialDeviceNode, range_message
 from .protocol import (SYNC_BYTE, Ack, AsciiText, ContinuousStart, Distance, DistanceSimple,
                        FirmwareVersion, GeneralInfo, Nack, Ping1dId, Profile, SetModeAuto,
                        SetPingEnable, SetPingInterval, SetSpeedOfSound, SpeedOfSound, request_frame)

@@ -20,8 +20,8 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
-from ..node_support.node_common import load_node_config, run_node
-from ..node_support.vehicle_node import VehicleNode
+from hindrax_common.node_support.node_common import load_node_config, run_node
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from .static_tf import DEFAULT_FRAME_IDS, TF_KEYS, vehicle_transforms
 
 __all__ = ["StaticTfNode", "STATIC_TF_QOS", "main"]

@@ -2,7 +2,7 @@
 
 The vehicle file gives every position in the marine body frame FRD about the centre of gravity
 (``docs/architecture.md`` §3); ROS frames follow REP-103 (``base_link`` FLU, origin at the CG) and REP-105.
-The conversion is :func:`hindrax_drivers.base.frames.frd_to_flu`, the one module that converts frames.
+The conversion is :func:`hindrax_common.base.frames.frd_to_flu`, the one module that converts frames.
 
 Frames (child of ``base_link``; ids are parameters of the static TF node):
 
@@ -28,8 +28,8 @@ from typing import Mapping
 
 import numpy as np
 
-from ..config import VehicleConfig
-from ..base.frames import frd_to_flu, quaternion_from_euler_ned, quaternion_from_rotvec
+from hindrax_common.config import VehicleConfig
+from hindrax_common.base.frames import frd_to_flu, quaternion_from_euler_ned, quaternion_from_rotvec
 
 __all__ = ["StaticTransform", "DEFAULT_FRAME_IDS", "vehicle_transforms", "thruster_frame_id", "TF_KEYS"]
 

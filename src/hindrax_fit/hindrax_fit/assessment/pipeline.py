@@ -16,7 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.config import VehicleConfig
 
 from ..bag_input.any_topics import FitOptions, TopicChoice
 from ..bag_input.from_bag import truncation

@@ -38,7 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_common.config import DOFS, VehicleConfig
 
 from ..fit import fit_core
 from ..bag_input.any_topics import FitInputError, FitOptions, TopicChoice, dof_records, preprocess_bag

@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from hindrax_drivers.config import VehicleConfig  # noqa: E402
+from hindrax_common.config import VehicleConfig  # noqa: E402
 
 from ..fit import fit_core  # noqa: E402
 from hindrax_onboard.identification.model.dof_model import model_terms, truth_parameters  # noqa: E402

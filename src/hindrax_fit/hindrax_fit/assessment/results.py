@@ -50,7 +50,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import yaml
 
-from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
+from hindrax_common.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
 from hindrax_onboard.estimation.drag_coefficient import (characteristic_length_from_volume, drag_coefficient,
                                             reynolds_range)

@@ -68,7 +68,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from scipy import stats
 
-from hindrax_drivers.config import ROTATIONAL_DOFS, VehicleConfig
+from hindrax_common.config import ROTATIONAL_DOFS, VehicleConfig
 
 from hindrax_onboard.vehicle.uncertainty import declared_rel
 from hindrax_onboard.identification.model.dof_model import core_index, thrust_covariance, thrust_weights

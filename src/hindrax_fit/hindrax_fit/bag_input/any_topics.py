@@ -1,8 +1,8 @@
 """The any-topics adapter of the bag reader (:mod:`.reader`): force and velocity found by message type, read into
 the fit core's per-DOF records. No ROS runtime (bags are decoded by
-:class:`hindrax_drivers.recording.reader.BagReader` from their stored definitions).
+:class:`hindrax_bringup.recording.reader.BagReader` from their stored definitions).
 
-Inputs (:data:`ACCEPTED`), every vector converted to body FRD with :mod:`hindrax_drivers.base.frames` (messages are
+Inputs (:data:`ACCEPTED`), every vector converted to body FRD with :mod:`hindrax_common.base.frames` (messages are
 REP-103 FLU in ``base_link``):
 
 * force: ``geometry_msgs/msg/WrenchStamped`` (commanded or measured wrench about base_link), or our
@@ -45,10 +45,10 @@ from rclpy.serialization import deserialize_message
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.recording.reader import BagReader
+from hindrax_common.base import frames
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS, VehicleConfig
+from hindrax_bringup.recording.reader import BagReader
 
 from ..fit import fit_core
 from hindrax_onboard.identification.model.dof_model import restoring_regressor
@@ -150,7 +150,7 @@ def _static_rotation(reader, parent: str, child: str) -> np.ndarray | None:
 def _decoded(reader, topics: Sequence[str]):
     """(raw, message) pairs of ``topics`` in log-time order: rclpy's C deserializer for types whose Python package
     is installed with the layout the bag recorded (standard messages: several times faster), else the reader's
-    mcap_ros2 decoding from the stored definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`;
+    mcap_ros2 decoding from the stored definitions (:meth:`hindrax_bringup.recording.reader.BagReader.decoded`;
     ``BagReader.installed_class`` decides): a bag recorded before a message gained a field
     (``ThrusterPwm.output_state``) stays readable."""
     classes = {t: reader.installed_class(t) for t in topics}
@@ -438,7 +438,7 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
                    t0: float | None = None) -> Preprocessed:
     """Read a bag's force, velocity, angular rate, attitude (and depth) and put them on one uniform grid (module
     docstring), without the delay (the fit core's). Raises :class:`FitInputError`
-    or :class:`hindrax_drivers.recording.reader.BagError`."""
+    or :class:`hindrax_bringup.recording.reader.BagError`."""
     path = Path(path)
     streams, info = _read_streams(path, choice, cfg)
     notes: dict[str, Any] = {"bag": str(path), **info, "time_base": {}}

@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.recording.msgtypes import TypeNotInstalledError
-from hindrax_drivers.recording.reader import BagReader
+from hindrax_bringup.recording.msgtypes import TypeNotInstalledError
+from hindrax_bringup.recording.reader import BagReader
 
 from hindrax_onboard.vehicle.state import SensorState
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag
@@ -231,9 +231,9 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
 
 
 def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01) -> CampaignRecord:
-    """:func:`record_from_messages` over the topics of a bag (:class:`~hindrax_drivers.recording.reader.BagReader`).
+    """:func:`record_from_messages` over the topics of a bag (:class:`~hindrax_bringup.recording.reader.BagReader`).
 
-    Raises :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag and
+    Raises :class:`~hindrax_bringup.recording.reader.BagError` for an unreadable bag and
     :class:`BagContentError` when a needed topic is missing.
     """
     reader = BagReader(bag_path)
@@ -257,7 +257,7 @@ def truncation(bag_path: str | Path) -> list[str]:
     summary (the recorder did not close it: :attr:`BagReader.truncated_files`) or when ``identification/status``
     ends while the campaign still runs (its last non-idle phase neither DONE nor ABORTED); then the DOF under test
     and its levels not reached are named, and every DOF whose levels stop short of its level count, with the
-    campaign time the bag holds. Raises :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag."""
+    campaign time the bag holds. Raises :class:`~hindrax_bringup.recording.reader.BagError` for an unreadable bag."""
     reader = BagReader(bag_path)
     out = []
     if reader.truncated_files:
@@ -288,6 +288,6 @@ def truncation(bag_path: str | Path) -> list[str]:
 
 def is_campaign_bag(bag_path: str | Path) -> bool:
     """True when the bag has every topic of :data:`CAMPAIGN_TOPICS` (with or without the leading slash). Raises
-    :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag."""
+    :class:`~hindrax_bringup.recording.reader.BagError` for an unreadable bag."""
     present = {tp.lstrip("/") for tp in BagReader(bag_path).topics}
     return all(tp in present for tp in CAMPAIGN_TOPICS)

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_common.config import DOFS, VehicleConfig
 
 from ..fit import campaign_fit
 from ..fit.calibration import apply_thrust_calibration

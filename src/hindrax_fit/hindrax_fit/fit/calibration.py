@@ -25,8 +25,8 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import optimize
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS
 
 from hindrax_onboard.estimation.free_decay import fit_quadratic_free_decay
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag

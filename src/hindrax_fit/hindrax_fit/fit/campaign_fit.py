@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig, or_default
+from hindrax_common.config import DOFS, VehicleConfig, or_default
 
 from hindrax_onboard.estimation.filters import smooth_kinematics
 from hindrax_onboard.estimation.least_squares import EstimationError, fit_linear_model

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS
+from hindrax_common.config import DOFS
 
 from hindrax_onboard.estimation.least_squares import EstimationError
 from . import fit_core

@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 from scipy import optimize, signal as _signal, stats
 
-from hindrax_drivers.config import DOFS
+from hindrax_common.config import DOFS
 
 from hindrax_onboard.estimation.least_squares import EstimationError
 from hindrax_onboard.vehicle.thrust_lag import ThrustLag

@@ -35,13 +35,13 @@ def choices(option: str, text: str | None, allowed, what: str, empty_ok: bool = 
 
 
 def load_vehicle(path: str | None = None) -> Any:
-    """The validated :class:`~hindrax_drivers.config.VehicleConfig` of ``path`` (default: the repository's
+    """The validated :class:`~hindrax_common.config.VehicleConfig` of ``path`` (default: the repository's
     ``ros_ws/config/hindrax.yaml``).
 
     Raises :class:`CommandError` ``"invalid configuration: <key, value, allowed range>"`` when the file does
-    not load or validate (:class:`~hindrax_drivers.config.ConfigError`).
+    not load or validate (:class:`~hindrax_common.config.ConfigError`).
     """
-    from hindrax_drivers.config import ConfigError, default_config_path, load_config
+    from hindrax_common.config import ConfigError, default_config_path, load_config
 
     try:
         return load_config(path or default_config_path())
@@ -95,11 +95,11 @@ def update_vehicle_file(path: str | Path, values: Mapping[str, Any],
     new_keys: {dotted key of ``values`` that may be absent: (sibling key it is inserted after, end-of-line
     comment)}; any other key must already be in the file.
     Raises ValueError when a key (or its section) is missing (the file is not written),
-    :class:`~hindrax_drivers.config.ConfigError` when the result does not validate (the file is restored).
+    :class:`~hindrax_common.config.ConfigError` when the result does not validate (the file is restored).
     """
     from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
-    from hindrax_drivers.config import ConfigError, load_config
+    from hindrax_common.config import ConfigError, load_config
 
     p = Path(path)
     original = p.read_text()

@@ -1,7 +1,7 @@
 """``hindrax config check FILE``: validate a vehicle configuration before a pool test.
 
 Prints each error as one line (key, value, allowed range) on stdout and exits 1, or prints a short
-summary of the vehicle and exits 0. Validation rules: :mod:`hindrax_drivers.config`.
+summary of the vehicle and exits 0. Validation rules: :mod:`hindrax_common.config`.
 """
 from __future__ import annotations
 
@@ -12,14 +12,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the command's options and arguments to ``parser``."""
     parser.add_argument("file", nargs="?", default=None,
                         help="vehicle configuration YAML (ros-args params-file layout); default: the "
-                             "installed share/hindrax_drivers/config/hindrax.yaml, or the repository's "
+                             "installed share/hindrax_common/config/hindrax.yaml, or the repository's "
                              "ros_ws/config/hindrax.yaml in a checkout")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.config import ConfigError, default_config_path, load_config, output_enable_gpio
-    from hindrax_drivers.config.sections.esc import board_id, oscillator_problem
+    from hindrax_common.config import ConfigError, default_config_path, load_config, output_enable_gpio
+    from hindrax_common.config.sections.esc import board_id, oscillator_problem
     from hindrax_drivers.pca9685.protocol import REFERENCE_CHANNEL
 
     if args.file is None:

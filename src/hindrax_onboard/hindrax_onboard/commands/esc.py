@@ -40,8 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.config import ConfigError, default_config_path
-    from hindrax_drivers.base.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
+    from hindrax_common.config import ConfigError, default_config_path
+    from hindrax_common.base.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
     from hindrax_drivers.pca9685 import protocol as p
 
     path = args.config or str(default_config_path())
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         "written": False,
     }
     if args.write:
-        from hindrax_drivers.config.sections.esc import board_id
+        from hindrax_common.config.sections.esc import board_id
 
         try:
             record = f"{board_id()} {time.strftime('%Y-%m-%d', time.gmtime())} {float(args.measured_us):g} us"

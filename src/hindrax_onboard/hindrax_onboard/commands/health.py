@@ -2,8 +2,8 @@
 
 Listens to the running vehicle for up to ``--timeout`` seconds (default 6: two periods of the 1 Hz statuses plus
 discovery) and exits 0 when it is ready, 1 with what is missing or failing otherwise (one line each,
-:mod:`hindrax_drivers.layout.health`). What must be there comes from the launch file the vehicle runs, read as ``ros2
-launch`` reads it (:mod:`hindrax_drivers.layout.launch_xml`; default ``hindrax_drivers/vehicle.launch.xml``, with the
+:mod:`hindrax_bringup.layout.health`). What must be there comes from the launch file the vehicle runs, read as ``ros2
+launch`` reads it (:mod:`hindrax_bringup.layout.launch_xml`; default ``hindrax_bringup/vehicle.launch.xml``, with the
 launch arguments given as ``NAME:=VALUE``, e.g. ``record:=true`` to require the recorder): every node in the graph,
 each node's ``/diagnostics`` status OK, ``supervisor/status`` OK, and no second ESC or supervisor on the domain
 (a second vehicle). It returns as soon as everything is seen OK.
@@ -20,7 +20,7 @@ from .common import CommandError
 
 __all__ = ["add_arguments", "run", "collect"]
 
-DEFAULT_LAUNCH = "hindrax_drivers/vehicle.launch.xml"
+DEFAULT_LAUNCH = "hindrax_bringup/vehicle.launch.xml"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _launch_path(spec: str):
     from pathlib import Path
 
-    from hindrax_drivers.layout.launch_xml import ament_share
+    from hindrax_bringup.layout.launch_xml import ament_share
 
     if Path(spec).is_file():
         return Path(spec)
@@ -51,15 +51,15 @@ def _launch_path(spec: str):
 def collect(timeout_s: float, done=None):
     """Listen to the graph for up to ``timeout_s`` s (returning early once ``done(nodes, statuses, supervisor)``):
     returns (node names, {status name: Seen}, Seen of supervisor/status or None, the graph's
-    :class:`~hindrax_drivers.node_support.vehicle_graph.GraphView` at the end: node names with duplicates, heartbeat
+    :class:`~hindrax_common.node_support.vehicle_graph.GraphView` at the end: node names with duplicates, heartbeat
     publishers)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from rclpy.executors import SingleThreadedExecutor
 
-    from hindrax_drivers.process.conditions import ros_context
-    from hindrax_drivers.layout.health import SUPERVISOR_STATUS_TOPIC, Seen
-    from hindrax_drivers.node_support.vehicle_graph import graph_view
+    from hindrax_common.process.conditions import ros_context
+    from hindrax_bringup.layout.health import SUPERVISOR_STATUS_TOPIC, Seen
+    from hindrax_common.node_support.vehicle_graph import graph_view
 
     def seen(st: DiagnosticStatus) -> Seen:
         level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
@@ -94,9 +94,9 @@ def second_vehicle(expected_nodes, view) -> str:
     """The problem line when ``view`` (:func:`collect`) shows an ESC or supervisor beyond the one each of the
     launch's ``expected_nodes`` (node names, no namespace) accounts for, e.g. ``"a second vehicle on this domain:
     ESC /esc, supervisor /supervisor: ..."``
-    (:func:`hindrax_drivers.node_support.vehicle_graph.foreign_vehicle_processes`);
+    (:func:`hindrax_common.node_support.vehicle_graph.foreign_vehicle_processes`);
     "" when there is none."""
-    from hindrax_drivers.node_support.vehicle_graph import (HEARTBEAT_TOPICS, ROLE_NODES, GraphView,
+    from hindrax_common.node_support.vehicle_graph import (HEARTBEAT_TOPICS, ROLE_NODES, GraphView,
                                                             foreign_vehicle_processes)
 
     own = GraphView(tuple("/" + n for n in expected_nodes if n in ROLE_NODES),
@@ -110,7 +110,7 @@ def _where() -> str:
     """The domain and discovery this process looked on, for the one-line verdict of an empty graph."""
     import os
 
-    from hindrax_drivers.process.dds_transport import PROFILE_ENV
+    from hindrax_common.process.dds_transport import PROFILE_ENV
 
     scope = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") or "SYSTEM_DEFAULT"
     if os.environ.get(PROFILE_ENV):
@@ -120,8 +120,8 @@ def _where() -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.layout.health import assess, expectation
-    from hindrax_drivers.layout.launch_xml import LaunchFileError, read_launch
+    from hindrax_bringup.layout.health import assess, expectation
+    from hindrax_bringup.layout.launch_xml import LaunchFileError, read_launch
 
     given = {}
     for item in args.launch_arguments:

@@ -3,7 +3,7 @@
 Run on the vehicle: writes a new random 32-byte key to ``<keys dir>/<name>.key`` (``$HINDRAX_KEYS_DIR``, default
 ``~/.config/hindrax/keys``; mode 0600) for the vehicle named, else the vehicle file's ``vehicle.name``, and prints
 where it is and where the topside copy goes: the same path on the operator's PC, mode 0600. The gateway checks every
-operator request against it (docs/architecture.md §8.2, :mod:`hindrax_drivers.gateway.operator_signing`); the
+operator request against it (docs/architecture.md §8.2, :mod:`hindrax_bringup.gateway.operator_signing`); the
 ``hindrax`` command signs with it. An existing key is kept unless ``--force`` (a new key must be copied to the topside
 again). Exit 1 with one line when the key exists or the vehicle file is invalid.
 """
@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.gateway.operator_signing import OperatorKeyError, create_key, key_path
+    from hindrax_bringup.gateway.operator_signing import OperatorKeyError, create_key, key_path
 
     name = args.vehicle or load_vehicle(args.config).vehicle.name
     try:

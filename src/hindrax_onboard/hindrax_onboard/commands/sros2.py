@@ -1,14 +1,14 @@
 """``hindrax sros2 policy|keystore``: the SROS2 permissions of the vehicle (docs/deployment.md, "SROS2 on the Pi").
 
 ``hindrax sros2 policy [--config FILE] [--out DIR]`` writes ``internal.policy.xml`` and ``topside.policy.xml``
-(:mod:`hindrax_drivers.gateway.sros2_policy`) for the vehicle file's ``vehicle.name`` and the enclaves of the installed
+(:mod:`hindrax_bringup.gateway.sros2_policy`) for the vehicle file's ``vehicle.name`` and the enclaves of the installed
 launch files (``vehicle.launch.xml``, ``pool_test.launch.xml``). Runs anywhere (no sros2 needed).
 
 ``hindrax sros2 keystore KEYSTORE [--config FILE] [--internal-domain-id N] [--topside-domain-id N]`` creates the
 keystore on the vehicle (or adds to it): the two policies under ``KEYSTORE/policies/``, then sros2's own artifact
 generation (``ros2 security generate_artifacts``' Python API: certificate authority, one key, certificate and signed
 permissions per enclave), the internal enclaves' permissions for the internal domain, the topside ones for the topside
-domain; then the vehicle's governance (:func:`hindrax_drivers.gateway.sros2_policy.governance`: participants without a
+domain; then the vehicle's governance (:func:`hindrax_bringup.gateway.sros2_policy.governance`: participants without a
 certificate may call the e-stop on the topside, nothing else) replaces sros2's default one, signed with the keystore's
 permissions CA. Needs sros2 (``ros-jazzy-sros2`` from apt, on the Pi); without it, exit 1 with one line saying so.
 Exit 1 with one line for an invalid vehicle file or launch file.
@@ -24,7 +24,7 @@ from .common import CommandError, add_config_argument, load_vehicle
 __all__ = ["add_arguments", "run", "write_policies"]
 
 #: the launch files whose processes get an internal enclave: PACKAGE/FILE
-LAUNCH_FILES = ("hindrax_drivers/vehicle.launch.xml", "hindrax_onboard/pool_test.launch.xml")
+LAUNCH_FILES = ("hindrax_bringup/vehicle.launch.xml", "hindrax_onboard/pool_test.launch.xml")
 #: what the missing sros2 package means, and where it comes from
 NO_SROS2 = ("sros2 is not installed: on the Pi, `sudo apt install ros-jazzy-sros2` (the development machines' ROS 2 "
             "wheels have no sros2 and no DDS Security); `hindrax sros2 policy` writes the policy files without it")
@@ -45,15 +45,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _enclaves() -> dict[str, tuple[str, ...]]:
-    from hindrax_drivers.layout.launch_xml import LaunchFileError, ament_share, read_launch
-    from hindrax_drivers.gateway.sros2_policy import launch_enclaves
+    from hindrax_bringup.layout.launch_xml import LaunchFileError, ament_share, read_launch
+    from hindrax_bringup.gateway.sros2_policy import launch_enclaves
 
     out: dict[str, set] = {}
     for spec in LAUNCH_FILES:
         package, _, name = spec.partition("/")
         try:
             processes = read_launch(ament_share(package) / "launch" / name, {"record": "true", "controller": "true"}
-                                    if package == "hindrax_drivers" else {})
+                                    if package == "hindrax_bringup" else {})
             found = launch_enclaves(processes)
         except (LaunchFileError, ValueError) as exc:
             raise CommandError(f"hindrax sros2: {exc}") from exc
@@ -65,7 +65,7 @@ def _enclaves() -> dict[str, tuple[str, ...]]:
 def write_policies(config: str | None, out: Path) -> dict[str, Path]:
     """Write ``internal.policy.xml`` and ``topside.policy.xml`` into ``out``; returns {domain: path}. Raises
     :class:`CommandError` (one line) for an invalid vehicle or launch file."""
-    from hindrax_drivers.gateway.sros2_policy import internal_policy, topside_policy
+    from hindrax_bringup.gateway.sros2_policy import internal_policy, topside_policy
 
     cfg = load_vehicle(config)
     out.mkdir(parents=True, exist_ok=True)
@@ -80,7 +80,7 @@ def write_governance(keystore: Path, vehicle_name: str, internal_domain: int, to
     CA) into ``governance.p7s``, the file every enclave's ``governance.p7s`` links to. Needs sros2."""
     from sros2._utilities import create_smime_signed_file
 
-    from hindrax_drivers.gateway.sros2_policy import governance
+    from hindrax_bringup.gateway.sros2_policy import governance
 
     try:
         text = governance(vehicle_name, internal_domain, topside_domain)

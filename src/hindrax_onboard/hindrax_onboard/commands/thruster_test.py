@@ -23,7 +23,7 @@ from .common import CommandError, add_config_argument, load_vehicle
 from .vehicle import add_vehicle_arguments, find_vehicle
 
 if TYPE_CHECKING:
-    from hindrax_drivers.allocation.core import AllocationCore
+    from hindrax_bringup.allocation.core import AllocationCore
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,7 +52,7 @@ def plan(core: AllocationCore, force_n: float) -> list[dict]:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.allocation.core import AllocationCore
+    from hindrax_bringup.allocation.core import AllocationCore
 
     core = AllocationCore(load_vehicle(args.config))
     rows = plan(core, args.force_n)
@@ -66,10 +66,10 @@ def run(args: argparse.Namespace) -> int:
 def _drive(core: AllocationCore, rows: list[dict], step_s: float, vehicle: str | None = None,
            discovery_timeout_s: float = 10.0) -> int:
     """Arm, step each thruster for ``step_s`` s with 1 s of neutral after it, disarm (also on Ctrl-C or any
-    error: registered before the node's clean-up, :class:`~hindrax_drivers.process.ros_process.RosProcess`)."""
+    error: registered before the node's clean-up, :class:`~hindrax_common.process.ros_process.RosProcess`)."""
     import rclpy
 
-    from hindrax_drivers.process.ros_process import RosProcess
+    from hindrax_common.process.ros_process import RosProcess
     from hindrax_msgs.msg import ThrusterForces
     from hindrax_msgs.srv import SetArmed
 

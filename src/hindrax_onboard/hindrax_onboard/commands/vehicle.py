@@ -2,12 +2,12 @@
 
 A vehicle shows itself by its gateway's node, ``/<vehicle.name>/gateway`` (docs/architecture.md §8.2), on the
 topside domain and on the vehicle's internal graph alike. On the topside the vehicle's interface is the gateway's
-relays under ``/<name>/`` (:data:`hindrax_drivers.gateway.interface.INTERFACE`); on the internal graph (a command
+relays under ``/<name>/`` (:data:`hindrax_bringup.gateway.interface.INTERFACE`); on the internal graph (a command
 run on the vehicle itself) the nodes' own names, without a namespace. :func:`find_vehicle` tells the two apart by
 the gateway's topside-only node ``/<name>/gateway_operator``, refuses a name two gateways answer to, and warns (stderr)
 when another server answers one of the vehicle's services (an eavesdropper, issue 71).
 
-On the topside an operator's request is signed (:mod:`hindrax_drivers.gateway.operator_signing`) with the vehicle's key,
+On the topside an operator's request is signed (:mod:`hindrax_bringup.gateway.operator_signing`) with the vehicle's key,
 ``<keys dir>/<name>.key`` (``hindrax keys``), when this PC has it; without it the gateway refuses the request and
 says where the key goes. The e-stop is never signed.
 """
@@ -45,12 +45,12 @@ class Target:
 
     def service(self, topside_name: str, internal_name: str, internal_type: Any, **fields: Any) -> tuple[Any, str, Any]:
         """(service type, absolute name, request with ``fields``) of an operator service: on the topside the
-        gateway's signed type (:data:`~hindrax_drivers.gateway.interface.INTERFACE`), the request signed; on the
+        gateway's signed type (:data:`~hindrax_bringup.gateway.interface.INTERFACE`), the request signed; on the
         vehicle ``internal_type`` and ``internal_name``."""
         if not self.topside:
             return internal_type, internal_name, internal_type.Request(**fields)
-        from hindrax_drivers.gateway.interface import INTERFACE
-        from hindrax_drivers.gateway.internal import interface_type
+        from hindrax_bringup.gateway.interface import INTERFACE
+        from hindrax_bringup.gateway.internal import interface_type
 
         (relay,) = [r for r in INTERFACE if r.topside == topside_name]
         srv = interface_type(relay.type)
@@ -76,14 +76,14 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
 
 def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float) -> Target:
     """Spin ``executor`` until a gateway (``wanted``'s, if given) is seen and discovery has settled
-    (:func:`hindrax_drivers.process.dds_transport.wait_discovered`: every gateway running has announced itself), at most
-    ``timeout_s``; then choose (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises
+    (:func:`hindrax_common.process.dds_transport.wait_discovered`: every gateway running has announced itself), at most
+    ``timeout_s``; then choose (:func:`hindrax_bringup.gateway.interface.choose_vehicle`). Raises
     :class:`CommandError` (one line) for no vehicle, several, not the one named, or a name two gateways answer to."""
-    from hindrax_drivers.process.dds_transport import wait_discovered
-    from hindrax_drivers.gateway.interface import (GATEWAY_NODE, STATUS_TOPIC, VehicleChoiceError, choose_vehicle,
+    from hindrax_common.process.dds_transport import wait_discovered
+    from hindrax_bringup.gateway.interface import (GATEWAY_NODE, STATUS_TOPIC, VehicleChoiceError, choose_vehicle,
                                                    duplicate_problem, extra_servers_problem, participants,
                                                    vehicles_seen)
-    from hindrax_drivers.gateway.operator_signing import OperatorKeyError, Signer, key_path, load_key
+    from hindrax_bringup.gateway.operator_signing import OperatorKeyError, Signer, key_path, load_key
 
     nodes = node.get_node_names_and_namespaces()
 

@@ -38,8 +38,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.config import DOFS, VehicleConfig
+from hindrax_common.base.frames import wrap_angle
 
 from ..estimation.kalman import LinearKalman
 from ..vehicle.state import rotation_ned_from_body

@@ -13,8 +13,8 @@ from typing import Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.config import DOFS, VehicleConfig
+from hindrax_common.base.frames import wrap_angle
 
 from .model import prior_inertia
 

@@ -21,7 +21,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.config import VehicleConfig
 
 from ..vehicle.state import DepthEstimator, SensorState
 from ..vehicle.uncertainty import measurement_settings

@@ -16,7 +16,7 @@ simulator's truth):
   model-based law of :mod:`hindrax_onboard.control.law` with the vehicle file's model (or an identified one); the
   former PD/PI law is :class:`hindrax_onboard.control.legacy.LegacyPDHold`.
 
-Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_drivers.base.frames`.
+Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`.
 """
 from __future__ import annotations
 
@@ -26,8 +26,8 @@ from typing import Sequence
 
 import numpy as np
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from .law import ControlInput, ControlSettings, Controller

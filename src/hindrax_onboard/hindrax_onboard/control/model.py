@@ -35,7 +35,7 @@ from typing import Any, Mapping
 
 import yaml
 
-from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
+from hindrax_common.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
 from ..vehicle.vehicle_match import parameter_differences
 from ..vehicle.uncertainty import declared_rel

@@ -41,15 +41,15 @@ from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
-from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
-from hindrax_drivers.cdr.lean_cdr import cdr_decoder
-from hindrax_drivers.node_support.liveness import TickGaps, starvation, starved_stop_s
+from hindrax_common.base import frames
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
+from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+from hindrax_common.cdr.lean_cdr import cdr_decoder
+from hindrax_common.node_support.liveness import TickGaps, starvation, starved_stop_s
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_support.node_common import load_node_config, run_node, sensor_input_qos
-from hindrax_drivers.node_support.vehicle_node import VehicleNode
+from hindrax_common.node_support.node_common import load_node_config, run_node, sensor_input_qos
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
 from .maneuvers import HoldController, dof_authority
@@ -464,7 +464,7 @@ def _key(msg: WrenchStamped) -> tuple:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_support.node_common.run_node`). Returns the
+    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_common.node_support.node_common.run_node`). Returns the
     exit status (1 on an invalid configuration)."""
     return run_node(ControllerNode, args)
 

@@ -299,7 +299,7 @@ def empirical_priors(g: Geometry, rigid: PriorInputs = PriorInputs()) -> dict[st
 
 def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m2: Optional[float] = None,
                        top_area_m2: Optional[float] = None) -> dict[str, Any]:
-    """:func:`empirical_priors` from a :class:`~hindrax_drivers.config.VehicleConfig`.
+    """:func:`empirical_priors` from a :class:`~hindrax_common.config.VehicleConfig`.
 
     Uses vehicle.length_m/width_m/height_m, environment.water_density_kg_m3, vehicle.mass_kg,
     vehicle.inertia_kg_m2 (roll, pitch), environment.gravity_m_s2 and BG = z_CG - z_CB from

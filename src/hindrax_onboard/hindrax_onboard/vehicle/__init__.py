@@ -9,9 +9,9 @@ The rigid body, the thrust lag, the thrust curve and the angle wrap exist once i
   controller and the identification read; :mod:`.fusion`: the accelerometer-aided Kalman filter and smoothers;
 - :mod:`.signals`: ROS messages -> sensor samples; :mod:`.uncertainty`: the measurement noise and thrust uncertainty
   the vehicle file declares; :mod:`.vehicle_match`: the vehicle-file values an identification depends on;
-- the thrust curve: :class:`hindrax_drivers.base.thrust_curve.ThrustCurve`, built from the vehicle file by
-  :func:`hindrax_drivers.allocation.from_config.thrust_curve_from_config` (the allocation's, used as it is);
-- the angle wrap: :func:`hindrax_drivers.base.frames.wrap_angle` (in the drivers because the DVL-75 emulator needs it).
+- the thrust curve: :class:`hindrax_common.base.thrust_curve.ThrustCurve`, built from the vehicle file by
+  :func:`hindrax_bringup.allocation.from_config.thrust_curve_from_config` (the allocation's, used as it is);
+- the angle wrap: :func:`hindrax_common.base.frames.wrap_angle` (in the drivers because the DVL-75 emulator needs it).
 
 Nothing here imports the simulator, identification or control.
 """

@@ -16,8 +16,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig
 
 __all__ = ["STILL_MESSAGE", "samples_from_dvl", "samples_from_imu", "sample_from_pressure", "sample_from_range",
            "thrust_of_written_widths"]
@@ -35,7 +35,7 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
     """Samples of one hindrax_msgs/Dvl message in the simulator's sample form (:mod:`hindrax_sim.sensors`).
 
     Returns ``[("dvl75_attitude", ns(stamp_s, roll_rad, pitch_rad, yaw_rad))]`` (NED Euler angles of body FRD,
-    via :func:`hindrax_drivers.base.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
+    via :func:`hindrax_common.base.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
     followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked, at_body_origin=True, beam_range_m (4,)))``
     (velocity FLU -> FRD; NaN and ``locked`` False without a valid velocity; the range along beams A-D, NaN for a beam
     without lock). Works on rclpy and bag-decoded messages alike.

@@ -10,7 +10,7 @@
 
 Used alike by the identification (online executive and bag analysis) and the controller. Everything here uses the
 vehicle configuration and SENSOR samples only, never the simulator's truth. Frames: body FRD, world NED
-(docs/architecture.md §3); conversions through :mod:`hindrax_drivers.base.frames`.
+(docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`.
 """
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ from typing import Sequence
 
 import numpy as np
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.config import VehicleConfig
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.base import frames
+from hindrax_common.config import VehicleConfig
+from hindrax_common.base.frames import wrap_angle
 
 from .fusion import AccelAidedFilter
 

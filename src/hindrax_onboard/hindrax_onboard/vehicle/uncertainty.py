@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from hindrax_drivers.config import DOFS, VehicleConfig, or_default
+from hindrax_common.config import DOFS, VehicleConfig, or_default
 
 __all__ = ["ACCEL_JERK_PSD", "measurement_settings", "DEFAULT_THRUST_UNCERTAINTY_REL", "declared_rel"]
 

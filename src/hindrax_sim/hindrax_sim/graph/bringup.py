@@ -1,8 +1,8 @@
 """Bring up the Hindrax node graph in one process (SingleThreadedExecutor; docs/architecture.md §11.5: the
 MultiThreadedExecutor is broken here, and launch is not available).
 
-Nodes: the device drivers (:data:`hindrax_drivers.base.devices.DEVICES`: DVL-75, Ping1D, MS5837, ICM-20948, and the ESC
-output on the PCA9685), the thrust allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the
+Nodes: the device drivers (:data:`hindrax_common.base.devices.DEVICES`: DVL-75, Ping1D, MS5837, ICM-20948, and the ESC
+output on the PCA9685), the thrust allocation, the safety supervisor (:mod:`hindrax_bringup.supervisor.node`), the
 static TF (/tf_static), the identification executive (:mod:`hindrax_onboard.identification.online.node`, always: on
 the vehicle as in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and,
 optionally, the recorder. On the vehicle they open the configured serial ports and ``/dev/i2c-N``. With ``sim=True``
@@ -23,21 +23,21 @@ from typing import Any, Callable
 from rclpy.executors import ShutdownException, TimeoutException
 from rclpy.parameter import Parameter
 
-from hindrax_drivers.base import devices as device_table
-from hindrax_drivers.allocation.node import ThrustAllocationNode
-from hindrax_drivers.process.conditions import wait_until
-from hindrax_drivers.config import ConfigError, VehicleConfig, load_config
-from hindrax_drivers.config.sections.esc import board_id
-from hindrax_drivers.gateway.interface import GATEWAY_NODE
-from hindrax_drivers.guard.node import OutputGuardNode
-from hindrax_drivers.recording.recorder_node import RecorderNode
-from hindrax_drivers.process.ros_process import RosProcess
-from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.process.dds_transport import loopback_transport
+from hindrax_common.base import devices as device_table
+from hindrax_bringup.allocation.node import ThrustAllocationNode
+from hindrax_common.process.conditions import wait_until
+from hindrax_common.config import ConfigError, VehicleConfig, load_config
+from hindrax_common.config.sections.esc import board_id
+from hindrax_bringup.gateway.interface import GATEWAY_NODE
+from hindrax_bringup.guard.node import OutputGuardNode
+from hindrax_bringup.recording.recorder_node import RecorderNode
+from hindrax_common.process.ros_process import RosProcess
+from hindrax_bringup.supervisor.node import SupervisorNode
+from hindrax_common.process.dds_transport import loopback_transport
 from hindrax_drivers.tf.node import StaticTfNode
-from hindrax_drivers.node_support.vehicle_graph import (ForeignVehicleError, ForeignVehicleWatch, own_view,
+from hindrax_common.node_support.vehicle_graph import (ForeignVehicleError, ForeignVehicleWatch, own_view,
                                                         refuse_before_start)
-from hindrax_drivers.node_support.vehicle_node import VehicleNode
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.srv import SetArmed
 
 from hindrax_onboard.control.node import ControllerNode
@@ -144,7 +144,7 @@ class Graph:
         with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
         ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); with time frozen
         again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request.
-        Returns the SetArmed response. Raises :class:`~hindrax_drivers.process.conditions.ConditionTimeout` when a step
+        Returns the SetArmed response. Raises :class:`~hindrax_common.process.conditions.ConditionTimeout` when a step
         takes longer than ``timeout_s`` of wall time.
         """
         spin = lambda: self.spin_once(spin_timeout_s)  # noqa: E731
@@ -227,9 +227,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     truth_rate_hz (sim only): rate of the simulator's ground truth (sim/odometry, sim/wrench), Hz (default the clock
     rate; no node under test reads it).
     parameter_services: False leaves out the nodes' parameter and type-description services
-    (:class:`~hindrax_drivers.node_support.vehicle_node.VehicleNode`; a graph nothing outside this process
+    (:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`; a graph nothing outside this process
     inspects, e.g. ``hindrax run``'s: a third fewer entities in each executor wait).
-    Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration.
+    Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration.
     """
     overrides = dict(overrides or {})
     if seed is not None:
@@ -334,7 +334,7 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
         seed: int | None = None, real_time_factor: float | None = None, controller: bool = False,
         model_file: str = "") -> int:
     """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down
-    (:class:`~hindrax_drivers.process.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
+    (:class:`~hindrax_common.process.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
     status: 1 with one line on stderr for an invalid configuration."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     loopback_transport()  # loopback discovery: over the vehicle's loopback UDP transport

@@ -41,10 +41,10 @@ from domain_coordinator import domain_id
 from rclpy.action import ActionClient
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.node_support.action_goal import GoalSender
-from hindrax_drivers.process.conditions import ros_context, wait_until
-from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
-from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleWatch, own_view, refuse_before_start
+from hindrax_common.node_support.action_goal import GoalSender
+from hindrax_common.process.conditions import ros_context, wait_until
+from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+from hindrax_common.node_support.vehicle_graph import ForeignVehicleWatch, own_view, refuse_before_start
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
@@ -203,9 +203,9 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     the identification node's own record (e.g. ``free_decay`` and ``inclining`` of the tilt_decay
     and inclining steps, which need its sensor log).
 
-    Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration,
+    Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration,
     ``TimeoutError`` when a step does not finish within its wall-clock deadline (the graph is shut
-    down, thrusters neutral) and :class:`~hindrax_drivers.node_support.vehicle_graph.ForeignVehicleError` when
+    down, thrusters neutral) and :class:`~hindrax_common.node_support.vehicle_graph.ForeignVehicleError` when
     another ESC or supervisor is on the domain.
     """
     say = progress or (lambda _m: None)

@@ -10,7 +10,7 @@ Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each 
 through an ``ExitStack``, asking every entity's callback group (a weak reference and a lock each),
 adding up the waitables' ``NumberOfEntities`` one object at a time and looking every entity of
 every node up in the ready lists; the virtual pool's graph waits once per /clock tick, on about 120
-entities (:class:`~hindrax_drivers.node_support.vehicle_node.VehicleNode`s: no parameter services, few QoS event
+entities (:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`s: no parameter services, few QoS event
 handlers). :meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the
 same callbacks in the same order (tasks in progress; ready waitables node by node; then per node
 its timers, subscriptions, guard conditions, clients and services in creation order) from a

@@ -1,7 +1,7 @@
-"""Record the driver test bag from the virtual pool: ``sim_drivers_3s`` under ``src/hindrax_drivers/test/data/``.
+"""Record the driver test bag from the virtual pool: ``sim_drivers_3s`` under ``src/hindrax_bringup/test/data/``.
 
 Usage: ``python -m hindrax_sim.graph.record_bag [--out DIR]`` (default: the repository's
-``src/hindrax_drivers/test/data``; the synthetic bags are :mod:`hindrax_drivers.recording.make_test_bags`).
+``src/hindrax_bringup/test/data``; the synthetic bags are :mod:`hindrax_bringup.recording.make_test_bags`).
 
 Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with
 ``sim=True``: simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837,
@@ -13,14 +13,14 @@ starting at 0 (``/clock``), as fast as possible. The vehicle floats passively fr
 ground truth (``sim/*``) and ``/clock``.
 
 A clean start and end, so that a replay of the raw data through fresh drivers reproduces the parsed topics
-exactly (:mod:`hindrax_drivers.recording.replay_devices`): simulated time is held at 0 until the recorder
+exactly (:mod:`hindrax_bringup.recording.replay_devices`): simulated time is held at 0 until the recorder
 has subscribed to and matched every topic; at the end simulated time is frozen and the recorder is stopped
 only once it has written every message the drivers published. The only driver traffic before the recording
 are the ESC node's constructor writes (PCA9685 configuration and first neutral), inside ``build_graph``.
 
 Simulated content is deterministic for a seed, but the exact message count is not (how the executor
 interleaves the driver timers with /clock steps varies with machine load), so tests check
-properties, not counts fixed in advance. It lives here, not in hindrax_drivers, so that the drivers
+properties, not counts fixed in advance. It lives here, not in hindrax_bringup, so that the drivers
 do not import the simulator.
 """
 from __future__ import annotations
@@ -33,11 +33,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hindrax_drivers.process.conditions import ConditionTimeout, ros_context, wait_until
-from hindrax_drivers.base.devices import DEVICES, I2C
-from hindrax_drivers.recording.make_test_bags import default_output_dir, write_bags
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.config import default_config_path
+from hindrax_common.process.conditions import ConditionTimeout, ros_context, wait_until
+from hindrax_common.base.devices import DEVICES, I2C
+from hindrax_bringup.recording.make_test_bags import default_output_dir, write_bags
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_common.config import default_config_path
 
 from .bringup import build_graph
 
@@ -62,7 +62,7 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     file, seed :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if
     it exists), in the initialised rclpy ``context``. Returns topic -> number of messages the
     graph's nodes published while recording (every one is in the bag). Raises
-    :class:`~hindrax_drivers.process.conditions.ConditionTimeout` naming the condition not reached (each
+    :class:`~hindrax_common.process.conditions.ConditionTimeout` naming the condition not reached (each
     wait: 60 s of wall time), ConfigError for bad overrides.
     """
     timeout_s = 60.0

@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from hindrax_drivers.process.dds_transport import loopback_transport
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.process.dds_transport import loopback_transport
+from hindrax_common.testing import ros_context, wait_until
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 

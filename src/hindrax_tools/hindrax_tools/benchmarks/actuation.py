@@ -1,7 +1,7 @@
 """Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
 
 One process, one EventsExecutor (as the vehicle's ``actuation_node``, composing the two nodes:
-``hindrax_drivers.layout.composition``), every thread scheduled as ``vehicle.launch.xml`` starts that
+``hindrax_bringup.layout.composition``), every thread scheduled as ``vehicle.launch.xml`` starts that
 process (``SCHED_FIFO`` at its ``HINDRAX_REALTIME_PRIORITY``; if refused, nice 0 and a note: the p99
 is then mostly a shared machine's load): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the
 thrust allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated
@@ -27,14 +27,14 @@ from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
 from std_msgs.msg import Header
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.allocation.node import ThrustAllocationNode
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_bringup.allocation.node import ThrustAllocationNode
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.process.scheduling import apply_realtime_priority, set_every_thread
-from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.process.scheduling import apply_realtime_priority, set_every_thread
+from hindrax_common.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.srv import SetArmed
 
 from . import call, spinning

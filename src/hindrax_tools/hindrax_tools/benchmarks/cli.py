@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from hindrax_drivers.config import default_config_path
+from hindrax_common.config import default_config_path
 
 TARGET_S = 0.3
 

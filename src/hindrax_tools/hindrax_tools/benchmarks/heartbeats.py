@@ -8,7 +8,7 @@ each beat is read by two receivers (docs/architecture.md §8), so a beat's cost 
   beat as the bytes a node publishes and to read it back as a receiver does, median of 5 blocks. Before: rosbags'
   encoder of a DiagnosticStatus with the ESC's seven key-value pairs (``boot_id``, ``seq``, ``output_state``,
   ``armed``, ``reason``, ``guard_boot_id``, ``guard_seq``), rclpy's deserialiser and the pairs parsed into numbers.
-  After: :func:`hindrax_drivers.cdr.lean_cdr.heartbeat_cdr` and :func:`~hindrax_drivers.cdr.lean_cdr.read_heartbeat`.
+  After: :func:`hindrax_common.cdr.lean_cdr.heartbeat_cdr` and :func:`~hindrax_common.cdr.lean_cdr.read_heartbeat`.
 * ``heartbeat_cycle_cpu_us_{status,heartbeat}`` and ``heartbeat_cycle_cpu_ratio``: process CPU time (every thread:
   DDS included) per beat built, published, delivered to a subscription in a second participant through rclpy's
   EventsExecutor and read, median of 5 alternating blocks of beats. Before: the DiagnosticStatus subscription of
@@ -27,10 +27,10 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from domain_coordinator import domain_id
 from rclpy.serialization import deserialize_message
 
-from hindrax_drivers.cdr.lean_cdr import diagnostic_status_cdr, heartbeat_cdr, read_heartbeat
-from hindrax_drivers.node_support.liveness import (SETTLE_S, HeartbeatPublisher, HeartbeatWatch, heartbeat_qos,
+from hindrax_common.cdr.lean_cdr import diagnostic_status_cdr, heartbeat_cdr, read_heartbeat
+from hindrax_common.node_support.liveness import (SETTLE_S, HeartbeatPublisher, HeartbeatWatch, heartbeat_qos,
                                                    publisher_node_names)
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_msgs.msg import Heartbeat
 
 from . import run_alone, spinning

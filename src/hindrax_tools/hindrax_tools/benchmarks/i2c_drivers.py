@@ -1,9 +1,9 @@
 """I2C sensor drivers benchmark: CPU per published message and register-read-to-topic latency.
 
 For each driver (MS5837 pressure node, ICM-20948 IMU node) one process runs the node over its
-device emulator on an :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`, plus a probe node
+device emulator on an :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`, plus a probe node
 subscribing to the main topic, all in one EventsExecutor (the executor of every node process,
-``hindrax_drivers.process.ros_process``), with the shipped configuration
+``hindrax_common.process.ros_process``), with the shipped configuration
 (MS5837: 10 Hz, OSR 4096; ICM-20948: 100 Hz configured = 102.27 Hz, I2C-master magnetometer).
 
 * Latency: from the emulator's ``i2c_read`` of the data (ICM-20948: the 23-byte burst; MS5837: the ADC read
@@ -29,8 +29,8 @@ from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.icm20948.node import Icm20948Node
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
 from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from sensor_msgs.msg import FluidPressure, Imu
 
 from . import run_alone, spin_for, spinning

@@ -1,8 +1,8 @@
 """Emulated I2C bus over a Unix socket: round-trip time of one transaction, with the serving process quiet or busy.
 
 The launch-layout tests and the pool-day rehearsal serve the emulated PCA9685, MS5837 and ICM-20948 from the test
-process (:class:`~hindrax_drivers.transport.socket_i2c.I2CSocketServer`, one thread per client connection); the
-driver processes are its clients (:class:`~hindrax_drivers.transport.socket_i2c.SocketI2CBus`). A serving thread
+process (:class:`~hindrax_common.transport.socket_i2c.I2CSocketServer`, one thread per client connection); the
+driver processes are its clients (:class:`~hindrax_common.transport.socket_i2c.SocketI2CBus`). A serving thread
 needs the GIL of its process for every request, so CPU-bound Python threads beside it (the test's own spinning,
 other emulators) delay every transaction by up to the interpreter's switch interval (``sys.getswitchinterval()``,
 5 ms) per hand-over.
@@ -27,9 +27,9 @@ from typing import Iterator
 
 import numpy as np
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-from hindrax_drivers.testing import child_process
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
+from hindrax_common.testing import child_process
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
 _MODULE = "hindrax_tools.benchmarks.i2c_socket"
 _WRITE = (0x40, 0x06, list(range(32)))  # PCA9685 at 0x40, LED0_ON_L, one 8-channel block

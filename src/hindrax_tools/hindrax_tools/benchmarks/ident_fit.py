@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_fit.assessment.pipeline import fit_read
 from hindrax_fit.assessment.results import assessment
 from hindrax_fit.bag_input import reader

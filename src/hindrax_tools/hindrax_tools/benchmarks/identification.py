@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import time
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim.campaign import Campaign
 from hindrax_fit.fit.campaign_fit import identify_all_with_errors
 

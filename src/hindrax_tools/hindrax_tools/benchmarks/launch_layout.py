@@ -1,7 +1,7 @@
 """The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices emulated.
 
 :func:`launch_processes` lists the processes of a launch XML file (``pool_test.launch.xml``, which includes
-``vehicle.launch.xml``) through :func:`hindrax_drivers.layout.launch_xml.read_launch`, the project's one reader of
+``vehicle.launch.xml``) through :func:`hindrax_bringup.layout.launch_xml.read_launch`, the project's one reader of
 launch files, each with its console script's function; the benchmark starts them with the arguments ``ros2 launch``
 would give (the ``launch`` package is not installable here, docs/architecture.md §11.3).
 
@@ -9,7 +9,7 @@ would give (the ``launch`` package is not installable here, docs/architecture.md
 the virtual pool in its own process (excluded from the stack's CPU): the simulator
 at real-time factor 1 (no ``/clock``, no ground truth: every node on system time), the serial
 emulators on pseudo-terminals, the I2C emulators on an
-:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
+:class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
 (:class:`I2CSocketServer`), all on ``time.monotonic``. The pty paths go to ``--ports-file`` (JSON,
 :func:`write_ports_file`: whole or not at all) once everything is up.
 """
@@ -31,17 +31,17 @@ from typing import Mapping
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.process.dds_transport import loopback_transport
-from hindrax_drivers.layout.launch_xml import NodeProcess, read_launch
-from hindrax_drivers.transport.socket_i2c import I2CSocketServer
+from hindrax_common.config import default_config_path, load_config
+from hindrax_common.process.dds_transport import loopback_transport
+from hindrax_bringup.layout.launch_xml import NodeProcess, read_launch
+from hindrax_common.transport.socket_i2c import I2CSocketServer
 from hindrax_sim.hardware import VirtualHardware
 from hindrax_sim.node import SimulatorNode
 from hindrax_sim.simulator import Simulator
 
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-loopback_transport()  # the vehicle's transport (hindrax_drivers.process.dds_transport)
+loopback_transport()  # the vehicle's transport (hindrax_common.process.dds_transport)
 
 #: the workspace's own packages: their share directory is the source package directory in a checkout
 OWN_PACKAGES = ("hindrax_drivers", "hindrax_onboard")
@@ -49,7 +49,7 @@ OWN_PACKAGES = ("hindrax_drivers", "hindrax_onboard")
 
 @dataclass(frozen=True)
 class LaunchProcess:
-    """One ``<node>`` of a launch file, as :func:`hindrax_drivers.layout.launch_xml.read_launch` reads it (the reader of
+    """One ``<node>`` of a launch file, as :func:`hindrax_bringup.layout.launch_xml.read_launch` reads it (the reader of
     the pool-day test and ``hindrax health``), with the function its console script runs.
 
     process: the node process (package, executable, name, parameters, remaps, ...); module: the console script's
@@ -86,10 +86,10 @@ def console_scripts(package: str) -> dict[str, str]:
 def launch_processes(path: str | Path, arguments: Mapping[str, str] | None = None) -> list[LaunchProcess]:
     """The processes ``ros2 launch`` would start for the launch XML file ``path`` with ``arguments`` (name ->
     value; the others take their defaults), in launch order, includes and groups expanded: those of
-    :func:`hindrax_drivers.layout.launch_xml.read_launch` (``$(find-pkg-share)`` resolved to this checkout's packages),
+    :func:`hindrax_bringup.layout.launch_xml.read_launch` (``$(find-pkg-share)`` resolved to this checkout's packages),
     each with the function its console script runs.
 
-    Raises :class:`~hindrax_drivers.layout.launch_xml.LaunchFileError` (a ValueError) for what the reader refuses (an
+    Raises :class:`~hindrax_bringup.layout.launch_xml.LaunchFileError` (a ValueError) for what the reader refuses (an
     undeclared argument, an unsupported element or substitution, a non-boolean condition), and ValueError for an
     enabled node of another package or an executable the package does not install."""
     out = []

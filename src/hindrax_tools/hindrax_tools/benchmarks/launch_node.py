@@ -1,14 +1,14 @@
 """One node process of the stack benchmark's launch layout: a console script's function, as installed.
 
 ``python -m hindrax_tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs ``MODULE.FUNCTION()``
-(default ``main``, e.g. ``hindrax_drivers.layout.composition:i2c_sensors_main``) as the installed console script
+(default ``main``, e.g. ``hindrax_bringup.layout.composition:i2c_sensors_main``) as the installed console script
 does. The I2C drivers reach the virtual pool's emulated bus through their own ``open_smbus``
-(:data:`hindrax_drivers.transport.socket_i2c.SOCKET_ENV`), so nothing of the node is replaced. This module imports no
+(:data:`hindrax_common.transport.socket_i2c.SOCKET_ENV`), so nothing of the node is replaced. This module imports no
 simulator, emulator or benchmark code, so a benchmarked process holds the modules and memory the vehicle's holds
 (``test_bench_launch_layout.py`` checks it).
 
 ``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`): cProfile, ``DIR/<module>.prof`` written on
-exit, ``os._exit`` included (:data:`hindrax_drivers.process.ros_process.BEFORE_PROCESS_END`). Every Python
+exit, ``os._exit`` included (:data:`hindrax_common.process.ros_process.BEFORE_PROCESS_END`). Every Python
 thread takes its ``threading`` name as its OS thread name (:func:`name_os_threads`), for the
 benchmark's figures by thread.
 
@@ -39,9 +39,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 
-from hindrax_drivers.gateway.internal import interface_type
-from hindrax_drivers.node_support.node_common import run_nodes
-from hindrax_drivers.process.ros_process import BEFORE_PROCESS_END
+from hindrax_bringup.gateway.internal import interface_type
+from hindrax_common.node_support.node_common import run_nodes
+from hindrax_common.process.ros_process import BEFORE_PROCESS_END
 
 #: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
 PROFILE_ENV = "HINDRAX_BENCH_PROFILE"
@@ -127,7 +127,7 @@ def _call_all(fns: list) -> None:
 def skeleton_main() -> int:
     """One skeleton process: argv ``SPEC LABEL``, SPEC a JSON file ``{"processes": {label:
     topology}}`` whose publishers carry ``rates`` (messages/s per phase) and ``payload`` (CDR hex;
-    null: a default message). Returns :func:`~hindrax_drivers.node_support.node_common.run_nodes`'s status."""
+    null: a default message). Returns :func:`~hindrax_common.node_support.node_common.run_nodes`'s status."""
     spec = json.loads(Path(sys.argv[1]).read_text())["processes"][sys.argv[2]]
     phase, timers = [0], []
 

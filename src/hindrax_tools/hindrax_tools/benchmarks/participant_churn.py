@@ -1,7 +1,7 @@
 """Safety benchmark rows of the armed vehicle while other processes start and run beside it.
 
 The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its
-own process on the shipped transport, :mod:`hindrax_drivers.process.dds_transport`, scheduled as
+own process on the shipped transport, :mod:`hindrax_common.process.dds_transport`, scheduled as
 ``vehicle.launch.xml`` starts them:
 :func:`~hindrax_tools.benchmarks.safety.vehicle_scheduling`; the layout of
 :func:`hindrax_tools.benchmarks.safety.running_layout`) are armed and commanded at 1700 us.
@@ -41,10 +41,10 @@ from typing import Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
-from hindrax_drivers.process.dds_transport import PROFILE_ENV, RANGE_ENV
-from hindrax_drivers.node_support.liveness import HEARTBEAT_NAMES
-from hindrax_drivers.process.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
-from hindrax_drivers.testing import child_process, python_executable, wait_until
+from hindrax_common.process.dds_transport import PROFILE_ENV, RANGE_ENV
+from hindrax_common.node_support.liveness import HEARTBEAT_NAMES
+from hindrax_common.process.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
+from hindrax_common.testing import child_process, python_executable, wait_until
 
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 

@@ -2,7 +2,7 @@
 recorded with zero drops.
 
 Set-up: the recorder runs as in the stack, in its own process (``python -m
-hindrax_drivers.recording.recorder_node``, default configuration: zstd chunks of 1 MiB, fsync at least
+hindrax_bringup.recording.recorder_node``, default configuration: zstd chunks of 1 MiB, fsync at least
 every ``recording.flush_interval_s``), recording every ``/bench/...`` topic. This process publishes
 pre-serialized messages of realistic size (the synthetic test-bag messages) on a wall-clock schedule:
 
@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
-from hindrax_drivers.recording.make_test_bags import STREAMS
-from hindrax_drivers.recording.metadata import read_metadata
-from hindrax_drivers.recording.msgtypes import message_class
-from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
+from hindrax_bringup.recording.make_test_bags import STREAMS
+from hindrax_bringup.recording.metadata import read_metadata
+from hindrax_bringup.recording.msgtypes import message_class
+from hindrax_common.testing import child_env, child_process, interrupt, python_executable, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 
@@ -64,7 +64,7 @@ def run(quick: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp, domain_id() as did:
         bag = Path(tmp) / "bench"
         with child_process(
-                [python_executable(), "-m", "hindrax_drivers.recording.recorder_node", "--ros-args",
+                [python_executable(), "-m", "hindrax_bringup.recording.recorder_node", "--ros-args",
                  "-p", "autostart:=true", "-p", f"output_dir:={bag}", "-p", "topic_regex:=^/bench/",
                  "-p", "discovery_period_s:=0.2", "-p", "status_period_s:=0.2"],
                 env=child_env(ROS_DOMAIN_ID=str(did)), stdout=subprocess.DEVNULL,

@@ -64,13 +64,13 @@ from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.ms5837.protocol import Ms5837Error
 from hindrax_drivers.ping1d.protocol import Distance, encode_frame, encode_message
 from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.testing import config_parameters, ros_context, wait_until
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.pty_device import PtyDevice
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 
 from . import run_alone, spin_for, spinning
 

@@ -21,7 +21,7 @@ I2C transaction after which the emulator decodes every thruster channel at neutr
 Process, bus and clock failures (:func:`run_processes`; target 500 ms each), in the vehicle's layout: the
 ESC node, the supervisor and the output guard each in its own process (``python -m ...``, EventsExecutor), sharing
 an emulated PCA9685 and its /OE line that this process serves over a Unix socket
-(:mod:`hindrax_drivers.transport.shared_emulation`); the bench's own vehicle file wires /OE and watches no sensor:
+(:mod:`hindrax_common.transport.shared_emulation`); the bench's own vehicle file wires /OE and watches no sensor:
 
 * ``supervisor_killed|hung_outputs_stopped``: SIGKILL / SIGSTOP of the supervisor while armed at 1700 us, until
   no thruster carries a non-neutral pulse (the ESC's heartbeat disarm or the guard's /OE, whichever is first);
@@ -87,25 +87,25 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from hindrax_drivers.node_support.liveness import heartbeat_qos
+from hindrax_common.node_support.liveness import heartbeat_qos
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.process.scheduling import PRIORITY_ENV
-from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_common.process.scheduling import PRIORITY_ENV
+from hindrax_bringup.supervisor.node import SupervisorNode
+from hindrax_common.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
                                      SafetyHeartbeats, child_env, child_process, config_parameters,
                                      interrupt, python_executable, ros_context, wait_until)
-from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
-from hindrax_drivers.transport.shared_emulation import SOCKET_ENV, EmulationServer
+from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
+from hindrax_common.transport.shared_emulation import SOCKET_ENV, EmulationServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
@@ -295,9 +295,9 @@ def run(quick: bool = False) -> list[dict]:
 # modules it runs imported and rclpy initialised, then gc.collect() timed (CPU of the process) before and after
 # freeze_startup_heap(), which RosProcess.spin() calls once the nodes are built.
 
-GC_PROCESSES = {"actuation": ["hindrax_drivers.layout.composition", "hindrax_drivers.allocation.node",
+GC_PROCESSES = {"actuation": ["hindrax_bringup.layout.composition", "hindrax_bringup.allocation.node",
                               "hindrax_drivers.pca9685.node"],
-                "supervisor": ["hindrax_drivers.supervisor.node"], "output_guard": ["hindrax_drivers.guard.node"]}
+                "supervisor": ["hindrax_bringup.supervisor.node"], "output_guard": ["hindrax_bringup.guard.node"]}
 
 _GC_PROBE = r"""
 import gc, importlib, json, sys, time
@@ -305,7 +305,7 @@ import rclpy
 for name in sys.argv[2:]:
     importlib.import_module(name)
 rclpy.init(args=[])
-from hindrax_drivers.process.ros_process import freeze_startup_heap
+from hindrax_common.process.ros_process import freeze_startup_heap
 
 def full_collection_ms():
     out = []
@@ -324,7 +324,7 @@ rclpy.shutdown()
 
 def gc_rows(quick: bool = False) -> list[dict]:
     """Rows ``gc_full_collection_cpu_ms_<process>`` (frozen: what a full collection costs once the process spins)
-    and ``..._unfrozen`` (the same heap without :func:`~hindrax_drivers.process.ros_process.freeze_startup_heap`),
+    and ``..._unfrozen`` (the same heap without :func:`~hindrax_common.process.ros_process.freeze_startup_heap`),
     median CPU ms of 3 (quick) or 7 collections, for each process of :data:`GC_PROCESSES`."""
     rows = []
     for label, modules in GC_PROCESSES.items():
@@ -342,11 +342,11 @@ def gc_rows(quick: bool = False) -> list[dict]:
 # ---------------------------------------------------------------------------------------------- process failures
 # The vehicle layout (vehicle.launch.xml): the ESC node, the supervisor and the output guard each in their own
 # process, sharing the PCA9685 and its /OE line. Here this process holds the emulated chip and line and serves them
-# (hindrax_drivers.transport.shared_emulation: a killed client's line returns to its pull-up, as the kernel frees a
+# (hindrax_common.transport.shared_emulation: a killed client's line returns to its pull-up, as the kernel frees a
 # dead process's request); the three nodes run as `python -m <module>` with HINDRAX_EMULATION_SOCKET set.
 
-PROCESSES = {"esc": "hindrax_drivers.pca9685.node", "supervisor": "hindrax_drivers.supervisor.node",
-             "guard": "hindrax_drivers.guard.node"}
+PROCESSES = {"esc": "hindrax_drivers.pca9685.node", "supervisor": "hindrax_bringup.supervisor.node",
+             "guard": "hindrax_bringup.guard.node"}
 #: the vehicle launch file's process of each (vehicle.launch.xml): its scheduling is theirs here
 VEHICLE_EXECUTABLES = {"esc": "actuation_node", "supervisor": "supervisor_node", "guard": "output_guard_node"}
 
@@ -355,7 +355,7 @@ VEHICLE_EXECUTABLES = {"esc": "actuation_node", "supervisor": "supervisor_node",
 def vehicle_scheduling() -> dict[str, tuple[tuple[str, ...], dict[str, str]]]:
     """Name of :data:`PROCESSES` -> (launch prefix, environment additions) that ``vehicle.launch.xml`` starts its
     process with: ``nice -n -5`` and ``HINDRAX_REALTIME_PRIORITY`` (docs/deployment.md §1,
-    :mod:`hindrax_drivers.process.scheduling`), read from the launch file, so a benchmark schedules the safety processes
+    :mod:`hindrax_common.process.scheduling`), read from the launch file, so a benchmark schedules the safety processes
     as the vehicle does. Read once per process (the launch file and the installed console scripts)."""
     read = {lp.process.executable: lp.process for lp in
             launch_processes(package_share("hindrax_drivers") / "launch" / "vehicle.launch.xml")}
@@ -524,7 +524,7 @@ class _Layout:
     realtime = True
     #: True: each node process in a session of its own, as a launched process is (the project's runner, a systemd
     #: service), so that the kernel's session autogroups rank it as on the vehicle
-    #: (hindrax_drivers/process/scheduling.py)
+    #: (hindrax_common/process/scheduling.py)
     new_session = False
 
     def start(self, name: str, extra: tuple = ()) -> None:
@@ -774,8 +774,8 @@ REPLAY_CENSOR_S = 3.0
 _REPLAY = r"""
 import sys, time
 from rclpy.parameter import Parameter
-from hindrax_drivers.recording.player_node import BagPlayerNode
-from hindrax_drivers.process.ros_process import RosProcess
+from hindrax_bringup.recording.player_node import BagPlayerNode
+from hindrax_common.process.ros_process import RosProcess
 class Unchecked(BagPlayerNode):
     def _check_graph(self, force=False):
         pass
@@ -798,7 +798,7 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
     each topic as it discovers it): replayed from there, every pass carries them without a gap until its end."""
     bag = tmp / "vehicle_bag"
     lay.armed_at_1700()
-    argv = [lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file", lay.config,
+    argv = [lay.py, "-m", "hindrax_bringup.recording.recorder_node", "--ros-args", "--params-file", lay.config,
             "-p", "all_topics:=true", "-p", "autostart:=true", "-p", f"output_dir:={bag}"]
     rec = start_logged(tmp / "recorder.log", argv, env=lay.env)
     try:

@@ -3,10 +3,10 @@ operator requests.
 
 The layout of :func:`hindrax_tools.benchmarks.safety.run_processes` (the ESC node, the
 supervisor and the output guard, each in its own process on the vehicle's transport) with the
-gateway beside them, started as ``python -m hindrax_drivers.gateway.node`` on the layout's internal
+gateway beside them, started as ``python -m hindrax_bringup.gateway.node`` on the layout's internal
 domain and a topside domain of its own, with an operator key for the vehicle (``HINDRAX_KEYS_DIR``):
 
-* ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_drivers.process.proc_sockets`) of the ESC,
+* ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_common.process.proc_sockets`) of the ESC,
   supervisor, guard and the gateway's internal process bound outside 127.0.0.1 and the multicast groups (target
   0). The gateway's topside process is not counted: it must reach the tether;
 * ``operator_{unsigned,wrong_key,replayed}_requests_accepted``: of :data:`REQUESTS` (:data:`QUICK_REQUESTS`) arm
@@ -23,9 +23,9 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from domain_coordinator import domain_id
-from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
-from hindrax_drivers.process.proc_sockets import child_pids, exposed, udp_sockets
-from hindrax_drivers.testing import wait_until
+from hindrax_bringup.gateway.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
+from hindrax_common.process.proc_sockets import child_pids, exposed, udp_sockets
+from hindrax_common.testing import wait_until
 
 from hindrax_msgs.srv import SetArmed, SignedTrigger
 from std_srvs.srv import Trigger
@@ -43,7 +43,7 @@ KINDS = {"unsigned": "unsigned", "wrong_key": "signed with another key",
 
 def exposure_row(sockets_by_process: dict[str, list[tuple[str, int]]]) -> dict:
     """The row ``internal_sockets_reachable_from_network`` from process label -> its UDP sockets (address, port):
-    value = how many are reachable from the network (:func:`~hindrax_drivers.process.proc_sockets.exposed`)."""
+    value = how many are reachable from the network (:func:`~hindrax_common.process.proc_sockets.exposed`)."""
     found = exposed(sockets_by_process)
     total = sum(len(s) for s in sockets_by_process.values())
     return {"name": "internal_sockets_reachable_from_network", "value": sum(len(s) for s in found.values()),
@@ -62,12 +62,12 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
 
 @contextmanager
 def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
-    """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
+    """The gateway (``python -m hindrax_bringup.gateway.node``) beside the layout ``lay``
     (:func:`~hindrax_tools.benchmarks.safety.running_layout`), on its internal domain and the topside domain
     ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
     request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
     env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
-    argv = [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config,
+    argv = [lay.py, "-m", "hindrax_bringup.gateway.node", "--ros-args", "--params-file", lay.config,
             "-p", f"topside_domain_id:={topside}"]
     gateway = start_logged(lay.tmp / "gateway.log", argv, env=env)
     try:

@@ -1,8 +1,8 @@
 """Serial drivers benchmark (DVL-75, Ping1D): CPU per published report and bytes-to-topic latency.
 
 For each driver one process runs its device emulator behind a pseudo-terminal
-(:class:`~hindrax_drivers.transport.pty_device.PtyDevice`), the driver node reading it through the real
-pyserial path (:class:`~hindrax_drivers.transport.serial_transport.SerialTransport`), and a probe node
+(:class:`~hindrax_common.transport.pty_device.PtyDevice`), the driver node reading it through the real
+pyserial path (:class:`~hindrax_common.transport.serial_transport.SerialTransport`), and a probe node
 subscribed to the output topics, in one SingleThreadedExecutor:
 
     emulator.poll -> pty write -> pyserial read (reader thread) -> decode -> publish -> probe callback
@@ -28,13 +28,13 @@ import numpy as np
 import rclpy
 from sensor_msgs.msg import Range
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_drivers.dvl75.node import Dvl75Node
 from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dSettings, Ping1dTruth
 from hindrax_drivers.ping1d.node import Ping1dNode
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
-from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_common.testing import config_parameters, ros_context, wait_until
+from hindrax_common.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl
 
 from . import run_alone, spin_for, spinning

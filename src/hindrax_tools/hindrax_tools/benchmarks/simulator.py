@@ -13,12 +13,12 @@ import time
 
 import numpy as np
 import rclpy
-from hindrax_drivers.testing import ros_context
+from hindrax_common.testing import ros_context
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_common.config import default_config_path, load_config
 from hindrax_sim.node import SimulatorNode
 from hindrax_sim.simulator import Simulator
 

@@ -54,17 +54,17 @@ from rclpy.action import ActionClient
 from rclpy.executors import ShutdownException, TimeoutException
 from std_msgs.msg import Header
 
-from hindrax_drivers.node_support.action_goal import GoalSender
-from hindrax_drivers.config import default_config_path
-from hindrax_drivers.layout.launch_xml import write_parameter_file
-from hindrax_drivers.cdr.lean_cdr import cdr_decoder, type_name_of
-from hindrax_drivers.node_support.liveness import heartbeat_qos
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.recording.selection import TopicSelection
+from hindrax_common.node_support.action_goal import GoalSender
+from hindrax_common.config import default_config_path
+from hindrax_bringup.layout.launch_xml import write_parameter_file
+from hindrax_common.cdr.lean_cdr import cdr_decoder, type_name_of
+from hindrax_common.node_support.liveness import heartbeat_qos
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_bringup.recording.selection import TopicSelection
 from hindrax_tools.benchmarks.rig import PI4_CORE_HERE, PI4_FACTOR, Rig
-from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
+from hindrax_common.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
-from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
+from hindrax_common.transport.socket_i2c import SOCKET_ENV
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import AllocationStatus, Heartbeat, ThrusterPwm
@@ -86,7 +86,7 @@ WRENCH_RATE_HZ = 50.0
 #: the ICM-20948's topic, whose rate and gaps the running phase reports (:func:`imu_timing`)
 IMU_TOPIC = "/imu/data_raw"
 #: the launch layout is armed once its ROS graph has not changed for this long (s): the publish stalls of a new
-#: participant's first messages came 0-3.0 s after it appeared (hindrax_drivers.testing.GraphSettled)
+#: participant's first messages came 0-3.0 s after it appeared (hindrax_common.testing.GraphSettled)
 GRAPH_QUIET_S = 5.0
 
 
@@ -153,7 +153,7 @@ def _wrench_stream(probe: Any) -> Callable[[bool], None]:
 def _running_then_idle(probe: Any, action: Any, switch: Callable[[bool], None], window: Any,
                        spin: Any, spin_idle: Any, what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
-    :class:`~hindrax_drivers.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3
+    :class:`~hindrax_common.node_support.action_goal.GoalSender`, which survives a lost goal or cancel response), 3
     s of warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
     switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one executor spin
@@ -341,7 +341,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = No
                 if lp.label in procs:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
-                # docs/deployment.md §1; the DDS transport, hindrax_drivers.process.dds_transport)
+                # docs/deployment.md §1; the DDS transport, hindrax_common.process.dds_transport)
                 argv = [*lp.process.launch_prefix, *(rig.prefix if rig else ()), py, *wrap, lp.module,
                         *lp.process.ros_arguments(values_file), *bench]
                 own = {**dict(lp.process.env), SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}

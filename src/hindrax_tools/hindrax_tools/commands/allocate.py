@@ -3,7 +3,7 @@
 The wrench is in base_link (FLU): forces X Y Z in N, moments K M N in N m, about the CG. Prints one JSON
 object: ``force_n`` (per thruster, N), ``pulse_width_us`` (per thruster, us), ``achieved_wrench``
 (base_link, N and N m), ``scale`` and ``saturated`` (per-thruster flags). Computed by
-:class:`hindrax_drivers.allocation.core.AllocationCore`, exactly what the node runs. Exit 1 on an
+:class:`hindrax_bringup.allocation.core.AllocationCore`, exactly what the node runs. Exit 1 on an
 invalid wrench or configuration.
 
 ``achieved_wrench`` is what the thrusters give at the printed widths, so it shows every component nobody asked
@@ -30,8 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.allocation.allocator import InvalidWrenchError
-    from hindrax_drivers.allocation.core import AllocationCore
+    from hindrax_bringup.allocation.allocator import InvalidWrenchError
+    from hindrax_bringup.allocation.core import AllocationCore
 
     cfg = load_vehicle(args.config)
     try:

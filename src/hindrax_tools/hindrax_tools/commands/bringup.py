@@ -7,7 +7,7 @@ and the device emulators (the virtual pool's and the tests' graph). ``--controll
 Runs until Ctrl-C / SIGTERM, then commands neutral thrust and closes any bag.
 
 The vehicle does not run this: it runs the launch layout, one process per node, respawned
-(``ros2 launch hindrax_drivers vehicle.launch.xml``, started by the Docker image and the systemd unit;
+(``ros2 launch hindrax_bringup vehicle.launch.xml``, started by the Docker image and the systemd unit;
 docs/deployment.md). Without ``--sim`` the graph still opens the configured ports and I2C bus (a bench check of
 the hardware on one process), after printing :data:`VEHICLE_NOTICE` on stderr.
 """
@@ -20,7 +20,7 @@ from hindrax_onboard.commands.common import add_config_argument
 
 #: printed on stderr by ``hindrax bringup`` without ``--sim``
 VEHICLE_NOTICE = ("bringup: this is the single-process graph of the virtual pool and the tests; the vehicle runs the "
-                  "launch layout (ros2 launch hindrax_drivers vehicle.launch.xml: one process per node, respawned; "
+                  "launch layout (ros2 launch hindrax_bringup vehicle.launch.xml: one process per node, respawned; "
                   "docs/deployment.md). Starting it on the hardware for a bench check only.")
 
 
@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.config import default_config_path
+    from hindrax_common.config import default_config_path
 
     from hindrax_sim.graph.bringup import run as run_graph
 

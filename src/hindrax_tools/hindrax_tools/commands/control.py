@@ -95,8 +95,8 @@ def _load_model(path, cfg):
 def _model(args, cfg) -> int:
     from hindrax_onboard.control.law import ControlSettings, Controller
     from hindrax_onboard.control.maneuvers import dof_authority
-    from hindrax_drivers.allocation.core import AllocationCore
-    from hindrax_drivers.config import DOFS
+    from hindrax_bringup.allocation.core import AllocationCore
+    from hindrax_common.config import DOFS
 
     model = _load_model(args.model, cfg)
     core = AllocationCore(cfg)

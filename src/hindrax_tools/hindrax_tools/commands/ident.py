@@ -49,7 +49,7 @@ import sys
 
 import numpy as np
 
-from hindrax_drivers.config import ConfigError
+from hindrax_common.config import ConfigError
 
 from hindrax_onboard.commands.common import CommandError, load_vehicle, update_vehicle_file
 

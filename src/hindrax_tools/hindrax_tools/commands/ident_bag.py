@@ -53,7 +53,7 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
     for an unusable bag or when no DOF is identified."""
     import yaml
 
-    from hindrax_drivers.recording.reader import BagError
+    from hindrax_bringup.recording.reader import BagError
 
     from hindrax_fit.assessment import pipeline
     from hindrax_fit.bag_input.reader import BagContentError

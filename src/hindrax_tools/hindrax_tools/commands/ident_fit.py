@@ -144,7 +144,7 @@ def _campaign_hint(args: argparse.Namespace, cfg) -> str:
 def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input (an
     output folder that cannot be used: before anything is fitted)."""
-    from hindrax_drivers.recording.reader import BagError
+    from hindrax_bringup.recording.reader import BagError
 
     from hindrax_fit.bag_input.reader import FitOptions, TopicChoice, reads_as_campaign
     from .ident_bag import result_dir_for_bag
@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_any(args: argparse.Namespace, cfg, out: Path, choice, dofs, options) -> int:
     """Bags of any topics: fit (:func:`~...identification.assessment.pipeline.fit_bags`), write into ``out``, print."""
-    from hindrax_drivers.recording.reader import BagError
+    from hindrax_bringup.recording.reader import BagError
 
     from hindrax_fit.assessment.pipeline import fit_bags, write_any_outputs
     from hindrax_fit.assessment.verdicts import format_advice

@@ -93,7 +93,7 @@ def format_status(msg: Any) -> str:
 def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float], list[str]]:
     """(DOFs, levels, fractions, calibration steps) of ``hindrax ident start``. Raises
     :class:`CommandError` for a bad one, or ``--calibration-only`` without a step."""
-    from hindrax_drivers.config import DOFS
+    from hindrax_common.config import DOFS
 
     from hindrax_onboard.identification.online.executive import CALIBRATION_STEPS
 
@@ -129,7 +129,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     (read on ``status_topic`` before the goal is sent: the goal is then not sent)."""
     from rclpy.action import ActionClient
 
-    from hindrax_drivers.node_support.action_goal import GoalNotAnswered, GoalSender
+    from hindrax_common.node_support.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
     from hindrax_sim.progress_line import ProgressLine

@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     """Predict, write the CSV files, print the scores. Raises :class:`CommandError` on bad input."""
     import yaml
 
-    from hindrax_drivers.recording.reader import BagError
+    from hindrax_bringup.recording.reader import BagError
 
     from hindrax_fit.bag_input.reader import FitInputError, TopicChoice
     from hindrax_fit.assessment.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv

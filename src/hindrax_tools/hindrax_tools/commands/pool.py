@@ -4,7 +4,7 @@ day on a laptop.
 One command stands in for the vehicle: it starts the live pool (:mod:`hindrax_sim.live_pool`: the simulator
 behind the five emulated devices, in a process of its own, on the wall clock) and the *installed*
 ``hindrax_onboard/pool_test.launch.xml`` (``make ros-install``, then ``source ros_ws/install/setup.bash``), process by
-process as ``ros2 launch`` starts it (:class:`~hindrax_drivers.layout.process_runner.ProcessRunner`), the drivers
+process as ``ros2 launch`` starts it (:class:`~hindrax_bringup.layout.process_runner.ProcessRunner`), the drivers
 pointed at the pool's serial ports and I2C socket; ``NAME:=VALUE`` are more launch arguments (``model_file:=`` of the
 block's second launch; an undeclared one is refused in one line). The vehicle file is the installed one with its
 oscillator marked measured (``hindrax esc calibrate --write`` on a real vehicle), written to ``DIR/hindrax.yaml``.
@@ -82,12 +82,12 @@ def _domains(args: argparse.Namespace) -> tuple[int, int]:
 
 def _refuse_a_domain_in_use(domain: int) -> None:
     """Raise :class:`CommandError` ``"hindrax pool rehearse: refused: ROS domain N already has ESC /esc; ..."`` when
-    an ESC or supervisor is on ``domain`` (:func:`hindrax_drivers.node_support.vehicle_graph.refuse_before_start`, as
+    an ESC or supervisor is on ``domain`` (:func:`hindrax_common.node_support.vehicle_graph.refuse_before_start`, as
     ``hindrax bringup`` and ``hindrax run``): a second vehicle there would cut the first one's thrusters and mix
     into its bags."""
     import rclpy
 
-    from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError, refuse_before_start
+    from hindrax_common.node_support.vehicle_graph import ForeignVehicleError, refuse_before_start
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
@@ -106,10 +106,10 @@ def run(args: argparse.Namespace) -> int:
     domain already has a vehicle (:func:`_refuse_a_domain_in_use`)."""
     import yaml
 
-    from hindrax_drivers.config import ConfigError, load_config
-    from hindrax_drivers.layout.launch_xml import LaunchFileError, ament_share, read_launch
-    from hindrax_drivers.gateway.operator_signing import KEYS_DIR_ENV, create_key
-    from hindrax_drivers.layout.process_runner import ProcessRunner, installed_command
+    from hindrax_common.config import ConfigError, load_config
+    from hindrax_bringup.layout.launch_xml import LaunchFileError, ament_share, read_launch
+    from hindrax_bringup.gateway.operator_signing import KEYS_DIR_ENV, create_key
+    from hindrax_bringup.layout.process_runner import ProcessRunner, installed_command
     from hindrax_tools.benchmarks.rig import Rig, RigError
 
     from hindrax_sim.live_pool import LivePool
@@ -124,13 +124,13 @@ def run(args: argparse.Namespace) -> int:
     _refuse_a_domain_in_use(internal)
     try:
         launch_file = ament_share(LAUNCH[0]) / "launch" / LAUNCH[1]
-        installed = ament_share("hindrax_drivers") / "config" / "hindrax.yaml"
+        installed = ament_share("hindrax_common") / "config" / "hindrax.yaml"
     except LaunchFileError as exc:
         raise CommandError(f"pool rehearse: {exc}; run make ros-install, then source ros_ws/install/setup.bash") \
             from None
     folder = Path(args.dir or tempfile.mkdtemp(prefix="hindrax-rehearsal-")).resolve()
     folder.mkdir(parents=True, exist_ok=True)
-    from hindrax_drivers.config.sections.esc import board_id
+    from hindrax_common.config.sections.esc import board_id
 
     doc = yaml.safe_load(installed.read_text())
     doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True  # the emulated part's, measured here

@@ -39,7 +39,7 @@ _CALIBRATION_OPTIONS = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``hindrax run`` (and ``hindrax ident campaign``)."""
-    from hindrax_drivers.config import DOFS
+    from hindrax_common.config import DOFS
 
     if parser.prog.endswith("campaign"):
         parser.description = ("Run the identification campaign in-process on the simulator (no ROS graph, no bag) "
@@ -156,7 +156,7 @@ def _finish(args: argparse.Namespace, progress: WallProgress, out: Path, idents:
 def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
     """``--out`` (new or empty), or a new folder under ``recording.output_root`` named by the
     campaign (``kind``, the DOFs) and the time (:func:`.common.result_dir`)."""
-    from hindrax_drivers.config import DOFS
+    from hindrax_common.config import DOFS
 
     root = cfg.recording.output_root
     label = "all" if set(dofs) == set(DOFS) else "-".join(dofs)
@@ -174,12 +174,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_args(args) -> tuple[object, list[str]]:
     """(vehicle configuration, DOFs to identify). Raises :class:`~.common.CommandError` on a bad argument."""
-    from hindrax_drivers.config import DOFS
+    from hindrax_common.config import DOFS
 
     cfg = load_vehicle(args.config)
     overrides = _calibration_overrides(args)
     if overrides:  # the options replace the vehicle file's calibration.* keys, validated like the file
-        from hindrax_drivers.config import ConfigError, load_config
+        from hindrax_common.config import ConfigError, load_config
         try:
             cfg = load_config(cfg.source, overrides)
         except ConfigError as exc:
@@ -215,9 +215,9 @@ def _calibration_overrides(args) -> dict:
 
 def run_graph(args: argparse.Namespace) -> int:
     """The campaign through the ROS graph (module docstring). Returns the exit status."""
-    from hindrax_drivers.config import default_config_path
+    from hindrax_common.config import default_config_path
 
-    from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError
+    from hindrax_common.node_support.vehicle_graph import ForeignVehicleError
 
     from hindrax_sim.graph.graph_campaign import run_graph_campaign
     from hindrax_fit.assessment.results import reference_sections

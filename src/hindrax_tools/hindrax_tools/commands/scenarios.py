@@ -116,7 +116,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
     covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file.
     """
-    from hindrax_drivers.config import or_default
+    from hindrax_common.config import or_default
 
     from hindrax_sim.campaign import Campaign
     from hindrax_fit.fit.campaign_fit import identify_all_with_errors
@@ -335,7 +335,7 @@ def format_table(summary: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run the suite (module docstring)."""
-    from hindrax_drivers.config import DOFS
+    from hindrax_common.config import DOFS
 
     load_vehicle(args.config)  # an invalid vehicle file: one line and exit 1 here, not an error per case
     names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]

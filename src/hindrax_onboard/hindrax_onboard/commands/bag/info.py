@@ -1,7 +1,7 @@
 """``hindrax bag info BAG``: topics, types, message counts, rates, duration and size of a bag.
 
 BAG is a bag directory (metadata.yaml + .mcap files) or one .mcap file. Exit 0, or 1 with one line
-on stderr when BAG is not a readable bag. Implementation: :mod:`hindrax_drivers.recording.info`.
+on stderr when BAG is not a readable bag. Implementation: :mod:`hindrax_bringup.recording.info`.
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.recording.info import bag_info, format_bag_info
-    from hindrax_drivers.recording.reader import BagError
+    from hindrax_bringup.recording.info import bag_info, format_bag_info
+    from hindrax_bringup.recording.reader import BagError
 
     from ..common import CommandError
 

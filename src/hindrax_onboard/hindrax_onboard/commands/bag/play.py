@@ -5,7 +5,7 @@ The safety and actuation topics (heartbeats, ``thrusters/*``, ``esc/*``, ``super
 a bag never answers for a vehicle's supervisor or drives its thrusters; that option is refused
 while an ESC or supervisor is on the graph. Give BAG first (``--topics`` takes every following
 word). Exit 0 when played, 1 with one line on stderr when the bag cannot be played or is refused.
-Implementation: :class:`hindrax_drivers.recording.player_node.BagPlayerNode`.
+Implementation: :class:`hindrax_bringup.recording.player_node.BagPlayerNode`.
 """
 from __future__ import annotations
 
@@ -34,9 +34,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from rclpy.parameter import Parameter
 
-    from hindrax_drivers.recording.player_node import REFUSAL, BagPlayerNode, PlayerError
-    from hindrax_drivers.process.ros_process import RosProcess
-    from hindrax_drivers.node_support.vehicle_graph import ForeignVehicleError, refuse_before_start
+    from hindrax_bringup.recording.player_node import REFUSAL, BagPlayerNode, PlayerError
+    from hindrax_common.process.ros_process import RosProcess
+    from hindrax_common.node_support.vehicle_graph import ForeignVehicleError, refuse_before_start
 
     overrides = [Parameter("bag", value=str(args.bag)), Parameter("rate", value=float(args.rate)),
                  Parameter("start_offset_s", value=float(args.start_offset)), Parameter("loop", value=bool(args.loop)),

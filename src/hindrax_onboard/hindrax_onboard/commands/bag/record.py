@@ -5,7 +5,7 @@ Selection: ``--topics T [T ...]``, ``--regex R`` and/or ``--all``; none of them 
 compression and splitting come from the ``recording.*`` keys of the configuration file (``--config``).
 Ctrl-C / SIGTERM / the end of ``--duration`` finish the bag; prints the bag path and message count.
 Exit 0, 1 on a configuration or output-directory error (one line on stderr).
-Implementation: :class:`hindrax_drivers.recording.recorder_node.RecorderNode`.
+Implementation: :class:`hindrax_bringup.recording.recorder_node.RecorderNode`.
 """
 from __future__ import annotations
 
@@ -33,9 +33,9 @@ def run(args: argparse.Namespace) -> int:
     import rclpy
     from rclpy.parameter import Parameter
 
-    from hindrax_drivers.config import ConfigError
-    from hindrax_drivers.recording.recorder_node import RecorderNode
-    from hindrax_drivers.process.ros_process import RosProcess
+    from hindrax_common.config import ConfigError
+    from hindrax_bringup.recording.recorder_node import RecorderNode
+    from hindrax_common.process.ros_process import RosProcess
 
     if args.duration < 0:
         raise CommandError("hindrax bag record: --duration must be >= 0")

@@ -3,7 +3,7 @@
 Rewrites every truncated .mcap file of BAG as a complete file (summary, indexes, rosbag2 metadata
 record) and rebuilds metadata.yaml from the files; complete files are left unchanged. Prints one line
 per file and a total. Exit 0, or 1 with one line on stderr. Implementation:
-:mod:`hindrax_drivers.recording.recover`.
+:mod:`hindrax_bringup.recording.recover`.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.recording.recover import RecoverError, recover_bag
+    from hindrax_bringup.recording.recover import RecoverError, recover_bag
 
     from ..common import CommandError
 

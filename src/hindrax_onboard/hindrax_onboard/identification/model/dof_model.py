@@ -28,7 +28,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_common.config import DOFS, VehicleConfig
 
 from ...estimation.least_squares import EstimationError, fit_drag
 from ...estimation.steady_windows import detect_steady_windows

@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, or_default
+from hindrax_common.config import DOFS, or_default
 
 from ...estimation.least_squares import EstimationError
 from ...estimation.priors import priors_from_config

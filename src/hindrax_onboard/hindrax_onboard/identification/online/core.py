@@ -23,7 +23,7 @@ Rules (one test row each in ``test/test_identification_core.py``):
   of :data:`NOT_SUPERVISOR_ABORTS`, then a zero wrench every tick until the ESC reports, after the stop, neutral
   widths or disarmed, or ``stop_timeout_s`` has passed; then the goal ends.
 * **Disarm cause** (:meth:`~IdentificationCore.on_disarm_cause`, the supervisor's ``disarm_cause``,
-  :mod:`hindrax_drivers.supervisor.disarm_cause`): a new cause while a goal runs is a stop of the thrust (a killed
+  :mod:`hindrax_bringup.supervisor.disarm_cause`): a new cause while a goal runs is a stop of the thrust (a killed
   ESC reports nothing, only the output guard says so) and aborts it as :data:`DISARMED`; the end of a goal aborted
   as :data:`DISARMED` waits for the cause (within ``stop_timeout_s``) and its result and final status name it.
 * **Status** (:data:`STATUS_PERIOD_S`): the running status goes out at once when the phase, DOF, level or
@@ -50,8 +50,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.node_support.liveness import STARVED_WARN_TICKS, starvation, starved_stop_s
+from hindrax_common.config import DOFS, VehicleConfig
+from hindrax_common.node_support.liveness import STARVED_WARN_TICKS, starvation, starved_stop_s
 
 from ..model import calibration_topic
 from ..model.campaign_record import CampaignRecord
@@ -95,7 +95,7 @@ STALE_STAMP_TOLERANCE_S = 2.0
 def goal_problem(dofs: Sequence[str], calibrate: Sequence[str], calibration_only: bool,
                  level_fractions: Sequence[float]) -> str:
     """Why a ``run_identification`` goal is refused (one line), "" when it is acceptable: DOFs from
-    :data:`~hindrax_drivers.config.DOFS`, steps from :data:`~.executive.CALIBRATION_STEPS`, fractions of the DOF's
+    :data:`~hindrax_common.config.DOFS`, steps from :data:`~.executive.CALIBRATION_STEPS`, fractions of the DOF's
     authority in (0, 1], ``calibration_only`` only with a step."""
     bad = [d for d in dofs if d not in DOFS]
     if bad:
@@ -295,7 +295,7 @@ class IdentificationCore:
     def starved(self, t: float, gap_s: float) -> list[Event]:
         """Call before :meth:`tick` at ROS time ``t`` (s) with ``gap_s``, the steady-clock time since the previous
         control tick of the goal (s): a warning for a starved tick, the goal's stop beyond
-        :func:`~hindrax_drivers.node_support.liveness.starved_stop_s` (module docstring, "Starvation"). No goal moving
+        :func:`~hindrax_common.node_support.liveness.starved_stop_s` (module docstring, "Starvation"). No goal moving
         the vehicle: nothing."""
         run = self.run
         said = starvation("identification", gap_s, self.tick_s)

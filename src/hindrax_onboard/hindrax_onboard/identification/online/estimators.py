@@ -16,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_common.config import DOFS, VehicleConfig
 
 from ...estimation.filters import KinematicKalmanFilter
 from ...estimation.rls import RecursiveLeastSquares

@@ -59,7 +59,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig, or_default
+from hindrax_common.config import DOFS, VehicleConfig, or_default
 
 from ...vehicle.state import DepthEstimator
 from ...vehicle.thrust_lag import ThrustLag

@@ -54,7 +54,7 @@ Publishes
     :mod:`.core` rule "Status"; DONE or ABORTED with the reason at the end); ``supervisor/abort``
     (std_msgs/String, data = the reason) once when a goal aborts on a limit, DVL lock loss or an
     error (not on a cancel or a disarmed ESC output): the safety supervisor
-    (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
+    (:mod:`hindrax_bringup.supervisor.node`) then disarms the ESC and stays tripped until reset;
     ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local,
     depth 1) when a calibration step ends (ballast, line pull surge / sway, inclining roll / pitch,
     tilt_decay roll / pitch): every step result since the node started, one DiagnosticStatus each,
@@ -102,14 +102,14 @@ from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_drivers.base import frames
-from hindrax_drivers.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
-from hindrax_drivers.cdr.lean_cdr import wrench_stamped_cdr
-from hindrax_drivers.node_support.liveness import TickGaps
-from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
+from hindrax_common.base import frames
+from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+from hindrax_common.cdr.lean_cdr import wrench_stamped_cdr
+from hindrax_common.node_support.liveness import TickGaps
+from hindrax_common.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_support.node_common import load_node_config, run_node, sensor_input_qos
-from hindrax_drivers.node_support.vehicle_node import VehicleNode
+from hindrax_common.node_support.node_common import load_node_config, run_node, sensor_input_qos
+from hindrax_common.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -152,7 +152,7 @@ class IdentificationNode(VehicleNode):
     """The identification executive as a ROS node (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters,
-    :func:`~hindrax_drivers.node_support.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
+    :func:`~hindrax_common.node_support.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
     :class:`ConfigError` for an invalid configuration.
     """
 
@@ -368,7 +368,7 @@ class IdentificationNode(VehicleNode):
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
         # serialised by rosbags and published as bytes: the command-rate publish without rclpy's object conversion
-        # (hindrax_drivers.cdr.lean_cdr, the measured gain)
+        # (hindrax_common.cdr.lean_cdr, the measured gain)
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
         self.pub_wrench.publish(wrench_stamped_cdr(now.nanoseconds, "base_link", w))
 
@@ -394,10 +394,10 @@ class IdentificationNode(VehicleNode):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_support.node_common.run_node`: a running
+    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_common.node_support.node_common.run_node`: a running
     goal is ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration).
 
-    The process spins the EventsExecutor like every node process (:mod:`hindrax_drivers.process.ros_process`): the
+    The process spins the EventsExecutor like every node process (:mod:`hindrax_common.process.ros_process`): the
     action runs no coroutine (module docstring, "Action execution")."""
     return run_node(IdentificationNode, args)
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...model.dof_model import truth_parameters
 from ..excitation import BROADBAND, BoxShaping, design_band, design_signal
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.base.frames import wrap_angle
 
 from ....control.maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
 from .base import DofStep

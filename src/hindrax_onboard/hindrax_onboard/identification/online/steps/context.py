@@ -26,8 +26,8 @@ from typing import Callable, Generator, Sequence
 
 import numpy as np
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_bringup.allocation.core import AllocationCore
+from hindrax_common.config import DOFS, VehicleConfig
 
 from ....vehicle.state import SensorState
 from ....control.maneuvers import DOF_INDEX, HoldController, PoolBox, dof_authority

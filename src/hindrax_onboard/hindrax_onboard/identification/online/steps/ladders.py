@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from hindrax_drivers.base.frames import wrap_angle
+from hindrax_common.base.frames import wrap_angle
 
 from ....control.maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
 from .base import DofStep

@@ -1,0 +1,1 @@
+"""Hindrax device drivers, thrust allocation, safety and recording (docs/architecture.md §2)."""

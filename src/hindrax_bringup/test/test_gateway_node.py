@@ -1,0 +1,110 @@
+"""The gateway process refuses a bad setting at start-up with one line naming key, value and allowed range."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hindrax_common.testing import child_env
+
+CONFIG = Path(__file__).resolve().parents[3] / "ros_ws" / "config" / "hindrax.yaml"
+
+
+@pytest.mark.parametrize("setting, line", [
+    ("topside_domain_id:=500", "invalid configuration: topside_domain_id = 500: allowed integer in [0, 101]"),
+    ("topside_discovery_range:=WIDE", "topside_discovery_range = 'WIDE': allowed one of LOCALHOST, SUBNET"),
+    ("call_timeout_s:=0.0", "call_timeout_s = 0.0: allowed number in [0.1, 30]"),
+    ("vehicle.name:=a-b", "vehicle.name = 'a-b': allowed a ROS name token"),
+])
+def test_bad_setting_stops_the_start_in_one_line(setting, line):
+    r = subprocess.run([sys.executable, "-m", "hindrax_bringup.gateway.node", "--ros-args", "--params-file",
+                        str(CONFIG), "-p", setting], capture_output=True, text=True, env=child_env(), timeout=60)
+    assert r.returncode == 1
+    errors = [x for x in r.stderr.splitlines() if x.startswith("invalid configuration")]
+    assert len(errors) == 1 and line in errors[0], r.stderr
+
+
+def _run_goal_against(frames):
+    """Run the gateway's goal relay on a stand-in gateway whose internal side answers a goal with ``frames``
+    ([(head, message or None)], ids filled in); returns (result, what the topside handle saw)."""
+    import itertools
+    import threading
+    from types import SimpleNamespace
+
+    from rclpy.serialization import serialize_message
+
+    from hindrax_bringup.gateway.node import Gateway
+    from hindrax_msgs.action import RunIdentification
+
+    gw = SimpleNamespace(verifier=SimpleNamespace(check_message=lambda *_: ""),
+                         bounds=SimpleNamespace(goal_problem=lambda _g: ""), _ids=itertools.count(1), _goals={},
+                         settings=SimpleNamespace(call_timeout_s=0.3), _action_type=RunIdentification,
+                         campaign=SimpleNamespace(context=SimpleNamespace(ok=lambda: True)), _refuse=lambda w, *_: w)
+
+    def send(head, payload=b""):
+        if head["k"] == "goal":
+            for frame, message in frames:
+                gw._goals[head["id"]].put(({**frame, "id": head["id"]},
+                                           b"" if message is None else serialize_message(message)))
+
+    gw.channel = SimpleNamespace(send=send)
+    gw._campaign_running = threading.Lock()  # one campaign at a time: held while the relay runs
+    gw._closing = threading.Event()  # the gateway is not shutting down
+    gw._relay_goal = lambda goal_handle, failed: Gateway._relay_goal(gw, goal_handle, failed)
+    seen = []
+    handle = SimpleNamespace(request=RunIdentification.Goal(dofs=["surge"]), is_cancel_requested=False,
+                             publish_feedback=seen.append, succeed=lambda: seen.append("succeeded"),
+                             abort=lambda: seen.append("aborted"), canceled=lambda: seen.append("canceled"))
+    out = Gateway._run_goal(gw, handle)
+    return out, [type(x).__name__ if not isinstance(x, str) else x for x in seen]
+
+
+def test_feedback_that_overtakes_the_acceptance_is_relayed_and_the_goal_runs_on():
+    """On the internal side a running goal's first feedback can reach the gateway before its acceptance (the action
+    client's feedback callback runs before the send-goal future's): the topside goal is relayed that feedback and
+    ends with the internal result, never read as refused."""
+    from action_msgs.msg import GoalStatus
+
+    from hindrax_msgs.action import RunIdentification
+
+    out, seen = _run_goal_against([
+        ({"k": "feedback"}, RunIdentification.Feedback(dof="surge", level_index=0, level_count=1)),
+        ({"k": "accepted", "ok": True, "why": ""}, None),
+        ({"k": "result", "status": GoalStatus.STATUS_SUCCEEDED}, RunIdentification.Result(success=True,
+                                                                                          message="done"))])
+    assert out.success and out.message == "done"
+    assert seen == ["RunIdentification_Feedback", "succeeded"]
+
+
+@pytest.mark.parametrize("frames, message", [
+    ([({"k": "accepted", "ok": False, "why": "not armed"}, None)], "run_identification: not armed"),
+    ([({"k": "gone"}, None)], "run_identification: the gateway's internal side is gone"),
+    ([], "run_identification: no answer from the identification node within 0.3 s"),
+])
+def test_a_goal_that_is_not_accepted_fails_on_the_topside_with_its_cause(frames, message):
+    """A refusal, the internal side ending, or no answer before the call timeout each abort the topside goal with
+    their own cause (the internal side ending is not reported as a refusal)."""
+    out, seen = _run_goal_against(frames)
+    assert not out.success and out.message == message
+    assert seen == ["aborted"]
+
+
+def test_a_second_answer_to_one_call_is_dropped_and_the_reader_reads_on():
+    """The internal side answering one call twice (a fault on the channel) leaves the first answer
+    with the caller and the channel's reader thread reading the frames after it."""
+    import queue
+    from concurrent.futures import Future
+    from types import SimpleNamespace
+
+    from hindrax_bringup.gateway.node import Gateway
+
+    answer = {"k": "answer", "id": 1, "ok": True}
+    result = ({"k": "result", "id": 2}, b"goal")
+    frames = iter([(answer, b"first"), (answer, b"again"), result, None])
+    pending, goal = Future(), queue.Queue()
+    gw = SimpleNamespace(channel=SimpleNamespace(recv=lambda: next(frames)), _pending={1: pending},
+                         _goals={2: goal}, _out={}, relayed={"messages": 0}, executors=[])
+    Gateway._read_channel(gw)
+    assert pending.result(timeout=0) == (answer, b"first")
+    assert goal.get_nowait() == result
+    assert goal.get_nowait() == ({"k": "gone"}, b"")
