@@ -1,13 +1,10 @@
 """A Pi-sized CPU rig on a development machine: the vehicle's processes inside a cgroup of F cores here.
 
-The factor (docs/pi_budget.md, "The Pi rig"), :data:`PI4_FACTOR`, the project's one figure for it (the stack bench's
-Pi rows use it too): one Raspberry Pi 4 core does the work of :data:`PI4_CORE_HERE` (0.2) of a core of the
-development machine for this stack, a factor of 5. Source (issue 73; not measured on a Pi): n-body is 2.8x slower on
-the Pi 4 in C and about 3.6x in the same CPython version; the stack's mix (wake-ups, rclpy, Fast DDS) is estimated at
-4-6x; 5 is its middle. (A published Python n-body time, 158.3 s on a Pi 4 at 1.5 GHz, chaitanyamehta.github.io, is
-10.8x this machine's 14.6 s, but of an older, unstated CPython: about 7-8x at the same version, the pure-Python bound.)
-The first Pi day measures it (:func:`measured_factor`, docs/pi_budget.md). Half a Pi 4 (2 cores) is 0.4 of a core
-here, the whole Pi 0.8.
+The factor, :data:`PI4_FACTOR` (the project's one figure; the stack bench uses it too): a Pi 4 core does the work of
+:data:`PI4_CORE_HERE` (0.2) of a core here for this stack. Source (issue 73; not measured on a Pi): n-body 2.8x slower
+on the Pi 4 in C, 3.6x in the same CPython version; the stack's mix (rclpy, Fast DDS, wake-ups) 4-6x; 5 its middle.
+(A published Python n-body time, 10.8x, is of an older, unstated CPython.) The first Pi day measures it
+(:func:`measured_factor`, docs/pi_budget.md). Half a Pi 4 is 0.4 of a core here, the whole Pi 0.8.
 
 The budget: the group's CFS quota (``cpu.cfs_quota_us``, cgroup v1; ``cpu.max``, cgroup v2) bounds its
 ``SCHED_OTHER`` processes, never its ``SCHED_FIFO`` ones (the kernel throttles those by the separate real-time
