@@ -307,6 +307,7 @@ def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packag
 
 def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_its_root(packages):
     from hindrax_bringup.layout.launch_xml import read_launch
+    from hindrax_bringup.recording.selection import TopicSelection
 
     for path in launch_files():
         for el in ET.parse(path).getroot().iter("node"):
@@ -322,6 +323,17 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
         # the root of new timestamped bags (recording/bag_dir.py), not one bag directory the next launch would find
         assert values["recording.output_root"] == "/x" and "output_dir" not in values
         assert values["autostart"] is True and values["all_topics"] is True
+    # the pool test's recorder leaves out what would cross a process for it alone (docs/pi_budget.md), nothing else
+    values = {k: v for p in next(p for p in pool if p.executable == "ident_record_node").parameters
+              if isinstance(p, dict) for k, v in p.items()}
+    sel = TopicSelection(all_topics=True, exclude_regex=values["exclude_regex"])
+    assert not [t for t in ("/esc/heartbeat", "/guard/heartbeat", "/supervisor/heartbeat",
+                            "/thrusters/command_pulse_width", "/dvl/twist", "/dvl/altitude", "/ping/confidence",
+                            "/pressure/temperature", "/imu/temperature") if sel.matches(t)]
+    assert all(sel.matches(t) for t in ("/wrench", "/thrusters/pulse_width", "/supervisor/status", "/imu/data_raw",
+                                        "/allocation/status", "/esc/output_state", "/diagnostics", "/dvl/data",
+                                        "/ping/altitude", "/pressure/fluid_pressure", "/pressure/depth", "/imu/mag",
+                                        "/raw/dvl75", "/raw/ping1d", "/raw/ms5837", "/raw/icm20948", "/raw/pca9685"))
 
 
 def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):

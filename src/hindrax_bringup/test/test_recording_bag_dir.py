@@ -54,9 +54,13 @@ def test_recorder_starts_again_when_the_timestamped_names_exist(tmp_path):
         d.mkdir(parents=True)
         (d / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
     with ros_context() as ctx:
-        params = config_parameters({"recording.output_root": str(root)}) + [Parameter("all_topics", value=True)]
+        params = config_parameters({"recording.output_root": str(root)}) + [
+            Parameter("all_topics", value=True), Parameter("exclude_regex", value="^/esc/heartbeat")]
         node = RecorderNode(context=ctx, parameter_overrides=params)
         try:
+            # exclude_regex (pool_test.launch.xml) takes a topic out of "all topics"
+            sel = node.default_selection()
+            assert sel.matches("/wrench") and not sel.matches("/esc/heartbeat")
             bags = []
             for _ in range(2):
                 bags.append(node.start_recording())

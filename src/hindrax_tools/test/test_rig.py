@@ -80,3 +80,26 @@ def test_the_quota_follows_a_realtime_process_below_the_busy_loops_own():
         u = rig.usage()
         assert rig._thread.is_alive()
     assert u.busy_cpu_s / u.wall_s < 0.33 and 0.3 < (u.cpu_s + u.busy_cpu_s) / u.wall_s < 0.5, u
+
+
+def test_the_first_pi_days_factor_is_the_pi_over_here_per_row_and_one_constant_plans_both(tmp_path):
+    """docs/pi_budget.md's first Pi day: ``rig --factor PI.json HERE.json`` prints each row's Pi / here; the rig and
+    the stack bench plan with the one PI4_FACTOR."""
+    import json
+
+    from hindrax_tools.benchmarks import rig, stack
+
+    pi = {"rows": [{"name": "launch_running_cpu_total", "value": 150.0}, {"name": "machine_nbody_cpu_s", "value": 80.0},
+                   {"name": "other", "value": 1.0}]}
+    here = {"rows": [{"name": "launch_running_cpu_total", "value": 30.0},
+                     {"name": "machine_nbody_cpu_s", "value": 20.0},
+                     {"name": "heartbeat_cycle_cpu_us_heartbeat", "value": 100.0}]}
+    assert rig.measured_factor(pi, here) == {"launch_running_cpu_total": 5.0, "machine_nbody_cpu_s": 4.0}
+    with pytest.raises(ValueError, match="launch_running_cpu_total"):
+        rig.measured_factor({"rows": []}, here)
+    (tmp_path / "pi.json").write_text(json.dumps(pi))
+    (tmp_path / "here.json").write_text(json.dumps(here))
+    out = subprocess.run([sys.executable, "-m", "hindrax_tools.benchmarks.rig", "--factor", str(tmp_path / "pi.json"),
+                          str(tmp_path / "here.json")], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "launch_running_cpu_total: 5.00x" in out.stdout, out.stderr
+    assert stack.PI4_FACTOR is rig.PI4_FACTOR and rig.PI4_CORE_HERE == pytest.approx(1 / rig.PI4_FACTOR)

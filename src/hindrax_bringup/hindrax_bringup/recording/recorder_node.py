@@ -42,7 +42,8 @@ Behaviour
   ``/diagnostics`` until space is freed. 0 turns the check off.
 
 Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.yaml):
-``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty = a new
+``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``exclude_regex`` (string: never these),
+``output_dir`` (string; empty = a new
 timestamped directory under ``recording.output_root`` at every start, never an existing one: :mod:`.bag_dir`),
 ``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000),
 ``disk_check_period_s`` (1.0), ``drain_period_s`` (:data:`DRAIN_PERIOD_S`, 0.1; the writer thread's drain period:
@@ -100,6 +101,7 @@ class RecorderNode(VehicleNode):
         self._topics_param = list(self._param("topics", []) or [])
         self._regex_param = str(self._param("topic_regex", ""))
         self._all_param = bool(self._param("all_topics", False))
+        self._exclude_param = str(self._param("exclude_regex", ""))
         self._output_dir_param = str(self._param("output_dir", ""))
         self._discovery_period_s = float(self._param("discovery_period_s", 1.0))
         self._status_period_s = float(self._param("status_period_s", 1.0))
@@ -133,6 +135,7 @@ class RecorderNode(VehicleNode):
         "topics": "topics to record (names); with topic_regex and all_topics empty: recording.topics, else all",
         "topic_regex": "record topics matching this regular expression (re.search)",
         "all_topics": "record every topic",
+        "exclude_regex": "never record topics matching this regular expression (re.search; with the three above)",
         "output_dir": "bag directory (empty: a new timestamped directory under recording.output_root per start)",
         "discovery_period_s": "period of the graph poll that subscribes to new topics, s",
         "status_period_s": "period of the /diagnostics status, s",
@@ -189,7 +192,7 @@ class RecorderNode(VehicleNode):
     def default_selection(self) -> TopicSelection:
         """Selection from the node parameters, else ``recording.topics``, else all topics."""
         if self._topics_param or self._regex_param or self._all_param:
-            return TopicSelection(tuple(self._topics_param), self._regex_param, self._all_param)
+            return TopicSelection(tuple(self._topics_param), self._regex_param, self._all_param, self._exclude_param)
         configured = self._cfg.recording.topics
         if configured:
             return TopicSelection(tuple(configured))

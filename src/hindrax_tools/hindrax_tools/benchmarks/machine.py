@@ -6,9 +6,9 @@
 four giant planets, pairwise gravity, a semi-implicit Euler step of 0.01 years), the least over a few runs,
 extrapolated to the 5 million steps of the Computer Language Benchmarks Game's n-body timings. It is the project's
 own code for that algorithm, checked against the Benchmarks Game's published energies (tests); its times are not
-those of the Benchmarks Game's Python program, so they do not rescale the Pi 4 factor of ``benchmarks/stack.py``
-(whose basis was that program), only figures of this project between machines: a figure times
-``nbody_cpu_s() / REFERENCE_NBODY_CPU_S`` is the figure at the reference machine's speed.
+those of the Benchmarks Game's Python program, so they do not rescale a published time into the Pi 4 factor
+(``benchmarks/rig.py``: on the Pi this row joins the factor's measure), only figures of this project between
+machines: a figure times ``nbody_cpu_s() / REFERENCE_NBODY_CPU_S`` is the figure at the reference machine's speed.
 
 The workload is pure Python, which is most of the stack's cost (docs/architecture.md §10.1); the C/C++ half (rcl,
 Fast DDS) may scale differently between machines.

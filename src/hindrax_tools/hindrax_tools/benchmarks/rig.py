@@ -1,9 +1,10 @@
 """A Pi-sized CPU rig on a development machine: the vehicle's processes inside a cgroup of F cores here.
 
-The factor (docs/architecture.md §10.1, "The Pi rig"): one Raspberry Pi 4 core does the work of
-:data:`PI4_CORE_HERE` (0.2) of a core of the development machine for this stack, a factor of 5: n-body is 2.8x
-slower on the Pi 4 in C and about 3.6x in the same Python version, and the stack's mix (wake-ups, rclpy, Fast DDS)
-is estimated at 4-6x (issue 73; not measured on a Pi). Half a Pi 4 (2 cores) is 0.4 of a core here, the whole Pi 0.8.
+The factor, :data:`PI4_FACTOR` (the project's one figure; the stack bench uses it too): a Pi 4 core does the work of
+:data:`PI4_CORE_HERE` (0.2) of a core here for this stack. Source (issue 73; not measured on a Pi): n-body 2.8x slower
+on the Pi 4 in C, 3.6x in the same CPython version; the stack's mix (rclpy, Fast DDS, wake-ups) 4-6x; 5 its middle.
+(A published Python n-body time, 10.8x, is of an older, unstated CPython.) The first Pi day measures it
+(:func:`measured_factor`, docs/pi_budget.md). Half a Pi 4 is 0.4 of a core here, the whole Pi 0.8.
 
 The budget: the group's CFS quota (``cpu.cfs_quota_us``, cgroup v1; ``cpu.max``, cgroup v2) bounds its
 ``SCHED_OTHER`` processes, never its ``SCHED_FIFO`` ones (the kernel throttles those by the separate real-time
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import os
 import shlex
 import subprocess
@@ -42,10 +44,16 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["PI4_CORE_HERE", "Rig", "RigError", "RigUsage", "find_cpu_controller", "main"]
+__all__ = ["PI4_CORE_HERE", "PI4_FACTOR", "Rig", "RigError", "RigUsage", "find_cpu_controller", "main",
+           "measured_factor"]
 
-#: one Raspberry Pi 4 core, in cores of the development machine (module docstring: a factor of 5)
-PI4_CORE_HERE = 0.2
+#: how many times slower a Raspberry Pi 4 core runs this stack than a core here (module docstring: its source)
+PI4_FACTOR = 5.0
+#: one Raspberry Pi 4 core, in cores of the development machine
+PI4_CORE_HERE = 1 / PI4_FACTOR
+#: the rows whose ratio, Pi over here, measures the factor (:func:`measured_factor`)
+FACTOR_ROWS = ("launch_running_cpu_total", "launch_idle_cpu_total", "machine_nbody_cpu_s",
+               "heartbeat_cycle_cpu_us_heartbeat")
 #: the quota's period, us (module docstring)
 CFS_PERIOD_US = 20_000
 #: the kernel's least quota per period, us
@@ -269,15 +277,36 @@ def _write(path: Path, value: object) -> None:
         raise RigError(f"rig: cannot write {value!r} to {path}: {exc.strerror}") from None
 
 
+def measured_factor(pi: dict, here: dict) -> dict[str, float]:
+    """The Pi 4 factor measured (docs/pi_budget.md, the first Pi day): per row of :data:`FACTOR_ROWS` found in both,
+    the Pi's value over this machine's (x). ``pi``, ``here``: ``results.json`` of ``python -m hindrax_tools.bench
+    --only stack,heartbeats`` on each (``{"rows": [{"name", "value", ...}]}``). Raises ValueError when no row is in
+    both."""
+    values = [{r["name"]: r["value"] for r in doc["rows"]} for doc in (pi, here)]
+    out = {n: values[0][n] / values[1][n] for n in FACTOR_ROWS if values[0].get(n) and values[1].get(n)}
+    if not out:
+        raise ValueError(f"no row of {', '.join(FACTOR_ROWS)} in both results")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m hindrax_tools.benchmarks.rig --cores F [--busy-loops N] -- COMMAND...``: run a command (and the
-    processes it starts) in a rig of F cores here; print the rig's CPU at its end. Exit status: the command's."""
+    processes it starts) in a rig of F cores here; print the rig's CPU at its end. Exit status: the command's.
+    ``--factor PI.json HERE.json``: print :func:`measured_factor` instead."""
     ap = argparse.ArgumentParser(prog="python -m hindrax_tools.benchmarks.rig", description=__doc__.splitlines()[0])
-    ap.add_argument("--cores", type=float, required=True,
+    ap.add_argument("--cores", type=float,
                     help=f"cores here (a Pi 4 core = {PI4_CORE_HERE:g}: half a Pi 0.4, the whole Pi 0.8)")
     ap.add_argument("--busy-loops", type=int, default=0, help="busy loops beside it, one Pi core each")
+    ap.add_argument("--factor", nargs=2, type=Path, metavar=("PI_JSON", "HERE_JSON"),
+                    help="the factor measured: results.json of the bench on the Pi and here")
     ap.add_argument("command", nargs=argparse.REMAINDER)
     args = ap.parse_args(argv)
+    if args.factor:
+        ratios = measured_factor(*(json.loads(p.read_text()) for p in args.factor))
+        print("\n".join(f"{n}: {v:.2f}x (PI4_FACTOR today {PI4_FACTOR:g})" for n, v in ratios.items()))
+        return 0
+    if args.cores is None:
+        ap.error("--cores is required")
     command = args.command[1:] if args.command[:1] == ["--"] else args.command
     if not command:
         ap.error("no command")

@@ -61,7 +61,7 @@ from hindrax_common.cdr.lean_cdr import cdr_decoder, type_name_of
 from hindrax_common.node_support.liveness import heartbeat_qos
 from hindrax_bringup.recording.reader import BagReader
 from hindrax_bringup.recording.selection import TopicSelection
-from hindrax_tools.benchmarks.rig import PI4_CORE_HERE, Rig
+from hindrax_tools.benchmarks.rig import PI4_CORE_HERE, PI4_FACTOR, Rig
 from hindrax_common.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
 from hindrax_common.transport.socket_i2c import SOCKET_ENV
@@ -471,8 +471,9 @@ def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, window
         whole = rig.usage()
     beside = f"{busy_loops} busy loop(s) of one Pi core each beside it" if busy_loops else "nothing beside it"
     rows = [{"name": "rig_cores", "value": cores, "unit": "cores here",
-             "note": f"{cores / PI4_CORE_HERE:g} Pi 4 cores at {PI4_CORE_HERE:g} core here each (hindrax_drivers/"
-                     f"rig.py); {beside}; launch of {LAUNCH_FILE[1]} inside, the virtual pool outside"}]
+             "note": f"{cores / PI4_CORE_HERE:g} Pi 4 cores at {PI4_CORE_HERE:g} core here each "
+                     f"(hindrax_tools/benchmarks/rig.py); {beside}; launch of {LAUNCH_FILE[1]} inside, the virtual "
+                     "pool outside"}]
     for phase in ("running", "idle"):
         spans = [(a, b) for p, a, b in tally["rig"] if p == phase]
         if spans:
@@ -743,18 +744,6 @@ def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------------------- rows
-#: Assumed slowdown of this stack on a Raspberry Pi 4 against this machine (planning figure, not measured on a Pi).
-#: Basis: the Benchmarks Game n-body program in Python, 5 million steps: 158.3 s on a Raspberry Pi 4 Model B at
-#: 1.5 GHz, performance governor (C. Mehta, "Performance Analysis of Languages on Raspberry Pi",
-#: chaitanyamehta.github.io; Python version not stated), 14.6 s of CPU here (CPython 3.11.7, measured with the
-#: same program): 10.8x. CPython 3.11 runs such code about 1.3-1.6x faster than the 3.7-3.9 interpreters of Pi
-#: OS images of that time, so about 7-8x for pure Python; the C/C++ half of the cost (rcl, Fast DDS) scales
-#: like the Pi 4's Linpack/SPEC-style figures, 3-4x. 6x is the planning figure for this mix.
-PI4_FACTOR = 6.0
-PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (published, chaitanyamehta.github.io) vs "
-            "14.6 s CPU here = 10.8x, about 7-8x for the same CPython version; C/C++ (rcl, DDS) 3-4x; "
-            "not measured on a Pi")
-
 #: The virtual pool's CPU (simulator and emulators, fraction of a core) in the running windows of the launch layout
 #: on the reference machine: docs/results.md, make bench at c7544b1, machine_nbody_cpu_s 27.2 s (the reference
 #: machine of :data:`~hindrax_tools.benchmarks.machine.REFERENCE_NBODY_CPU_S`)
@@ -946,7 +935,9 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
     nbody_after = nbody_cpu_s()
     nbody_s = (nbody_before + nbody_after) / 2
     rows: list[dict] = [
-        {"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x", "note": PI4_NOTE},
+        {"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x",
+         "note": "hindrax_tools/benchmarks/rig.py PI4_FACTOR: issue 73's n-body 2.8x (C), 3.6x (the same CPython), "
+                 "the stack's mix 4-6x; not measured on a Pi (docs/pi_budget.md, the first Pi day)"},
         {"name": "machine_nbody_cpu_s", "value": nbody_s, "unit": "s",
          "note": f"this machine's Python speed: CPU time of 5 million n-body steps (benchmarks/machine.py, least of "
                  f"5 runs of 100,000), mean of {nbody_before:.1f} s before the layouts and {nbody_after:.1f} s "
