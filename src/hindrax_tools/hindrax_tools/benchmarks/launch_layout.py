@@ -44,7 +44,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 loopback_transport()  # the vehicle's transport (hindrax_common.process.dds_transport)
 
 #: the workspace's own packages: their share directory is the source package directory in a checkout
-OWN_PACKAGES = ("hindrax_drivers", "hindrax_onboard")
+OWN_PACKAGES = ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard")
 
 
 @dataclass(frozen=True)
