@@ -1,6 +1,9 @@
 """The whole stack on the virtual pool, in one process: simulator -> emulators -> real drivers, and
 wrench -> allocation -> ESC node -> PCA9685 registers -> thrust -> vehicle motion."""
 
+import random
+import time
+
 import numpy as np
 import pytest
 import rclpy
@@ -123,9 +126,24 @@ def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
         assert interrupt(proc, 30) == 0
 
 
-def _stepped_run(seed: int, duration_s: float) -> dict:
+def _late_kernel(transport, rng: random.Random):
+    """``transport.pump`` as on a loaded machine: a third of the time the bytes not handled yet are still in the
+    kernel's pty buffer, and a wait shorter than 1 s without a byte gets none of them (returns False)."""
+    real = transport.pump
+
+    def pump(n_bytes: int, wait_s: float) -> bool:
+        if wait_s < 1.0 and transport.status().bytes_handled < n_bytes and rng.random() < 1 / 3:
+            return False
+        return real(n_bytes, wait_s)
+    return pump
+
+
+def _stepped_run(seed: int, duration_s: float, disturbed: bool = False) -> dict:
     """Messages of a stepped graph (drive_clocks=True), as ``hindrax run`` builds it, over ``duration_s``
-    simulated seconds with a constant surge wrench from 0.5 s; topic -> list of message reprs."""
+    simulated seconds with a constant surge wrench from 0.5 s; topic -> list of (simulated time received, ns,
+    message repr). ``disturbed``: as on a loaded machine, a pty hands a third of the serial bytes over a second
+    late (:func:`_late_kernel`) and the process stalls for up to 0.3 s before one callback in 50 (the steady-clock
+    timers then run at other simulated instants)."""
     topics = {"dvl/data": Dvl, "pressure/fluid_pressure": FluidPressure, "imu/data_raw": Imu,
               "ping/altitude": Range, "thrusters/pulse_width": ThrusterPwm}
     got: dict = {t: [] for t in topics}
@@ -138,11 +156,27 @@ def _stepped_run(seed: int, duration_s: float) -> dict:
         graph.nodes["simulator"].drive_clock(probe.get_clock())  # the probe's timer runs on simulated time too
         graph.executor.add_node(probe)
         for topic, cls in topics.items():
-            probe.create_subscription(cls, topic, (lambda t: lambda m: got[t].append(repr(m)))(topic), 100)
+            probe.create_subscription(cls, topic, (lambda t: lambda m: got[t].append(
+                (probe.get_clock().now().nanoseconds, repr(m))))(topic), 100)
         wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
         arm = probe.create_client(SetArmed, "esc/set_armed")
         sim = graph.nodes["simulator"].simulator
         spin = lambda: graph.spin_once(0.005)  # noqa: E731
+        if disturbed:
+            rng = random.Random(7)
+            for link in graph.hardware.serial_lock_steps.values():
+                link.transport.pump = _late_kernel(link.transport, rng)
+            run_callbacks = graph.spin_until_idle
+
+            def stalled(max_callbacks: int = 100_000) -> int:  # one callback at a time, a stall before some
+                for n in range(max_callbacks):
+                    if rng.random() < 0.02:
+                        time.sleep(rng.uniform(0.0, 0.3))
+                    if not run_callbacks(1):
+                        return n
+                return max_callbacks
+
+            graph.spin_until_idle = stalled
         try:
             graph.start_and_arm(arm, 60, spin_timeout_s=0.005)
             m = WrenchStamped()
@@ -154,6 +188,21 @@ def _stepped_run(seed: int, duration_s: float) -> dict:
             graph.shutdown()
             probe.destroy_node()
     return got
+
+
+def test_stepped_graph_gives_the_same_messages_when_serial_bytes_come_late_and_the_process_stalls():
+    """Issue 72.4: on a loaded machine the lock-step graph receives every message at the same simulated instant,
+    with the same content, as on a quiet one: serial bytes a pty hands over a second late and stalls of the process
+    between callbacks (its steady-clock timers then run at other simulated instants) change nothing. Before, the
+    tick gave up on bytes 0.5 s late: the DVL's and the Ping1D's messages went out a tick later, and the serial gate,
+    holding at the next boundary, ran the other nodes' callbacks once more at the same instant, so messages published
+    there (the ESC's widths) arrived a tick earlier than on a quiet machine."""
+    a, b = _stepped_run(11, 2.0), _stepped_run(11, 2.0, disturbed=True)
+    for topic in a:
+        assert len(a[topic]) > 5, topic
+        n = min(len(a[topic]), len(b[topic]))
+        assert a[topic][:n] == b[topic][:n], topic
+        assert abs(len(a[topic]) - len(b[topic])) <= 1, topic  # the last tick may be cut by the end condition
 
 
 def test_stepped_graph_gives_the_same_messages_for_the_same_seed():

@@ -5,8 +5,7 @@ Installed (colcon): no executable; the vehicle file in ``share/hindrax_common/co
 (``config`` is a symlink to the repository's ``ros_ws/config``, the one vehicle file) with the Fast DDS
 profiles, the virtual pool's truth files beside it in ``share/hindrax_common/config/truth``
 (``truth/scenarios``: the scenario suite; read by the simulator of ``hindrax run``, ``hindrax bringup
---sim`` and ``simulator_node``, never by a vehicle node).
-"""
+--sim`` and ``simulator_node``, never by a vehicle node)."""
 from glob import glob
 from pathlib import Path
 

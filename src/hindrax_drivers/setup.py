@@ -2,8 +2,7 @@
 Dependencies and metadata: package.xml (rosdep on the Pi) and requirements.txt (dev venv), not here.
 
 Installed (colcon): every device node and the static TF as a console script in ``lib/hindrax_drivers``
-(``ros2 run hindrax_drivers <node>``; setup.cfg puts scripts there).
-"""
+(``ros2 run hindrax_drivers <node>``; setup.cfg puts scripts there)."""
 from pathlib import Path
 
 from setuptools import find_packages, setup
@@ -11,8 +10,7 @@ from setuptools import find_packages, setup
 PACKAGE = "hindrax_drivers"
 HERE = Path(__file__).resolve().parent
 
-#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch
-#: files use.
+#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch files use.
 NODES = {
     "dvl75_node": "hindrax_drivers.dvl75.node",
     "ping1d_node": "hindrax_drivers.ping1d.node",
@@ -22,8 +20,7 @@ NODES = {
     "static_tf_node": "hindrax_drivers.tf.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
-NODES = {name: mod for name, mod in NODES.items()
-         if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
+NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
 
 setup(
     name=PACKAGE,

@@ -1,9 +1,8 @@
 """Helpers for tests and benchmarks: waiting on conditions, isolated rclpy contexts (both from
 :mod:`hindrax_common.process.conditions`, which production code uses), child processes, configuration parameters.
 
-Tests wait on conditions with a deadline, never on fixed sleeps (README, "Tests"). Every helper here
-keeps ROS 2 traffic on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and in the ROS_DOMAIN_ID the
-test session reserved (conftest.py).
+Tests wait on conditions with a deadline, never on fixed sleeps (README, "Tests"). Every helper here keeps ROS 2 traffic
+on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and in the ROS_DOMAIN_ID the test session reserved (conftest.py).
 """
 from __future__ import annotations
 
@@ -86,8 +85,7 @@ def burst_qos() -> QoSProfile:
     ``publisher.get_subscription_count() > 0`` says only that the writer has matched the reader; the reader may
     match the writer later, and a volatile reader then loses what was published in between (Fast-DDS issues
     2641 and 3009). A transient-local reader (the recorder subscribes so when every publisher offers it,
-    ``recording.qos``) receives the writer's history when it matches, so the whole burst arrives either way.
-    """
+    ``recording.qos``) receives the writer's history when it matches, so the whole burst arrives either way."""
     return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -179,8 +177,7 @@ class GraphSettled:
     health check, which can sleep 333 ms (a third of the 1 s ``healthy_check_timeout_ms``) while the sending
     participant's send lock is held: every publish of that process waits (docs/architecture.md §10.1, "The publish
     stalls"), and such stalls come within seconds of the newest participant's creation. So anything
-    that arms the ESC in a freshly started layout waits for this first.
-    """
+    that arms the ESC in a freshly started layout waits for this first."""
 
     def __init__(self, node, quiet_s: float = 5.0, min_nodes: int = 1) -> None:
         self.node, self.quiet_s, self.min_nodes = node, float(quiet_s), int(min_nodes)

@@ -39,11 +39,14 @@ def truth_keywords(config: VehicleConfig, device: device_table.Device) -> dict[s
     return {k: getattr(section, k) for k in device.truth_keywords}
 
 
-#: Time a serial step gate waits (its own waits added up) with its driver's reader idle before it re-bases its byte
-#: count, s.
-RESYNC_AFTER_S = 1.0
-#: Wall time a clock tick waits for a driver to handle the bytes it was just sent, s (then the gate holds on).
-HANDOFF_TIMEOUT_S = 0.5
+#: Wall time a clock tick waits without a byte for its driver to receive what it was just sent before it gives up
+#: with :class:`SerialHandoffError`, s: the pty's bytes are in the kernel, late only as long as the machine is busy.
+HANDOFF_TIMEOUT_S = 60.0
+
+
+class SerialHandoffError(RuntimeError):
+    """A driver did not receive the bytes sent at a clock tick within :data:`HANDOFF_TIMEOUT_S` of wall time, its
+    connection up: the run stops rather than go on with those bytes handled at a later simulated instant."""
 
 
 class SerialLockStep:
@@ -54,11 +57,10 @@ class SerialLockStep:
     :meth:`settled` a step gate: the driver stamps every message at the tick it was sent.
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
-    on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
-    reconnect between a write and the check), a gate that has itself waited :data:`RESYNC_AFTER_S` for the bytes
-    with the reader idle re-bases the count rather than stall the simulation: its own waits add up, not the wall
-    time between its checks (a process a loaded machine did not schedule for a second has lost no byte, and
-    re-basing then would let simulated time run on before the driver handled them).
+    on open anyway). Counting restarts at every (re)connection of the transport; bytes sent to a connection that
+    has gone are never handled, so the gate opens when the connection changes, and only then: no wall-time limit
+    decides when simulated time moves on (a pty hands its bytes over through a kernel worker, which a loaded
+    machine may run a second late; going on without them would publish the driver's message at a later tick).
 
     Args:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
@@ -72,13 +74,13 @@ class SerialLockStep:
         self.pty, self.transport, self.wait_s, self.ready = pty, transport, float(wait_s), ready
         self._connection: int | None = None
         self._written0 = self._handled0 = 0
-        self._stalled_s = 0.0  # what settled() has waited for the bytes since they were last all handled, s
         transport.pump(0, 0.0)  # from now on the driver's bytes are read in the simulator's thread
 
     def tick(self, _t_s: float = 0.0) -> None:
         """Send what the emulator has due now (its clock: the drivers' clock), if the driver's port is open, and
-        read it (up to :data:`HANDOFF_TIMEOUT_S` of wall time) until the driver has handled it: its
-        messages are then published before any other node runs at this tick, whatever the load."""
+        read it until the driver has handled it (or the connection went): its messages are then published before
+        any other node runs at this tick, whatever the load. Raises :class:`SerialHandoffError` when no byte came
+        for :data:`HANDOFF_TIMEOUT_S` of wall time."""
         st = self.transport.status()
         if not st.connected:
             self.pty.service(deliver=False)
@@ -88,7 +90,14 @@ class SerialLockStep:
             self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
         if self.pty.service():
             due = self._handled0 + self.pty.bytes_to_host - self._written0
-            self.transport.pump(due, HANDOFF_TIMEOUT_S)
+            if not self.transport.pump(due, HANDOFF_TIMEOUT_S) and self._same_connection():
+                raise SerialHandoffError(f"{getattr(self.transport, 'port', 'serial port')}: bytes sent at a clock "
+                                         f"tick not received in {HANDOFF_TIMEOUT_S:g} s of wall time")
+
+    def _same_connection(self) -> bool:
+        """The connection the bytes were counted on is still up."""
+        st = self.transport.status()
+        return st.connected and st.connections == self._connection
 
     def startup_done(self) -> bool:
         """With simulated time frozen (call repeatedly, it serves the device at the frozen instant): True when the
@@ -100,20 +109,11 @@ class SerialLockStep:
                 and self.pty.bytes_from_host == st.bytes_tx and self.settled())
 
     def settled(self, _t_s: float = 0.0) -> bool:
-        """Step gate: True when the driver has handled every byte sent on this connection (or is not connected)."""
-        if self._connection is None or not self.transport.connected:
+        """Step gate: True when the driver has handled every byte sent on this connection, or the connection is no
+        longer the one they were sent on (closed, or reopened: :meth:`tick` re-bases the count)."""
+        if self._connection is None or not self._same_connection():
             return True
-        target = self._handled0 + self.pty.bytes_to_host - self._written0
-        if self.transport.pump(target, self.wait_s):
-            self._stalled_s = 0.0
-            return True
-        st = self.transport.status()
-        self._stalled_s += self.wait_s
-        if self._stalled_s > RESYNC_AFTER_S and st.bytes_rx == st.bytes_handled:
-            self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
-            self._stalled_s = 0.0
-            return True
-        return False
+        return self.transport.pump(self._handled0 + self.pty.bytes_to_host - self._written0, self.wait_s)
 
 
 class VirtualHardware:

@@ -33,8 +33,11 @@ Lock-step (``add_step_gate(gate)``): a gate is a callable ``gate(t_s) -> bool`` 
 whether simulated time may advance past ``t_s``; while one says no, the node does not step (and checks again
 at its next timer callback). In one process with the identification node this keeps the control loop
 on every control tick whatever the CPU load (a loaded machine otherwise lets the simulation run ahead of the
-controller, which then overshoots its planned runs). A gate that has refused for :data:`GATE_TIMEOUT_S` of
-wall time is overridden with a warning, so a stalled node cannot freeze the simulation.
+controller, which then overshoots its planned runs). On its timer, a gate that has refused for :data:`GATE_TIMEOUT_S`
+of wall time is overridden with a warning, so a stalled node cannot freeze the simulation; stepped by its caller
+(:meth:`SimulatorNode.advance_clock_period`, the lock-step graph of ``hindrax run``) it holds on, warning every
+:data:`GATE_TIMEOUT_S`: what happens at each simulated instant then never depends on wall time (the caller's own
+wall-clock deadlines end a run that stalls).
 
 Python API for in-process device emulators: ``node.simulator`` (its sensor listeners and latest
 samples), :meth:`SimulatorNode.add_step_listener`, :meth:`SimulatorNode.add_clock_listener` and the
@@ -73,7 +76,7 @@ __all__ = ["SimulatorNode", "PulseWidthSource", "time_msg", "main"]
 PulseWidthSource = Callable[[], "Sequence[float] | None"]
 #: Largest lag behind the real-time schedule before re-anchoring, simulated s.
 _MAX_LAG_S = 0.5
-#: Wall time a step gate may hold the simulation before it is overridden (with a warning), s.
+#: Wall time a step gate may hold the simulation on the node's timer before it is overridden (with a warning), s.
 GATE_TIMEOUT_S = 10.0
 
 
@@ -222,8 +225,9 @@ class SimulatorNode(VehicleNode):
         docstring)."""
         self._gates.append(gate)
 
-    def _gates_open(self) -> bool:
-        """True when every gate lets the time advance (or they have refused for longer than GATE_TIMEOUT_S)."""
+    def _gates_open(self, override: bool) -> bool:
+        """True when every gate lets the time advance, or (``override``) they have refused for longer than
+        :data:`GATE_TIMEOUT_S` of wall time."""
         t = self.simulator.t_s
         if all(g(t) for g in self._gates):
             self._gate_blocked_since = None
@@ -233,9 +237,9 @@ class SimulatorNode(VehicleNode):
             self._gate_blocked_since = now
         elif now - self._gate_blocked_since > GATE_TIMEOUT_S:
             self.get_logger().warn(f"a step gate held simulated time {t:.2f} s for {GATE_TIMEOUT_S:g} s of wall time; "
-                                   "stepping on", throttle_duration_sec=10.0)
+                                   + ("stepping on" if override else "holding on"), throttle_duration_sec=10.0)
             self._gate_blocked_since = None
-            return True
+            return override
         return False
 
     def _at_clock_boundary(self) -> bool:
@@ -244,11 +248,12 @@ class SimulatorNode(VehicleNode):
         return abs(t - k * self.clock_period_s) < 0.25 * self.simulator.step_s
 
     # ------------------------------------------------------------------ stepping by the caller
-    def advance_clock_period(self) -> bool:
-        """Step to the next /clock tick (one whole period), unless a step gate holds the time: returns False then.
-        For a caller that drives the simulation itself instead of the timer (the node is then not added to an
-        executor; :meth:`hindrax_sim.graph.bringup.Graph.spin_once`)."""
-        if self._gates and self._at_clock_boundary() and not self._gates_open():
+    def advance_clock_period(self, override_gates: bool = False) -> bool:
+        """Step to the next /clock tick (one whole period), unless a step gate holds the time: returns False then
+        (however long it holds, unless ``override_gates``: the node's timer, module docstring). For a caller that
+        drives the simulation itself instead of the timer (the node is then not added to an executor;
+        :meth:`hindrax_sim.graph.bringup.Graph.spin_once`)."""
+        if self._gates and self._at_clock_boundary() and not self._gates_open(override_gates):
             if self.real_time_factor > 0.0:  # the wall clock keeps running: do not try to catch up afterwards
                 self._wall_anchor, self._sim_anchor = time.monotonic(), self.simulator.t_s
             return False
@@ -274,10 +279,10 @@ class SimulatorNode(VehicleNode):
         start = time.monotonic()
         if self.real_time_factor <= 0.0:
             # one /clock period of simulated time, then back to the executor (other nodes run in between)
-            self.advance_clock_period()
+            self.advance_clock_period(override_gates=True)
             return
         # whole /clock periods only (module docstring), up to the last tick due on the wall clock
-        while self.wall_time_until_next_tick_s() <= 0.0 and self.advance_clock_period():
+        while self.wall_time_until_next_tick_s() <= 0.0 and self.advance_clock_period(override_gates=True):
             if time.monotonic() - start > 0.05:  # keep the executor responsive
                 break
 

@@ -8,8 +8,9 @@ Who flies (``PilotSettings.pilot``):
   "turn 90 deg" (targets drawn until they lie inside ``pool.*`` less ``pool.margin_m``), plus a random jitter on
   every commanded axis;
 * ``"openloop"``: open-loop runs as a team without a controller flies them: each axis a force level held 1-4 s,
-  uniform up to 60 % of the saturation, its sign toward the pool's centre when the vehicle is past half the way to
-  a wall (no feedback within a level);
+  uniform up to ``level_top`` of the saturation, its sign toward the pool's centre when the vehicle is past half the
+  way to a wall (no feedback within a level); with ``idle_fraction`` that fraction of the levels is instead an idle
+  stretch of 4-12 s (a team discussing the next run);
 * ``"autopilot"``: a closed-loop survey autopilot nobody designed for identification: lawnmower legs along the
   pool at ``cruise_m_s`` with a PI surge-speed loop, cross-track and heading PD, a depth PI loop with a depth step
   at every leg end, the turn between legs, and a small jitter. Its commands are smooth and mostly steady: little
@@ -88,7 +89,8 @@ class PilotSettings:
     (tf2_msgs/msg/TFMessage), and the odometry's angular twist left at zero (``sensors="odometry"`` only).
     pilot, actuation, sensors: one of :data:`PILOTS`, :data:`ACTUATIONS`, :data:`SENSORS` (module docstring);
     cruise_m_s: the autopilot's leg speed; gain_scale: the controllers' gains times this (a heavier vehicle needs
-    larger gains)."""
+    larger gains); level_top, idle_fraction: the open-loop pilot's largest level (fraction of the saturation) and
+    its share of idle stretches (module docstring)."""
 
     duration_s: float = 120.0
     control_hz: float = 20.0
@@ -109,6 +111,8 @@ class PilotSettings:
     sensors: str = "odometry"
     cruise_m_s: float = 0.35
     gain_scale: float = 1.0
+    level_top: float = 0.6
+    idle_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         for name, allowed in (("pilot", PILOTS), ("actuation", ACTUATIONS), ("sensors", SENSORS)):
@@ -213,8 +217,8 @@ class _OpenLoopPilot:
     """Held force levels per axis (module docstring), [X, Y, Z, N] in body axes."""
 
     def __init__(self, s: PilotSettings, rng, lo, hi, start) -> None:
-        self.rng, self.lo, self.hi, self.mid = rng, lo, hi, start
-        self.top = 0.6 * np.array([s.max_force_n[0], s.max_force_n[0], s.max_force_n[1], s.max_moment_n_m])
+        self.rng, self.lo, self.hi, self.mid, self.idle = rng, lo, hi, start, s.idle_fraction
+        self.top = s.level_top * np.array([s.max_force_n[0], s.max_force_n[0], s.max_force_n[1], s.max_moment_n_m])
         self.level, self.until = np.zeros(4), np.zeros(4)
 
     def command(self, t: float, pos, eul, nu, tick_s: float) -> np.ndarray:
@@ -222,6 +226,9 @@ class _OpenLoopPilot:
         off = (pos - self.mid) / np.maximum(0.5 * (self.hi - self.lo), 1e-3)  # -1..1 across the pool
         off_body = np.array([c * off[0] + sn * off[1], -sn * off[0] + c * off[1], off[2], 0.0])
         for i in np.flatnonzero(t >= self.until):
+            if self.idle > 0.0 and self.rng.random() < self.idle:  # no draw without idle stretches
+                self.level[i], self.until[i] = 0.0, t + float(self.rng.uniform(4.0, 12.0))
+                continue
             a = float(self.rng.uniform(0.2, 1.0)) * self.top[i] * float(self.rng.choice([-1.0, 1.0]))
             self.level[i] = -math.copysign(a, off_body[i]) if abs(off_body[i]) > 0.5 else a
             self.until[i] = t + float(self.rng.uniform(1.0, 4.0))

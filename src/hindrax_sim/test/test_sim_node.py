@@ -200,6 +200,31 @@ def test_step_gate_holds_simulated_time_until_it_opens(cfg):
             close(ex, sim_node, probe.node)
 
 
+def test_a_stepped_simulation_holds_a_closed_gate_whatever_the_wall_time(cfg, monkeypatch):
+    """Issue 72.4: stepped by its caller (``hindrax run``'s lock-step graph), a gate that refuses for longer than
+    GATE_TIMEOUT_S of wall time (here the steady clock jumps a minute per reading) still holds simulated time: the
+    step it allows never depends on how busy the machine is. Before, it stepped on after 10 s of wall time. On the
+    node's own timer the override stays (a stalled node cannot freeze an interactive simulation)."""
+    import itertools
+
+    from hindrax_sim import node as sim_node_module
+
+    with ros_context() as ctx:
+        sim_node, probe, ex, _ = make(ctx, cfg)
+        ex.remove_node(sim_node)  # stepped by this test, as Graph.spin_once does
+        sim_node.add_step_gate(lambda t_s: False)
+        clock = itertools.count(0.0, 60.0)
+        monkeypatch.setattr(sim_node_module.time, "monotonic", lambda: float(next(clock)))
+        try:
+            assert not any(sim_node.advance_clock_period() for _ in range(50))
+            assert sim_node.simulator.t_s == 0.0
+            assert sim_node.advance_clock_period(override_gates=True) or \
+                sim_node.advance_clock_period(override_gates=True)
+            assert sim_node.simulator.t_s == pytest.approx(sim_node.clock_period_s)
+        finally:
+            close(ex, sim_node, probe.node)
+
+
 def test_time_msg_rounding():
     assert time_msg(1.5).sec == 1 and time_msg(1.5).nanosec == 500_000_000
     m = time_msg(2.9999999999)

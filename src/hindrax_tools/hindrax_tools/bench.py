@@ -29,7 +29,7 @@ loopback_transport()  # the vehicle's transport (hindrax_common.process.dds_tran
 #: section, each with ``run(quick)``; a section's first module is named like it
 BENCHMARKS: dict[str, tuple[str, ...]] = {name: (name,) for name in (
     "stack", "actuation", "heartbeats", "safety", "simulator", "i2c_drivers", "i2c_socket",
-    "identification", "ident_fit", "scenarios", "recorder", "serial_drivers", "robustness", "cli")}
+    "identification", "ident_fit", "scenarios", "recorder", "serial_drivers", "robustness", "cli", "repro")}
 BENCHMARKS["safety"] += ("participant_churn", "sealed_authority")
 
 

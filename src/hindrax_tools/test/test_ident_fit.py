@@ -118,7 +118,7 @@ def test_one_bag_is_cross_validated_by_blocks_of_segments(piloted):
     _root, _cfg, _bags, hold, _truth = piloted
     res = fit_bags([hold], TopicChoice(), None, ["surge"], opts=FitOptions(folds=2))
     r = res.dofs["surge"]
-    assert res.design.startswith("2-fold cross-validation by contiguous blocks")
+    assert res.design.startswith("2-fold cross-validation: whole bags held out")
     assert r.status == "fitted" and len(r.folds) == 2
     assert r.validation["cross_validation"]["nrmse"] < 0.3
     # --depth-topic: heave velocity from the depth rate (odometry pose here), rotated into the body with the

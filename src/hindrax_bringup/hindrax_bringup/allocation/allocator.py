@@ -1,9 +1,8 @@
 """Thrust allocation: body wrench (FRD) -> thruster forces -> ESC pulse widths, pure numpy.
 
-Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z
-K M N] in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster
-([Hindrax-Drag] eq. 1), :class:`ThrustAllocator` turns a requested wrench into forces and pulse
-widths:
+Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z K M N] in N and N
+m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hindrax-Drag] eq. 1),
+:class:`ThrustAllocator` turns a requested wrench into forces and pulse widths:
 
 1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``, ``W
    = diag(weights)``: of the least-squares forces, the one minimising ``sum w_i F_i^2``, computed
@@ -21,18 +20,16 @@ widths:
      along its own direction (unlike ``scipy.optimize.lsq_linear``, which could turn the reduced
      axes). The null space of B is not used.
 3. **Deadband.** An ESC gives 0 N inside its deadband (docs/devices.md §5.2). If a force of step 2
-   falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses
-   which thrusters run as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one
-   symmetric pair at 1.73 N instead of four at 0.87 N. Otherwise step 2's forces are kept (the
-   search costs nothing).
+   falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses which thrusters run
+   as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one symmetric pair at 1.73 N instead of four at
+   0.87 N. Otherwise step 2's forces are kept (the search costs nothing).
 4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (:mod:`.thrust_curve`),
    optionally on the PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the
    nearest width not in the deadband, and the *actual* thrust at that width is evaluated with the
    forward curve. The achieved wrench ``B @ force_n`` is what the thrusters will apply according to
    the model (for anti-windup).
 
-Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8).
-"""
+Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8)."""
 
 from __future__ import annotations
 
@@ -68,16 +65,14 @@ class InvalidWrenchError(ValueError):
 class AllocationResult:
     """Outcome of one :meth:`ThrustAllocator.allocate` call (FRD, N and N m, us).
 
-    ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after
-    saturation and deadband handling, before the curves and the pulse-width grid (``B @ allocated_force_n``
-    is the wrench the allocator aimed for; with the deadband search every force is 0 or outside the
-    deadband). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those
-    pulse widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
-    ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``) or the smallest
-    group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
-    the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation
-    (its force of the saturation step, or its allocated force, is at the limit).
-    """
+    ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after saturation and deadband
+    handling, before the curves and the pulse-width grid (``B @ allocated_force_n`` is the wrench the allocator aimed
+    for; with the deadband search every force is 0 or outside the deadband). ``pulse_width_us`` (n,): ESC commands.
+    ``force_n`` (n,): thrust the curves give at those pulse widths (deadband, small-force rule and quantisation
+    included). ``achieved_wrench`` (6,): ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``)
+    or the smallest group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
+    the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation (its force of
+    the saturation step, or its allocated force, is at the limit)."""
 
     requested_wrench: np.ndarray
     allocated_force_n: np.ndarray
@@ -95,8 +90,7 @@ def weighted_pseudo_inverse(matrix, weights=None, rcond: float = 1e-10) -> np.nd
     ``F = result @ tau`` minimises ``sum w_i F_i^2`` among the least-squares solutions of ``B F = tau``
     (unconstrained weighted least-squares control allocation, Fossen 2011, Handbook of Marine Craft
     Hydrodynamics and Motion Control, control-allocation chapter). ``weights`` (n,) positive, default
-    ones. Raises ``ValueError`` for bad shapes, non-finite values or non-positive weights.
-    """
+    ones. Raises ``ValueError`` for bad shapes, non-finite values or non-positive weights."""
     b = np.asarray(matrix, dtype=float)
     if b.ndim != 2 or b.shape[0] != 6 or b.shape[1] < 1 or not np.all(np.isfinite(b)):
         raise ValueError(f"matrix must be a finite (6, n) array with n >= 1, got shape {b.shape}")
@@ -114,8 +108,7 @@ class _PulseGrid:
 
     ``smallest_forward_n`` / ``smallest_reverse_n`` (n,), magnitudes in N at ``voltage_scale = 1``: the thrust
     at the first width outside the deadband that the generator can produce (1525.20 us: 1.2038 N and
-    1474.36 us: 1.2087 N for the [Hindrax-Drag] eq. 1 curve at the PCA9685's 1.24 us).
-    """
+    1474.36 us: 1.2087 N for the [Hindrax-Drag] eq. 1 curve at the PCA9685's 1.24 us)."""
 
     def __init__(self, curves: Sequence[ThrustCurve], step: float | None) -> None:
         fwd_inner = np.array([c.forward_branch_us[0] for c in curves])
@@ -193,8 +186,7 @@ class ThrustAllocator:
         :data:`DEFAULT_PRIORITY_GROUPS`. Ignored in uniform mode.
     pulse_width_step_us:
         Optional quantisation step of the pulse-width generator (us), e.g. the PCA9685 tick
-        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no
-        quantisation.
+        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no quantisation.
     deadband_search:
         ``True`` (default): forces the thrusters cannot give (inside the ESC deadband) are avoided by choosing
         which thrusters run (:mod:`.deadband`); ``False``: each force is inverted on its own (small-force rule
@@ -207,11 +199,9 @@ class ThrustAllocator:
         so a pair of thrusters is run against each other only to remove more than about one step's worth of
         wrench error; :data:`DEFAULT_EFFORT_WEIGHT` without a step.
 
-    Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n),
-    ``pseudo_inverse`` (n, 6), ``curves`` (n ThrustCurve), ``mode``,
-    ``priority_groups`` (tuples of axis indices, final group included), ``zero_authority_axes`` (6,)
-    bool, ``n_thrusters``.
-    """
+    Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n), ``pseudo_inverse`` (n, 6),
+    ``curves`` (n ThrustCurve), ``mode``, ``priority_groups`` (tuples of axis indices, final group included),
+    ``zero_authority_axes`` (6,) bool, ``n_thrusters``."""
 
     # Set by reconfigure() (which __init__ calls); declared here for the type checker.
     _matrix: np.ndarray
@@ -242,8 +232,7 @@ class ThrustAllocator:
         per-thruster lists must still match it.
 
         The new configuration is validated completely before anything is replaced; on ``ValueError`` the
-        allocator keeps its previous configuration.
-        """
+        allocator keeps its previous configuration."""
         keep = ThrustAllocator._KEEP
         b = np.array(self._matrix if matrix is keep else matrix, dtype=float)
         if b.ndim != 2 or b.shape[0] != 6 or b.shape[1] < 1 or not np.all(np.isfinite(b)):
@@ -406,8 +395,7 @@ class ThrustAllocator:
         read-only: a request equal bit for bit to the last call's, at the same scale, returns the same result object
         without allocating again (a hold or a step commands the same wrench for many ticks in a row). Raises
         :class:`InvalidWrenchError` if the wrench is not 6 finite numbers, ``ValueError`` for a bad
-        ``voltage_scale``. Source: [Hindrax-Drag] eqs. 1 and 9; module docstring for the method.
-        """
+        ``voltage_scale``. Source: [Hindrax-Drag] eqs. 1 and 9; module docstring for the method."""
         try:
             tau = np.array(wrench, dtype=float)
         except (TypeError, ValueError) as exc:

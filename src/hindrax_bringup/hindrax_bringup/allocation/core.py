@@ -10,8 +10,7 @@ A wrench asking more than ``thrusters.max_wrench_excess_ratio`` times what the t
 with the reason) rather than saturated: 1e30 N is a unit or scaling fault, not a request for full thrust.
 
 Thruster reversal and trim (``thrusters.<t>.reversed``/``trim_us``) are applied by the ESC output, not here:
-the pulse widths below are what the thrust curves need, in the thrusters' configured directions.
-"""
+the pulse widths below are what the thrust curves need, in the thrusters' configured directions."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,8 +30,7 @@ class FluAllocation:
     requested_wrench_flu / achieved_wrench_flu: (6,) [Fx Fy Fz Tx Ty Tz] in base_link, N and N m.
     force_n (n,): thrust of each thruster at its pulse width (curve output). pulse_width_us (n,).
     scale: uniform scale in (0, 1] (priority mode: smallest group factor). saturated (n,) bool.
-    frd: the underlying :class:`AllocationResult` in body FRD.
-    """
+    frd: the underlying :class:`AllocationResult` in body FRD."""
 
     requested_wrench_flu: np.ndarray
     achieved_wrench_flu: np.ndarray
@@ -58,8 +56,7 @@ class AllocationCore:
 
     The allocator (matrix, pseudo-inverse, curves) is built once here and rebuilt only by
     :meth:`reconfigure`, never per wrench. Raises :class:`InvalidWrenchError` for a NaN/inf or
-    malformed wrench; :meth:`neutral` gives the all-neutral pulse widths to command instead.
-    """
+    malformed wrench; :meth:`neutral` gives the all-neutral pulse widths to command instead."""
 
     def __init__(self, cfg: VehicleConfig):
         self.reconfigure(cfg)
@@ -73,8 +70,7 @@ class AllocationCore:
         self.max_excess_ratio = float(cfg.thrusters.max_wrench_excess_ratio)
         lower, upper = self.allocator.force_limits_n()
         b = self.allocator.matrix
-        self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1),
-                          np.maximum(b * lower, b * upper).sum(axis=1))
+        self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1), np.maximum(b * lower, b * upper).sum(axis=1))
 
     def wrench_capacity_frd(self) -> tuple[np.ndarray, np.ndarray]:
         """``(lowest, highest)`` (6,) each axis of the body FRD wrench can reach, N and N m: for axis k the extremes

@@ -1,23 +1,20 @@
 """Thrust allocation outside the ESC deadband: which thrusters run, and how hard, pure numpy.
 
-An ESC gives no thrust inside its deadband (docs/devices.md §5.2, 1500 +- 25 us), so a thruster
-produces 0 N or at least the thrust at the first pulse width outside it (about 1.2 N for the
-[Hindrax-Drag] eq. 1 curve at the PCA9685's step). The weighted pseudo-inverse spreads a small
-request over every thruster: ``[-2 0 0 0 0 0]`` asks each horizontal thruster for 0.87 N, which none
-can give, while a symmetric pair at 1.74 N gives the -2 N exactly.
+An ESC gives no thrust inside its deadband (docs/devices.md §5.2, 1500 +- 25 us), so a thruster produces 0 N or at least
+the thrust at the first pulse width outside it (about 1.2 N for the [Hindrax-Drag] eq. 1 curve at the PCA9685's step).
+The weighted pseudo-inverse spreads a small request over every thruster: ``[-2 0 0 0 0 0]`` asks each horizontal
+thruster for 0.87 N, which none can give, while a symmetric pair at 1.74 N gives the -2 N exactly.
 
 Problem. Find the forces F (n,) minimising
 
     J(F) = || B F - tau ||^2 + rho * sum_i w_i F_i^2
 
-subject to ``F_i = 0`` or ``m_fwd_i <= F_i <= u_i`` or ``l_i <= F_i <= -m_rev_i``, where ``m_fwd``
-and ``m_rev`` are the smallest thrusts outside the deadband (on the pulse-width grid), ``l`` and
-``u`` the saturation limits, ``w`` the allocation weights and ``rho`` the effort weight
-(:class:`DeadbandSearch`); the residual is in the Euclidean metric of [X Y Z K M N], N and N m. The
-axes are not prioritised here (the allocator's step 2 fixes ``tau``). It is the constrained
-least-squares allocation with a slack ``s = B F - tau`` of [JohansenFossen2013] (Q = I) with each
-bound made semi-continuous: a mixed-integer quadratic program, with a binary on/off and a sign per
-thruster.
+subject to ``F_i = 0`` or ``m_fwd_i <= F_i <= u_i`` or ``l_i <= F_i <= -m_rev_i``, where ``m_fwd`` and ``m_rev`` are the
+smallest thrusts outside the deadband (on the pulse-width grid), ``l`` and ``u`` the saturation limits, ``w`` the
+allocation weights and ``rho`` the effort weight (:class:`DeadbandSearch`); the residual is in the Euclidean metric of
+[X Y Z K M N], N and N m. The axes are not prioritised here (the allocator's step 2 fixes ``tau``). It is the
+constrained least-squares allocation with a slack ``s = B F - tau`` of [JohansenFossen2013] (Q = I) with each bound made
+semi-continuous: a mixed-integer quadratic program, with a binary on/off and a sign per thruster.
 
 Method: a search over active sets, vectorised over all of them at once (no maintained Python solver
 answers a mixed-integer QP in well under a millisecond; ``scipy.optimize.milp`` takes only a linear
@@ -42,8 +39,7 @@ objective and is tens of ms here).
 For requests without an exact solution the search is a heuristic for the exact solve of all 3^n sign
 patterns (``test/test_allocation_deadband.py`` checks two fixed requests against it). Subsets are
 enumerated for n <= :data:`MAX_THRUSTERS`; beyond, the allocator runs without the search. Cost:
-``make bench`` (``actuation``: ``allocate_cpu_p50``, ``allocate_cpu_p99``).
-"""
+``make bench`` (``actuation``: ``allocate_cpu_p50``, ``allocate_cpu_p99``)."""
 from __future__ import annotations
 
 import itertools
@@ -76,14 +72,11 @@ class DeadbandSearch:
         Magnitudes (n,) in N, >= 0, at ``voltage_scale = 1``: the smallest thrust each thruster gives outside its
         deadband in each direction, m_fwd and m_rev (0: no gap on that side).
 
-    Precomputes one weighted pseudo-inverse per subset of thrusters (2^n of shape (n, 6)) and the affine map
-    of every seed. Raises ``ValueError`` for a bad shape, non-finite values, non-positive weights or upper
-    limits, non-negative lower limits, negative smallest thrusts, a negative effort weight, or
-    n > :data:`MAX_THRUSTERS`.
-    """
+    Precomputes one weighted pseudo-inverse per subset of thrusters (2^n of shape (n, 6)) and the affine map of every
+    seed. Raises ``ValueError`` for a bad shape, non-finite values, non-positive weights or upper limits, non-negative
+    lower limits, negative smallest thrusts, a negative effort weight, or n > :data:`MAX_THRUSTERS`."""
 
-    def __init__(self, matrix, weights, effort_weight: float, lower, upper, smallest_forward,
-                 smallest_reverse) -> None:
+    def __init__(self, matrix, weights, effort_weight: float, lower, upper, smallest_forward, smallest_reverse) -> None:
         b = np.array(matrix, dtype=float)
         if b.ndim != 2 or b.shape[0] != 6 or not 1 <= b.shape[1] <= MAX_THRUSTERS or not np.all(np.isfinite(b)):
             raise ValueError(f"matrix must be a finite (6, n) array with 1 <= n <= {MAX_THRUSTERS}, got {b.shape}")
@@ -172,8 +165,7 @@ class DeadbandSearch:
         ``voltage_scale`` (> 0) multiplies the limits and the smallest thrusts (battery voltage, see
         :func:`.thrust_curve.voltage_thrust_scale`). Every returned F_i is 0 or within ``[m_fwd_i, upper_i]``
         or ``[lower_i, -m_rev_i]`` (times ``voltage_scale``). Inputs are not validated (the allocator passes
-        checked values).
-        """
+        checked values)."""
         tau = np.asarray(tau, dtype=float)
         s = float(voltage_scale)
         n, seeds = self.n, self._seed_free.size

@@ -1,8 +1,7 @@
 """Build the thrust model (curves, thrust allocation matrix, allocator) from the vehicle configuration.
 
 The allocation node, the ``hindrax allocate`` command, the simulator and the identification regression all
-call these functions, so every one of them uses the same curves and matrix.
-"""
+call these functions, so every one of them uses the same curves and matrix."""
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +30,7 @@ def allocation_matrix_from_config(cfg: VehicleConfig) -> np.ndarray:
 def pca9685_pulse_step_us(cfg: VehicleConfig) -> float:
     """Pulse-width resolution of the PCA9685 at the configured frequency and oscillator, us per count.
 
-    PRE_SCALE = round(f_osc / (4096 f)) - 1; one count = (PRE_SCALE + 1) / f_osc (docs/devices.md §5.1).
-    """
+    PRE_SCALE = round(f_osc / (4096 f)) - 1; one count = (PRE_SCALE + 1) / f_osc (docs/devices.md §5.1)."""
     f_osc = cfg.esc.oscillator_hz
     return pca.count_duration_us(pca.prescale_for_frequency(cfg.esc.pwm_frequency_hz, f_osc), f_osc)
 

@@ -6,8 +6,7 @@ unit vector ``d_i`` with thrust ``F_i`` (N) applies the wrench ``tau_i = [d_i; r
 ([Hindrax-Drag] eq. 9, after Fossen 1994), ``tau = [X Y Z K M N]`` in N and N m. Stacking the columns
 ``[d_i; r_i x d_i]`` gives the 6 x n thrust allocation matrix ``B`` with ``tau = B F``.
 
-Conversions between ROS ``base_link`` (FLU) and FRD are done by the project's frames module, not here.
-"""
+Conversions between ROS ``base_link`` (FLU) and FRD are done by the project's frames module, not here."""
 
 from __future__ import annotations
 
@@ -37,8 +36,7 @@ def thrust_allocation_matrix(positions_m, directions) -> np.ndarray:
     ``directions`` (n, 3): unit vectors (FRD) of the force a positive thrust applies to the vehicle.
     Rows of ``B`` are surge X, sway Y, heave Z (N per N) and roll K, pitch M, yaw N (N m per N).
     Works for any number and arrangement of thrusters. Raises ``ValueError`` for wrong shapes,
-    non-finite values, different n, or a direction whose norm differs from 1 by more than 1e-6.
-    """
+    non-finite values, different n, or a direction whose norm differs from 1 by more than 1e-6."""
     r = _as_n_by_3(positions_m, "positions_m")
     d = _as_n_by_3(directions, "directions")
     if r.shape != d.shape:

@@ -25,8 +25,7 @@ The core (:class:`~hindrax_bringup.allocation.core.AllocationCore`) is built at 
 when a parameter changes, never per message. The thruster keys (geometry, curves, trims, limits, wrench timeout) are
 applied while running; a change is refused while the ESC is armed or has not reported its state
 (:class:`~hindrax_common.node_support.esc_state.ArmedWatch`), with the reason. Configuration: the vehicle file as ROS
-parameters (``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported).
-"""
+parameters (``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported)."""
 from __future__ import annotations
 
 from typing import Any
@@ -45,9 +44,8 @@ from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
 BASE_FRAME = "base_link"
-#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of
-#: state, s (5 Hz: a topside display, the controller's anti-windup; a change of saturation or
-#: rejection goes out at once)
+#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s (5 Hz: a topside
+#: display, the controller's anti-windup; a change of saturation or rejection goes out at once)
 STATUS_PERIOD_S = 0.2
 STATUS_PERIOD_NS = int(STATUS_PERIOD_S * 1e9)
 
@@ -211,8 +209,7 @@ class ThrustAllocationNode(VehicleNode):
         else:
             stamp_ns = now_ns
         # the command's CDR is published as bytes (50 Hz without an rclpy object, hindrax_common.cdr.lean_cdr)
-        self.pub_pwm.publish(thruster_pwm_encode(thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us,
-                                                                   not rejected)))
+        self.pub_pwm.publish(thruster_pwm_encode(thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us, not rejected)))
         saturated = np.asarray(saturated, dtype=bool)
         self._held = (stamp_ns, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
                       np.asarray(achieved, dtype=float), float(scale), saturated, rejected, reason)

@@ -15,8 +15,7 @@ depth or speed the vehicle must not reach.
   ``pool.margin_m``)]; an altitude in [``limits.min_altitude_m``, ``pool.depth_m``]; surge and sway speeds no
   higher than the steady speed the thrusters' capacity gives against the damping (:func:`top_speeds_m_s`).
 
-Pure (numpy through the allocation's capacity); no rclpy: messages are read by attribute.
-"""
+Pure (numpy through the allocation's capacity); no rclpy: messages are read by attribute."""
 from __future__ import annotations
 
 import math

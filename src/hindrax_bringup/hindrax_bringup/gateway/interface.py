@@ -2,13 +2,11 @@
 
 This is the whole topside interface (docs/architecture.md §8.2): the gateway (:mod:`hindrax_bringup.gateway.node`)
 relays these and nothing else between the vehicle's internal graph (loopback) and the topside domain, under the
-namespace ``/<vehicle.name>/``. Heartbeats, ``thrusters/*``, ``esc/*``, ``pressure/zero_depth`` and
-``supervisor/abort`` have no entry: they do not exist on the topside. ``who`` is the access the SROS2 permissions
-policy grants on the Pi: ``anyone`` (every topside participant), ``operator`` (the operator enclave only),
-``read`` (telemetry, subscribe only).
+namespace ``/<vehicle.name>/``. Heartbeats, ``thrusters/*``, ``esc/*``, ``pressure/zero_depth`` and ``supervisor/abort``
+have no entry: they do not exist on the topside. ``who`` is the access the SROS2 permissions policy grants on the Pi:
+``anyone`` (every topside participant), ``operator`` (the operator enclave only), ``read`` (telemetry, subscribe only).
 
-Pure: no rclpy import (the CLI, the policy generator and the tests read it).
-"""
+Pure: no rclpy import (the CLI, the policy generator and the tests read it)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -30,8 +28,7 @@ class Relay:
     ``topic_out`` (vehicle -> topside); type: the ROS interface type on the topside (``pkg/srv/Name``,
     ``pkg/action/Name``, ``pkg/msg/Name``); who: ``anyone``, ``operator`` or ``read`` (module docstring);
     internal_type: the type on the internal graph when it differs (an operator's signed request, e.g.
-    ``hindrax_msgs/srv/SignedTrigger`` on the topside, ``std_srvs/srv/Trigger`` inside).
-    """
+    ``hindrax_msgs/srv/SignedTrigger`` on the topside, ``std_srvs/srv/Trigger`` inside)."""
 
     topside: str
     internal: str
@@ -97,8 +94,7 @@ def choose_vehicle(seen: Iterable[str], wanted: str | None, domain: str = "this 
     """The vehicle a command that moves one talks to: ``wanted`` if it is among ``seen``, else the only one seen.
 
     Raises :class:`VehicleChoiceError` (one line naming the domain and what was seen) when ``wanted`` is not seen,
-    when nothing is seen, or when several are seen and none is named.
-    """
+    when nothing is seen, or when several are seen and none is named."""
     seen = sorted(set(seen))
     if wanted is not None:
         if wanted in seen:

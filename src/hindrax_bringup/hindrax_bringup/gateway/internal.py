@@ -2,19 +2,17 @@
 
 Started by the topside process (:mod:`hindrax_bringup.gateway.node`) with the vehicle's loopback transport
 (:mod:`hindrax_common.process.dds_transport`: every UDP socket on 127.0.0.1) and one end of a Unix socket pair
-(``--link-fd N``, :mod:`.link`). It reads the gateway's settings from its parameters (the vehicle file), sends them
-and the request bounds (:class:`.bounds.RequestBounds`) to the topside process, then serves it: calls the internal
-services, publishes the internal topics and sends the campaign goals of the interface
-(:data:`.interface.INTERFACE`) and nothing else (a name outside the interface is refused), and sends the telemetry
-topics back as serialized bytes. Its node is ``/<vehicle.name>/gateway`` on the internal graph; the gateway's status
-goes to ``/diagnostics``. It ends when the channel ends (the topside process is gone), and the topside process ends
-when it does.
+(``--link-fd N``, :mod:`.link`). It reads the gateway's settings from its parameters (the vehicle file), sends them and
+the request bounds (:class:`.bounds.RequestBounds`) to the topside process, then serves it: calls the internal services,
+publishes the internal topics and sends the campaign goals of the interface (:data:`.interface.INTERFACE`) and nothing
+else (a name outside the interface is refused), and sends the telemetry topics back as serialized bytes. Its node is
+``/<vehicle.name>/gateway`` on the internal graph; the gateway's status goes to ``/diagnostics``. It ends when the
+channel ends (the topside process is gone), and the topside process ends when it does.
 
 Parameters (read here, for both processes): the vehicle file (``vehicle.name``: the namespace; the sections the
 bounds need), ``topside_domain_id`` (int, 0-101), ``topside_discovery_range`` (``LOCALHOST``, ``SUBNET``,
 ``SYSTEM_DEFAULT``, ``OFF``), ``call_timeout_s`` (0.1-30 s, default 2). A bad value ends the start with one line
-naming key, value and allowed range (exit status 1).
-"""
+naming key, value and allowed range (exit status 1)."""
 from __future__ import annotations
 
 import argparse
@@ -48,8 +46,7 @@ DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")
 #: default longest wait for an internal service's answer, s
 DEFAULT_CALL_TIMEOUT_S = 2.0
 #: the vehicle file's sections the gateway reads: its name, and what the request bounds need
-BOUNDS_SECTIONS = ("vehicle", "identification", "supervisor", "limits", "pool", "hydrodynamics", "thrusters",
-                   "esc")
+BOUNDS_SECTIONS = ("vehicle", "identification", "supervisor", "limits", "pool", "hydrodynamics", "thrusters", "esc")
 #: the relay of these topics takes best-effort publishers too (odometry is often published best effort)
 BEST_EFFORT_TOPICS = frozenset({"odom"})
 

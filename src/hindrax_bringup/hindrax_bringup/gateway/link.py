@@ -10,9 +10,7 @@ kind) and the payload: a serialized ROS message (CDR), never decoded here. The k
   ``why``), ``topic`` (``name`` = a topside topic of the interface), ``accepted`` (``id``, ``ok``, ``why``),
   ``feedback`` (``id``), ``result`` (``id``, ``status``).
 
-:class:`Channel` sends from any thread (one lock) and receives in one reader thread. Standard
-library only.
-"""
+:class:`Channel` sends from any thread (one lock) and receives in one reader thread. Standard library only."""
 from __future__ import annotations
 
 import contextlib

@@ -33,8 +33,7 @@ campaign after the first). One thread reads the channel. A relay whose internal 
 a cancel of the topside goal cancels the internal one.
 
 Parameters: read by the internal side (:mod:`.internal`). Run alone: ``python -m hindrax_bringup.gateway.node
---ros-args --params-file ros_ws/config/hindrax.yaml -p topside_domain_id:=7``.
-"""
+--ros-args --params-file ros_ws/config/hindrax.yaml -p topside_domain_id:=7``."""
 from __future__ import annotations
 
 import contextlib

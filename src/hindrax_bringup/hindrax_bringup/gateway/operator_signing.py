@@ -15,8 +15,7 @@ A refusal sent to the topside names no file of the vehicle.
 Key file: ``<keys dir>/<vehicle>.key`` (:func:`key_path`), 64 hex digits and a newline, mode 0600, on the vehicle and
 on the operator's PC. Made by :func:`create_key` (``hindrax keys``).
 
-Pure: standard library only (messages are read through their fields).
-"""
+Pure: standard library only (messages are read through their fields)."""
 from __future__ import annotations
 
 import hmac
@@ -76,9 +75,8 @@ def replay_path(vehicle: str) -> Path:
 
 
 def create_key(path: Path, force: bool = False) -> Path:
-    """Write a new random 32-byte key (:func:`secrets.token_bytes`) to ``path`` as hex, mode 0600 from creation;
-    the folder is made (mode 0700) if missing. Raises :class:`OperatorKeyError` when the file exists and not
-    ``force``."""
+    """Write a new random 32-byte key (:func:`secrets.token_bytes`) to ``path`` as hex, mode 0600 from creation; the
+    folder is made (mode 0700) if missing. Raises :class:`OperatorKeyError` when the file exists and not ``force``."""
     path = Path(path)
     if path.exists() and not force:
         raise OperatorKeyError(f"{path} exists (a new key means copying it to the topside again): use --force to "

@@ -5,11 +5,10 @@ permissions document per *enclave*; a process joins the graph with its enclave's
 its permissions grant (default deny). This module writes the policy that matches docs/architecture.md §8.2:
 
 - **internal domain** (the vehicle's loopback graph): one enclave per process of the launch layout, named by the
-  ``--enclave`` its ``<node>`` passes (``/vehicle/<process>``, :func:`launch_enclaves`), plus ``/vehicle/gateway``
-  (the gateway's internal side) and ``/vehicle/tools`` (the ``hindrax`` commands run on the vehicle). Each may
-  use every topic, service and action of the internal graph
-  (:data:`INTERNAL_TOPICS`, :data:`INTERNAL_SERVICES`, :data:`INTERNAL_ACTIONS`): the vehicle trusts its own
-  processes; what it keeps from the topside is the domain itself.
+  ``--enclave`` its ``<node>`` passes (``/vehicle/<process>``, :func:`launch_enclaves`), plus ``/vehicle/gateway`` (the
+  gateway's internal side) and ``/vehicle/tools`` (the ``hindrax`` commands run on the vehicle). Each may use every
+  topic, service and action of the internal graph (:data:`INTERNAL_TOPICS`, :data:`INTERNAL_SERVICES`,
+  :data:`INTERNAL_ACTIONS`): the vehicle trusts its own processes; what it keeps from the topside is the domain itself.
 - **topside domain**, under ``/<vehicle.name>/``: ``/<name>/gateway`` serves the gateway's interface
   (:data:`hindrax_bringup.gateway.interface.INTERFACE`); ``/<name>/operator`` may call all of it (arm, disarm,
   reset, setpoints, campaign, recorder); ``/<name>/topside`` (every other topside participant) may call ``estop``
@@ -27,8 +26,7 @@ DDS permissions name one domain per grant (sros2 writes ``ROS_DOMAIN_ID`` into e
 topside enclaves are two policies, :func:`internal_policy` and :func:`topside_policy`, turned into permissions with
 the internal and the topside domain id respectively (``hindrax sros2 keystore``).
 
-Pure: strings in, XML text out (``xml.etree``); no rclpy, no sros2.
-"""
+Pure: strings in, XML text out (``xml.etree``); no rclpy, no sros2."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
@@ -36,10 +34,9 @@ from typing import Iterable, Mapping
 
 from .interface import GATEWAY_NODE, INTERFACE
 
-__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS",
-           "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
-           "NODE_TOPICS", "POLICY_VERSION", "enclave_of", "gateway_internal_enclave", "internal_policy",
-           "launch_enclaves", "topside_enclaves", "topside_policy"]
+__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS", "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES",
+           "INTERNAL_TOPICS", "NODE_SERVICES", "NODE_TOPICS", "POLICY_VERSION", "enclave_of",
+           "gateway_internal_enclave", "internal_policy", "launch_enclaves", "topside_enclaves", "topside_policy"]
 
 #: sros2's policy format (``policy.xsd`` fixes the attribute ``version`` to it)
 POLICY_VERSION = "0.2.0"
@@ -155,8 +152,7 @@ def topside_policy(vehicle_name: str) -> str:
     ns = f"/{vehicle_name}"
 
     def names(kind: str, who: tuple[str, ...] | None = None) -> list[str]:
-        return [f"{ns}/{r.topside}" for r in INTERFACE
-                if r.kind == kind and (who is None or r.who in who)]
+        return [f"{ns}/{r.topside}" for r in INTERFACE if r.kind == kind and (who is None or r.who in who)]
 
     roles = topside_enclaves(vehicle_name)
     gateway = _node_rules() + [
@@ -167,8 +163,7 @@ def topside_policy(vehicle_name: str) -> str:
     operator = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
                 ("topics", {"subscribe": "ALLOW"}, names("topic_out")),
                 ("topics", {"publish": "ALLOW"}, names("topic_in")),
-                ("services", {"request": "ALLOW"}, names("service")),
-                ("actions", {"call": "ALLOW"}, names("action"))]
+                ("services", {"request": "ALLOW"}, names("service")), ("actions", {"call": "ALLOW"}, names("action"))]
     anyone = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
               ("topics", {"subscribe": "ALLOW"}, names("topic_out", ("read", "anyone"))),
               ("services", {"request": "ALLOW"}, names("service", ("anyone",))),

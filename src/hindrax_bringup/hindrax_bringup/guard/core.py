@@ -27,8 +27,7 @@ disarms in the handler of any guard beat that is not OK, and cannot arm again be
 published after the release. So an ESC beat acknowledging ``guard_seq`` >= :attr:`GuardCore.cause_seq` reports a
 state later than that disarm, whatever the delivery delays (a beat merely received after the last
 cause may have been published before an arm and delivered late). It starts asserted: nothing is
-released until a live ESC has acknowledged one of this guard's ERROR beats at neutral.
-"""
+released until a live ESC has acknowledged one of this guard's ERROR beats at neutral."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -27,14 +27,13 @@ later without any software alive. A feed line that cannot be requested or driven
 heartbeat). When no edge went out for longer than the timeout while the ESC was armed (this process was frozen or
 starved), the guard asserts and latches: thrust comes back only through a new arm request.
 
-Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed
-flag and the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold)
-and ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
-unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_common.process.sd_notify`):
-a frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
-``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled,
-ERROR = silenced with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics``
-(``hindrax/output_guard``).
+Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed flag and
+the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
+``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the unit's READY=1
+and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_common.process.sd_notify`): a frozen ESC,
+supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes ``guard/heartbeat``
+(hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled, ERROR = silenced with
+the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_common.node_support.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so
@@ -42,8 +41,7 @@ a starved guard ages a dead peer at wall speed; on simulated time a peer is late
 clock), timeout: the read-only node parameter ``heartbeat_timeout_s`` (default ``esc.guard_heartbeat_timeout_s``).
 The two heartbeats are callbacks in both clock modes (the path the vehicle takes is the path the tests take). A
 small process of its own (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's
-sensor code cannot take the second stop path with it.
-"""
+sensor code cannot take the second stop path with it."""
 from __future__ import annotations
 
 import math
@@ -380,8 +378,7 @@ class OutputGuardNode(VehicleNode):
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
                 ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
-                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values())),
-                *self.tick_gaps.report()]
+                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values())), *self.tick_gaps.report()]
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:

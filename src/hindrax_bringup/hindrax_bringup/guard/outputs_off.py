@@ -5,8 +5,7 @@ own, and a Raspberry Pi kernel without ``strict_gpiod`` keeps a freed /OE low (d
 /OE (``esc.output_enable_gpio``) high and releases it, then writes the chip's ALL_LED_OFF_H full-OFF bit and MODE1
 SLEEP (:func:`silence_chip`), each step tried even when the other fails, one line each on stdout; exit status 0
 when both worked (or /OE is not wired), else 1. No ROS: it must run when the ROS installation is what broke. The
-vehicle file: ``HINDRAX_CONFIG``, else the installed one (:func:`hindrax_common.config.default_config_path`).
-"""
+vehicle file: ``HINDRAX_CONFIG``, else the installed one (:func:`hindrax_common.config.default_config_path`)."""
 from __future__ import annotations
 
 import sys

@@ -38,8 +38,7 @@ the DVL's scale error, docs/devices.md §1): ``cage_margin_m`` and the wider ide
 identification's own, better position estimate aborts a manoeuvre first.
 
 A breach latches: :attr:`SupervisorCore.tripped` keeps the first reason until :meth:`SupervisorCore.reset`, and
-the node disarms again whenever the ESC reports armed while tripped.
-"""
+the node disarms again whenever the ESC reports armed while tripped."""
 from __future__ import annotations
 
 import collections
@@ -67,8 +66,7 @@ def tilt_from_specific_force(f_frd_m_s2: np.ndarray, g_m_s2: float = 9.81) -> tu
     f_frd_m_s2: (3,) specific force in body FRD, m/s^2 (a level vehicle at rest reads (0, 0, -g)). At rest
     f = R_nb^T (0, 0, -g) = -g (-sin(theta), cos(theta) sin(phi), cos(theta) cos(phi)) ([Fossen2011] §2.1, R of
     eq. 2.18, gravity in NED), so phi = atan2(-f_y, -f_z) and theta = atan2(f_x, sqrt(f_y^2 + f_z^2)). Returns None
-    when |f| is not within TILT_ACCEL_TOLERANCE of g (accelerating, or not a reading) or not finite.
-    """
+    when |f| is not within TILT_ACCEL_TOLERANCE of g (accelerating, or not a reading) or not finite."""
     f = np.asarray(f_frd_m_s2, dtype=float)
     if f.shape != (3,) or not np.all(np.isfinite(f)):
         return None

@@ -9,12 +9,10 @@ KeyValue ``disarm_cause``: ``<process>: <cause>; next: <step>``.
 
 Rules (:class:`DisarmCauses`): the first cause seen while the output is armed is kept until the next arming (a
 supervisor trip, then the guard's "supervisor tripped" and the ESC's "disarmed" that follow it, name the trip); a
-supervisor trip is a cause whether armed or not (it also refuses the next arming). The guard's beat counts while
-the supervisor sees the ESC armed: a killed ESC stops reporting, its last (armed) state stays latched, and only the
-guard's beat says that its outputs were silenced. An ESC that reports disarmed without a cause seen before is named
-with its own reason. A starvation a node reports after the stop it caused joins that cause
-(:meth:`DisarmCauses.on_starved`).
-"""
+supervisor trip is a cause whether armed or not (it also refuses the next arming). The guard's beat counts while the
+supervisor sees the ESC armed: a killed ESC stops reporting, its last (armed) state stays latched, and only the guard's
+beat says that its outputs were silenced. An ESC that reports disarmed without a cause seen before is named with its own
+reason. A starvation a node reports after the stop it caused joins that cause (:meth:`DisarmCauses.on_starved`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

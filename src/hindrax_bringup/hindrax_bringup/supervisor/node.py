@@ -1,10 +1,9 @@
 """Safety supervisor node: disarms the ESC output when the vehicle leaves its safe envelope.
 
-Thin rclpy wrapper of :class:`~hindrax_bringup.supervisor.core.SupervisorCore` (the checks and their keys are
-documented there). On a breach it calls ``esc/set_armed`` with ``arm=False`` (the ESC node writes neutral on
-every channel in that service callback, i.e. at once, well within one output period), latches the reason, says
-why on ``supervisor/status`` and in ``/diagnostics`` (level ERROR), and disarms again whenever the ESC reports
-armed while the breach is latched.
+Thin rclpy wrapper of :class:`~hindrax_bringup.supervisor.core.SupervisorCore` (the checks and their keys are documented
+there). On a breach it calls ``esc/set_armed`` with ``arm=False`` (the ESC node writes neutral on every channel in that
+service callback, i.e. at once, well within one output period), latches the reason, says why on ``supervisor/status``
+and in ``/diagnostics`` (level ERROR), and disarms again whenever the ESC reports armed while the breach is latched.
 
 Subscribes (ROS time of arrival is used for rates and run time, the header stamps for freshness; ``use_sim_time``
 supported)
@@ -125,8 +124,7 @@ class SupervisorNode(VehicleNode):
         self.create_subscription(Imu, "imu/data_raw", self.on_imu, sensor_input_qos(IMU_QUEUE_DEPTH), raw=True)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos())
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
-        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard,
-                                 heartbeat_qos(), raw=True)
+        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), raw=True)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")

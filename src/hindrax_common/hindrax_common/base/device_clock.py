@@ -18,8 +18,7 @@ window (default 10 s of device time) lets the estimate follow the drift between 
   backwards needs no rule: the minimum follows it at the next sample.
 
 Everything is integer nanoseconds (a float64 of ROS time in seconds only resolves about 0.2 us).
-Pure code: no ROS, no clock reads.
-"""
+Pure code: no ROS, no clock reads."""
 from __future__ import annotations
 
 import collections
@@ -38,9 +37,7 @@ class DeviceClockSync:
     Attributes:
         resets: number of re-initialisations (device clock backwards, ROS time jump).
         samples: samples accepted since construction.
-    Raises:
-        ValueError: non-positive window or jump, resync_samples < 1.
-    """
+    Raises ``ValueError``: non-positive window or jump, resync_samples < 1."""
 
     def __init__(self, window_s: float = 10.0, jump_s: float = 1.0, resync_samples: int = 3) -> None:
         if window_s <= 0 or jump_s <= 0 or resync_samples < 1:
@@ -69,8 +66,7 @@ class DeviceClockSync:
     def update(self, device_ns: int, receive_ns: int) -> int:
         """Add one report: device time ``device_ns`` received at ROS time ``receive_ns`` (both ns).
 
-        Returns the offset estimate after the update (ns).
-        """
+        Returns the offset estimate after the update (ns)."""
         device_ns, receive_ns = int(device_ns), int(receive_ns)
         delta = receive_ns - device_ns
         if self._last_device_ns is not None and device_ns < self._last_device_ns:

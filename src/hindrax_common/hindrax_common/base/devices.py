@@ -3,8 +3,7 @@ and the simulator's virtual hardware loop over.
 
 Adding a device is one :class:`Device` entry here plus its own folder (protocol, emulator, node). Node classes and
 emulator factories are "module:attribute" strings (".dvl75.node": in hindrax_drivers) or callables (a test's fake
-device), imported only when used, so reading the table loads no ROS messages.
-"""
+device), imported only when used, so reading the table loads no ROS messages."""
 from __future__ import annotations
 
 import functools
@@ -29,8 +28,7 @@ class Device:
     replay compares. output: an actuator (its reads echo the driver's writes; not part of the sensors group).
     status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``. truth_keywords: the emulator factory's
     keyword-only arguments that only the simulated part knows (the simulator passes each from its truth's section
-    of this device, by name).
-    """
+    of this device, by name)."""
 
     name: str
     node: str

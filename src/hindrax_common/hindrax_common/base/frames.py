@@ -18,8 +18,7 @@ their ROS boundary (test/test_docs_truth.py checks that no other module spells t
 own sign conventions (the DVL-75's pitch, docs/devices.md §1.5) stay in its protocol.
 
 Angles: :func:`wrap_angle` is the one angle wrap of the repository (headings, attitude errors, the DVL-75
-emulator's attitude rates).
-"""
+emulator's attitude rates)."""
 from __future__ import annotations
 
 import math
@@ -131,8 +130,7 @@ def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
     R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd, applied as the constant linear map :data:`_Q_ROS_MARINE` that
     the Hamilton product defines (the same result as composing scipy Rotations, without their cost per call).
     Raises ValueError for a zero or non-finite quaternion. The same map takes the body in NED back
-    to base_link in odom (:func:`quaternion_marine_to_ros`): both factors are their own inverses.
-    """
+    to base_link in odom (:func:`quaternion_marine_to_ros`): both factors are their own inverses."""
     return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
 
 
@@ -146,8 +144,7 @@ def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
     [NTNU-Thesis] eq. 2.2), from the unit quaternion's rotation matrix entries (Fossen 2011 eqs. 2.50 and 2.68):
     phi = atan2(R32, R33), theta = -asin(R31), psi = atan2(R21, R11). Written out (scipy's ``as_euler`` costs
     more per call, for every DVL message in three nodes); the tests compare both. At theta = +-pi/2 (gimbal
-    lock, outside any ROV's envelope) phi and psi are not unique; this gives one valid pair.
-    """
+    lock, outside any ROV's envelope) phi and psi are not unique; this gives one valid pair."""
     q = _unit_quaternions(q_xyzw)
     if q.ndim == 1:
         x, y, z, w = q.tolist()

@@ -6,17 +6,15 @@ nominal, 23-27 MHz measured on individual parts. Blue Robotics Basic ESC (docs/d
 1500 us stop, deadband 1500 +- 25 us, update rate 50-400 Hz, neutral held 7 s to arm.
 
 The driver (:mod:`hindrax_drivers.pca9685.protocol`) re-exports these names; the configuration
-(:mod:`hindrax_common.config`) imports them from here, so it imports no driver package.
-"""
+(:mod:`hindrax_common.config`) imports them from here, so it imports no driver package."""
 from __future__ import annotations
 
 import math
 
-__all__ = ["Pca9685Error", "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX",
-           "INTERNAL_OSCILLATOR_HZ", "PCA9685_OSCILLATOR_MIN_HZ", "PCA9685_OSCILLATOR_MAX_HZ",
-           "ESC_MIN_US", "ESC_NEUTRAL_US", "ESC_MAX_US", "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ",
-           "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S", "prescale_for_frequency",
-           "frequency_for_prescale", "esc_prescale"]
+__all__ = ["Pca9685Error", "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX", "INTERNAL_OSCILLATOR_HZ",
+           "PCA9685_OSCILLATOR_MIN_HZ", "PCA9685_OSCILLATOR_MAX_HZ", "ESC_MIN_US", "ESC_NEUTRAL_US", "ESC_MAX_US",
+           "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ", "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S",
+           "prescale_for_frequency", "frequency_for_prescale", "esc_prescale"]
 
 
 class Pca9685Error(ValueError):
@@ -29,10 +27,9 @@ PRESCALE_MIN = 3
 PRESCALE_MAX = 255
 #: Nominal internal oscillator; real parts measure 23-27 MHz: calibrate (docs/devices.md §0 item 8, §5.1).
 INTERNAL_OSCILLATOR_HZ = 25_000_000.0
-#: Range of the PCA9685's internal oscillator, Hz: 25 MHz nominal (data sheet §7.3.5, osc_clock 25 MHz);
-#: individual parts measure 23-27 MHz (docs/devices.md §5.1). A calibration outside it is a wrong reading
-#: (channel, trigger, unit), not a part: with 28.85 MHz assumed, a commanded 1500 us neutral puts 1732 us on a
-#: 25 MHz part's wire.
+#: Range of the PCA9685's internal oscillator, Hz: 25 MHz nominal (data sheet §7.3.5, osc_clock 25 MHz); individual
+#: parts measure 23-27 MHz (docs/devices.md §5.1). A calibration outside it is a wrong reading (channel, trigger, unit),
+#: not a part: with 28.85 MHz assumed, a commanded 1500 us neutral puts 1732 us on a 25 MHz part's wire.
 PCA9685_OSCILLATOR_MIN_HZ = 23e6
 PCA9685_OSCILLATOR_MAX_HZ = 27e6
 
@@ -64,12 +61,9 @@ def check_prescale(prescale: int) -> int:
 def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
     """PRE_SCALE = round(f_osc / (4096 f)) - 1 (docs/devices.md §5.1 [Q1 §7.3.5]).
 
-    Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not
-    Python's banker's rounding.
+    Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not Python's banker's rounding.
 
-    Raises:
-        Pca9685Error: non-finite/non-positive inputs, or a result outside 3..255
-        (about 24..1526 Hz at 25 MHz).
+    Raises ``Pca9685Error``: non-finite/non-positive inputs, or a result outside 3..255 (about 24..1526 Hz at 25 MHz).
     """
     osc = check_oscillator(oscillator_hz)
     if not (math.isfinite(frequency_hz) and frequency_hz > 0.0):
@@ -93,9 +87,7 @@ def esc_prescale(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR
     E.g. 400 Hz rounds to prescale 14 = 406.9 Hz at 25 MHz, above the Basic ESC's 400 Hz maximum,
     and is rejected; use 381.5 Hz (prescale 15) or 200 Hz.
 
-    Raises:
-        Pca9685Error: the actual frequency is outside 50..400 Hz.
-    """
+    Raises ``Pca9685Error``: the actual frequency is outside 50..400 Hz."""
     prescale = prescale_for_frequency(frequency_hz, oscillator_hz)
     actual_hz = frequency_for_prescale(prescale, oscillator_hz)
     if not ESC_MIN_FREQUENCY_HZ <= actual_hz <= ESC_MAX_FREQUENCY_HZ:

@@ -5,29 +5,25 @@ the ESC pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, one cubic for
 (1100-1500 us) and one for positive (1500-1900 us); 1500 us stops the motor. Coefficient tuples are
 ordered ``(c4, c3, c2, c1)``, highest power first (``numpy.polyval`` order).
 
-[Hindrax-Drag]'s Table 2 negative row gives -15.53 N at 1100 us and is monotone only up to 1495.8
-us; its positive row as printed is negative and decreasing on the forward side, which
-``ThrustCurve`` rejects (``test/test_thrust_curve.py`` asserts both). Until a bollard-pull fit
-replaces it, the default positive curve is the point reflection of the negative one about (1500 us,
-0 N) (docs/architecture.md §4, :func:`point_reflection`).
+[Hindrax-Drag]'s Table 2 negative row gives -15.53 N at 1100 us and is monotone only up to 1495.8 us; its positive row
+as printed is negative and decreasing on the forward side, which ``ThrustCurve`` rejects (``test/test_thrust_curve.py``
+asserts both). Until a bollard-pull fit replaces it, the default positive curve is the point reflection of the negative
+one about (1500 us, 0 N) (docs/architecture.md §4, :func:`point_reflection`).
 
-ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop,
-1900 us full forward, deadband 1500 +- 25 us (UNVERIFIED there). The forward model returns 0 N
-inside the deadband.
+ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop, 1900 us full
+forward, deadband 1500 +- 25 us (UNVERIFIED there). The forward model returns 0 N inside the deadband.
 
-Inverse: on each side only the monotone branch from the range end towards neutral is used, ending at
-the cubic's first extremum, its first zero or the deadband edge, whichever comes first (1100-1475 us
-and 1525-1900 us for the default curve, +-1.20 N to +-15.53 N). A smaller force maps to whichever of
-0 N and the branch's inner end is nearer (``small_force="nearest"``, default) or to neutral
-(``"neutral"``); a larger one saturates at the end. :meth:`ThrustCurve.thrust_n` gives the force
-actually produced. Each branch is tabulated once on a grid of at most 0.005 us and inverted with
-``numpy.interp`` (vectorised, exact to the grid step; ``numpy.roots`` and ``brentq`` are one Python
-call per thruster), about 2.4 MB per distinct curve; the tests check it against ``numpy.roots``.
+Inverse: on each side only the monotone branch from the range end towards neutral is used, ending at the cubic's first
+extremum, its first zero or the deadband edge, whichever comes first (1100-1475 us and 1525-1900 us for the default
+curve, +-1.20 N to +-15.53 N). A smaller force maps to whichever of 0 N and the branch's inner end is nearer
+(``small_force="nearest"``, default) or to neutral (``"neutral"``); a larger one saturates at the end.
+:meth:`ThrustCurve.thrust_n` gives the force actually produced. Each branch is tabulated once on a grid of at most
+0.005 us and inverted with ``numpy.interp`` (vectorised, exact to the grid step; ``numpy.roots`` and ``brentq`` are one
+Python call per thruster), about 2.4 MB per distinct curve; the tests check it against ``numpy.roots``.
 
 Battery voltage (docs/devices.md §5.3: full-throttle thrust roughly as V^1.2): both directions take
 ``voltage_scale``, which multiplies the forward model and divides the requested force;
-:func:`voltage_thrust_scale` gives it from a battery voltage.
-"""
+:func:`voltage_thrust_scale` gives it from a battery voltage."""
 
 from __future__ import annotations
 
@@ -36,9 +32,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["ThrustCurveError", "HINDRAX_DRAG_NEGATIVE_COEFFS",
-           "HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED", "HINDRAX_NOMINAL_VOLTAGE_V",
-           "BASIC_ESC_DEADBAND_US", "point_reflection", "voltage_thrust_scale",
+__all__ = ["ThrustCurveError", "HINDRAX_DRAG_NEGATIVE_COEFFS", "HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED",
+           "HINDRAX_NOMINAL_VOLTAGE_V", "BASIC_ESC_DEADBAND_US", "point_reflection", "voltage_thrust_scale",
            "check_positive", "ThrustCurve", "hindrax_default_curve", "forward_thrust"]
 
 #: [Hindrax-Drag] Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
@@ -77,8 +72,7 @@ def point_reflection(coeffs: Sequence[float], neutral_us: float = 1500.0) -> tup
     negative row this is the project's default positive-rotation curve (docs/architecture.md §4): it gives
     +15.53 N at 1900 us. Applying it twice returns the original coefficients.
 
-    Raises :class:`ThrustCurveError` for anything but 4 finite numbers or a non-finite ``neutral_us``.
-    """
+    Raises :class:`ThrustCurveError` for anything but 4 finite numbers or a non-finite ``neutral_us``."""
     f = np.poly1d(_coeffs(coeffs, "coeffs"))
     if not math.isfinite(neutral_us):
         raise ThrustCurveError(f"neutral_us must be finite, got {neutral_us!r}")
@@ -92,12 +86,10 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
                          exponent: float = 1.2) -> float:
     """Thrust factor ``(battery_voltage_v / nominal_voltage_v) ** exponent`` for ``voltage_scale``.
 
-    Source: docs/devices.md §5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust
-    scales roughly with V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal
-    voltage is the Hindrax battery, 14.8 V ([Hindrax-Drag] section 2.1), at which the curves are taken to be
-    valid. Raises :class:`ThrustCurveError` unless both voltages are finite and positive and the
-    exponent is finite.
-    """
+    Source: docs/devices.md §5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust scales roughly with
+    V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal voltage is the Hindrax battery, 14.8 V
+    ([Hindrax-Drag] section 2.1), at which the curves are taken to be valid. Raises :class:`ThrustCurveError` unless
+    both voltages are finite and positive and the exponent is finite."""
     for name, value in (("battery_voltage_v", battery_voltage_v), ("nominal_voltage_v", nominal_voltage_v)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
             raise ThrustCurveError(f"{name} must be a finite positive number, got {value!r}")
@@ -138,14 +130,12 @@ def forward_thrust(pulse_width_us, negative, positive, pulse_width_min_us, pulse
                    positive_edge_us, max_reverse_n, max_forward_n):
     """Forward thrust model (N) of :meth:`ThrustCurve.thrust_n` at ``voltage_scale = 1``, vectorised.
 
-    Every parameter broadcasts against ``pulse_width_us``: ``negative`` and ``positive`` are
-    ``(c4, c3, c2, c1)`` of [Hindrax-Drag] eq. 1 with shape (4,) or (4, n) (one column per thruster), the others
-    scalars or (n,). Pulse widths are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative
-    cubic (clipped to <= 0) applies at ``P <= negative_edge_us``, the positive one (clipped to >= 0) at
-    ``P >= positive_edge_us``, 0 N between (deadband, docs/devices.md §5.2); the result is clipped to
-    ``[max_reverse_n, max_forward_n]``. Inputs are not validated: use :meth:`ThrustCurve.thrust_n`
-    unless the values come from :attr:`ThrustCurve.forward_parameters`.
-    """
+    Every parameter broadcasts against ``pulse_width_us``: ``negative`` and ``positive`` are ``(c4, c3, c2, c1)`` of
+    [Hindrax-Drag] eq. 1 with shape (4,) or (4, n) (one column per thruster), the others scalars or (n,). Pulse widths
+    are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative cubic (clipped to <= 0) applies at
+    ``P <= negative_edge_us``, the positive one (clipped to >= 0) at ``P >= positive_edge_us``, 0 N between (deadband,
+    docs/devices.md §5.2); the result is clipped to ``[max_reverse_n, max_forward_n]``. Inputs are not validated: use
+    :meth:`ThrustCurve.thrust_n` unless the values come from :attr:`ThrustCurve.forward_parameters`."""
     p = np.minimum(np.maximum(pulse_width_us, pulse_width_min_us), pulse_width_max_us)
     thrust = np.where(p <= negative_edge_us, np.minimum(_cubic(negative, p), 0.0),
                       np.where(p >= positive_edge_us, np.maximum(_cubic(positive, p), 0.0), 0.0))
@@ -182,8 +172,7 @@ class ThrustCurve:
     Attributes (all read-only, at ``voltage_scale = 1``): ``max_forward_n`` (> 0, thrust at
     ``pulse_width_max_us``), ``max_reverse_n`` (< 0, thrust at ``pulse_width_min_us``),
     ``smallest_forward_n`` (>= 0) and ``smallest_reverse_n`` (<= 0), the branch forces nearest zero,
-    ``forward_branch_us`` and ``reverse_branch_us``, the ``(low, high)`` pulse widths of the branches.
-    """
+    ``forward_branch_us`` and ``reverse_branch_us``, the ``(low, high)`` pulse widths of the branches."""
 
     def __init__(self, negative: Sequence[float], positive: Sequence[float], pulse_width_min_us: float = 1100.0,
                  pulse_width_neutral_us: float = 1500.0, pulse_width_max_us: float = 1900.0,
@@ -322,8 +311,7 @@ class ThrustCurve:
     def force_limits_n(self, voltage_scale: float = 1.0) -> tuple[float, float]:
         """``(max_reverse_n, max_forward_n)`` multiplied by ``voltage_scale`` (N).
 
-        Raises :class:`ThrustCurveError` for a non-finite or non-positive ``voltage_scale``.
-        """
+        Raises :class:`ThrustCurveError` for a non-finite or non-positive ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         return (s * self.max_reverse_n, s * self.max_forward_n)
 
@@ -337,8 +325,7 @@ class ThrustCurve:
         the side's sign (a thruster in reverse rotation does not push forward) and to
         ``[max_reverse_n, max_forward_n]``, times ``voltage_scale``.
         Source: [Hindrax-Drag] eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
-        input or a bad ``voltage_scale``.
-        """
+        input or a bad ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         p = _finite_array(pulse_width_us, "pulse_width_us")
         return _out(s * forward_thrust(p, *self.forward_parameters))
@@ -347,13 +334,11 @@ class ThrustCurve:
     def pulse_width_us(self, force_n, voltage_scale: float = 1.0):
         """Pulse width(s) (us) that produce thrust ``force_n`` (N); scalar in, float out; array in, array out.
 
-        The requested force is divided by ``voltage_scale``, then inverted on the monotone branch of its
-        sign (exact to 0.005 us). 0 N gives neutral. Forces beyond ``max_forward_n`` / ``max_reverse_n``
-        saturate at ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the
-        branch's smallest thrust go to neutral or to the branch's inner end according to
-        ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] eq. 1. Raises
-        :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``.
-        """
+        The requested force is divided by ``voltage_scale``, then inverted on the monotone branch of its sign (exact to
+        0.005 us). 0 N gives neutral. Forces beyond ``max_forward_n`` / ``max_reverse_n`` saturate at
+        ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the branch's smallest thrust
+        go to neutral or to the branch's inner end according to ``small_force`` (module docstring). Source: inverse of
+        [Hindrax-Drag] eq. 1. Raises :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``."""
         s = check_positive(voltage_scale, "voltage_scale")
         return _out(self._pulse_width_unchecked(_finite_array(force_n, "force_n"), s))
 
@@ -397,7 +382,6 @@ def hindrax_default_curve(deadband_us: float = BASIC_ESC_DEADBAND_US, small_forc
     """The project's default thruster curve: [Hindrax-Drag] Table 2 negative row, and its point reflection
     about (1500 us, 0 N) as positive row (docs/architecture.md §4), ESC range 1100/1500/1900 us.
 
-    Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``.
-    """
+    Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``."""
     return ThrustCurve(HINDRAX_DRAG_NEGATIVE_COEFFS, point_reflection(HINDRAX_DRAG_NEGATIVE_COEFFS, 1500.0),
                        deadband_us=deadband_us, small_force=small_force)

@@ -1,25 +1,20 @@
-"""Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of
-rclpy's classes.
+"""Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of rclpy's classes.
 
-Taking or publishing an rclpy message is mostly its conversion between Python and C structures;
-rosbags' objects skip that. They have the ROS field names (nested messages as objects, numeric
-arrays as numpy arrays), so a handler written for the rclpy message reads them unchanged, but they
-are read-only data (no rclpy type checks). The bytes differ from rclpy's only in padding, and every
-reader decodes them to the same message (test_lean_cdr.py).
+Taking or publishing an rclpy message is mostly its conversion between Python and C structures; rosbags' objects skip
+that. They have the ROS field names (nested messages as objects, numeric arrays as numpy arrays), so a handler written
+for the rclpy message reads them unchanged, but they are read-only data (no rclpy type checks). The bytes differ from
+rclpy's only in padding, and every reader decodes them to the same message (test_lean_cdr.py).
 
-On the 50 Hz chain and the safety path (docs/architecture.md §10): the wrench, the allocation's
-command, the ESC's pulse widths and latched state and the IMU are published as bytes
-(:func:`cdr_encoder`, ``Publisher.publish(bytes)``); the supervisor's ``imu/data_raw``, the
-allocation's ``wrench`` and the campaign bag reader's topics are decoded with :func:`cdr_decoder`
-(``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class). ``hindrax_msgs`` types
-are registered from their installed ``.msg`` files
-(:func:`hindrax_common.cdr.msgdefs.message_definition`), the standard ones come with rosbags'
-Jazzy store.
+On the 50 Hz chain and the safety path (docs/architecture.md §10): the wrench, the allocation's command, the ESC's pulse
+widths and latched state and the IMU are published as bytes (:func:`cdr_encoder`, ``Publisher.publish(bytes)``); the
+supervisor's ``imu/data_raw``, the allocation's ``wrench`` and the campaign bag reader's topics are decoded with
+:func:`cdr_decoder` (``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class). ``hindrax_msgs`` types
+are registered from their installed ``.msg`` files (:func:`hindrax_common.cdr.msgdefs.message_definition`), the standard
+ones come with rosbags' Jazzy store.
 
 The safety heartbeats (``hindrax_msgs/Heartbeat``) are a fixed layout, fixed-size fields first and
 one string last: :func:`heartbeat_cdr` and :func:`read_heartbeat` pack and read it with
-:mod:`struct` at fixed offsets, tested against rclpy's own serialiser.
-"""
+:mod:`struct` at fixed offsets, tested against rclpy's own serialiser."""
 from __future__ import annotations
 
 import functools
@@ -196,9 +191,8 @@ def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, acce
     cls, vector, quaternion, no_orientation, encode = _imu_parts()
     a = [float(x) for x in accel_m_s2]
     g = [float(x) for x in gyro_rad_s]
-    return encode(cls(header=_header(stamp_ns, frame_id),
-                      orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=no_orientation,
-                      angular_velocity=vector(x=g[0], y=g[1], z=g[2]),
+    return encode(cls(header=_header(stamp_ns, frame_id), orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+                      orientation_covariance=no_orientation, angular_velocity=vector(x=g[0], y=g[1], z=g[2]),
                       angular_velocity_covariance=np.asarray(gyro_cov, dtype=np.float64).ravel(),
                       linear_acceleration=vector(x=a[0], y=a[1], z=a[2]),
                       linear_acceleration_covariance=np.asarray(accel_cov, dtype=np.float64).ravel()))

@@ -17,8 +17,7 @@ then of the running interpreter's prefix (the pip-wheel venv installs ``share/``
 The RIHS01 type hash comes from ``share/<pkg>/msg/<Type>.json`` (written by
 rosidl_generator_type_description), as rosbag2 stores it in ``topic_type_hash``/``type_description_hash``.
 
-Pure: file reads only, no ROS runtime. Errors: :class:`DefinitionNotFoundError` (a ``LookupError``).
-"""
+Pure: file reads only, no ROS runtime. Errors: :class:`DefinitionNotFoundError` (a ``LookupError``)."""
 from __future__ import annotations
 
 import functools
@@ -101,8 +100,7 @@ def msg_dependencies(text: str, package: str) -> list[str]:
 def message_definition(type_name: str) -> str:
     """Full ``ros2msg`` definition of ``type_name`` (``pkg/msg/Type``) as rosbag2 Jazzy writes it,
     from the :func:`share_directories`. Raises :class:`DefinitionNotFoundError` when the type or one
-    of its dependencies has no ``.msg`` file, and ValueError for a malformed type name.
-    """
+    of its dependencies has no ``.msg`` file, and ValueError for a malformed type name."""
     pkg, name = split_type_name(type_name)
     dirs = tuple(share_directories())
     seen: set[str] = set()
@@ -126,8 +124,7 @@ def message_definition(type_name: str) -> str:
 def type_description_hash(type_name: str) -> str:
     """RIHS01 type hash of ``type_name`` from ``share/<pkg>/msg/<Type>.json`` (e.g. ``"RIHS01_6f61..."``).
 
-    Raises :class:`DefinitionNotFoundError` when the JSON file is missing or has no hash for the type.
-    """
+    Raises :class:`DefinitionNotFoundError` when the JSON file is missing or has no hash for the type."""
     pkg, name = split_type_name(type_name)
     dirs = tuple(share_directories())
     path = _interface_file(pkg, name, ".json", dirs)
@@ -160,8 +157,7 @@ def matches_installed(type_name: str, definition: str, type_hash: str | None = N
     type_hash: the channel's ``topic_type_hash`` (RIHS01) when the bag has one. The hashes are compared when
     both exist (they cover the fields, not the comments); otherwise the definitions are compared without their
     comments. False when the installed type or its definition cannot be found: a bag recorded before a message
-    changed (a field added, as ``ThrusterPwm.output_state``) must be decoded from its own stored definition.
-    """
+    changed (a field added, as ``ThrusterPwm.output_state``) must be decoded from its own stored definition."""
     try:
         if type_hash:
             return type_hash == type_description_hash(type_name)

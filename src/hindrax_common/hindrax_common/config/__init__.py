@@ -27,8 +27,7 @@ Where each thing is:
 * :mod:`.node_parameters`: the keys each node declares as described ROS parameters, validated like the file, and
   the read-only node parameters outside the file (rclpy; not imported here, so offline tools load no rclpy).
 
-The names below are the package's API (``from hindrax_common.config import load_config``).
-"""
+The names below are the package's API (``from hindrax_common.config import load_config``)."""
 from __future__ import annotations
 
 from .loader import config_from_parameters, default_config_path, load_config, ros_parameters_from_yaml

@@ -1,7 +1,6 @@
 """Reading a vehicle file: the ros-args params-file layout, its validation as a whole (:func:`load_config`), a
 node's parameters as a configuration (:func:`config_from_parameters`) and where the default vehicle file is
-(:func:`default_config_path`).
-"""
+(:func:`default_config_path`)."""
 from __future__ import annotations
 
 import hashlib
@@ -23,8 +22,7 @@ __all__ = ["ros_parameters_from_yaml", "load_config", "config_from_parameters", 
 def ros_parameters_from_yaml(doc: Any, source: str = "") -> dict[str, Any]:
     """Extract the ``ros__parameters`` mapping of a params-file document (first node key) as a nested dict.
 
-    Accepts ``{"/**": {"ros__parameters": {...}}}`` or any single node name. Raises ConfigError otherwise.
-    """
+    Accepts ``{"/**": {"ros__parameters": {...}}}`` or any single node name. Raises ConfigError otherwise."""
     if not isinstance(doc, Mapping) or not doc:
         raise ConfigError([ConfigIssue("<file>", type(doc).__name__,
                                        "a mapping {'/**': {'ros__parameters': {...}}}")], source)
@@ -45,8 +43,7 @@ def load_config(path: str | Path, overrides: Mapping[str, Any] | None = None) ->
 
     path: YAML file. overrides: dotted keys replacing file values before validation.
     Returns a :class:`VehicleConfig`. Raises :class:`ConfigError` (with every issue) on an unreadable
-    file, bad YAML, unknown/missing keys, wrong types or out-of-range values.
-    """
+    file, bad YAML, unknown/missing keys, wrong types or out-of-range values."""
     path = Path(path)
     src = str(path)
     try:
@@ -74,8 +71,7 @@ def config_from_parameters(params: Mapping[str, Any], source: str = "ros paramet
     """Validate the vehicle keys among a node's parameters (dotted names -> values).
 
     Parameters outside the configuration sections (``use_sim_time``, node-specific ones) are ignored;
-    inside the sections, unknown keys are errors. Raises :class:`ConfigError`.
-    """
+    inside the sections, unknown keys are errors. Raises :class:`ConfigError`."""
     flat = {k: v for k, v in params.items() if k.split(".")[0] in SECTIONS}
     digest = hashlib.sha256(repr(sorted(flat.items())).encode()).hexdigest()
     return VehicleConfig(validate_flat(flat, source=source), source, digest)
@@ -84,15 +80,13 @@ def config_from_parameters(params: Mapping[str, Any], source: str = "ros paramet
 def default_config_path() -> Path:
     """Path of the vehicle file used when none is given (``--config``, ``config_file``, ``--params-file``).
 
-    Order: in an installed workspace (this module imported from a colcon install space, e.g.
-    ``ros_ws/install`` or ``/ws/install``), ``share/hindrax_common/config/hindrax.yaml`` of that install;
-    otherwise (repository checkout, editable dev venv) the repository's ``ros_ws/config/hindrax.yaml``, found
-    by walking up from this file, then the installed share directory. The canonical file is the
-    repository's ``ros_ws/config/hindrax.yaml``; the package installs it through the symlink
-    ``src/hindrax_common/config -> ../../ros_ws/config``. The environment variable ``HINDRAX_CONFIG``, when set,
-    names the file instead (the Docker image sets it to the mounted vehicle file). Raises FileNotFoundError
-    naming the places searched.
-    """
+    Order: in an installed workspace (this module imported from a colcon install space, e.g. ``ros_ws/install`` or
+    ``/ws/install``), ``share/hindrax_common/config/hindrax.yaml`` of that install; otherwise (repository checkout,
+    editable dev venv) the repository's ``ros_ws/config/hindrax.yaml``, found by walking up from this file, then the
+    installed share directory. The canonical file is the repository's ``ros_ws/config/hindrax.yaml``; the package
+    installs it through the symlink ``src/hindrax_common/config -> ../../ros_ws/config``. The environment variable
+    ``HINDRAX_CONFIG``, when set, names the file instead (the Docker image sets it to the mounted vehicle file). Raises
+    FileNotFoundError naming the places searched."""
     env = os.environ.get("HINDRAX_CONFIG")
     if env:
         if Path(env).is_file():

@@ -30,8 +30,7 @@ refines, validated like a vehicle key (one line naming key, value and allowed ra
 (``parameter_overrides``, ``-p``), so ``ros2 param get`` shows the value the node uses.
 
 Only public rclpy API is used (declare_parameter, get_parameter, set_parameters, set_descriptor,
-add_on_set_parameters_callback).
-"""
+add_on_set_parameters_callback)."""
 from __future__ import annotations
 
 import array
@@ -66,8 +65,7 @@ def select_schema_keys(prefixes: Sequence[str] | None = None) -> list[str]:
     """SCHEMA keys (generic, ``<thruster>`` unexpanded) under any of ``prefixes`` (None: every section).
 
     ``thrusters.names`` is added whenever a per-thruster key is selected (it names the thrusters).
-    Raises ValueError for a prefix that selects nothing (a typo in a node's key list).
-    """
+    Raises ValueError for a prefix that selects nothing (a typo in a node's key list)."""
     if prefixes is None:
         prefixes = SECTIONS
     prefixes = tuple(prefixes)
@@ -100,8 +98,7 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
 
     flat: concrete key -> value (None or absent = not given). generic: the node's SCHEMA keys.
     Returns the coerced values (absent optional keys left out). Raises :class:`ConfigError` listing every
-    issue: wrong type, out of range, missing required key, cross-key inconsistency among the selected keys.
-    """
+    issue: wrong type, out of range, missing required key, cross-key inconsistency among the selected keys."""
     names_raw = flat.get("thrusters.names")
     names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []
     issues: list[ConfigIssue] = []
@@ -128,9 +125,8 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
 
 
 def _descriptor(name: str, spec: Spec, read_only: bool) -> ParameterDescriptor:
-    """``rcl_interfaces/ParameterDescriptor`` of a parameter from its Spec: description,
-    additional_constraints "allowed <range>", ranges for scalar numbers with both bounds; the
-    type is left to the caller."""
+    """``rcl_interfaces/ParameterDescriptor`` of a parameter from its Spec: description, additional_constraints "allowed
+    <range>", ranges for scalar numbers with both bounds; the type is left to the caller."""
     d = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                             read_only=read_only)
     if spec.kind == "float" and spec.lo is not None and spec.hi is not None:
@@ -179,8 +175,7 @@ def check_whole_vehicle(overrides: Mapping[str, Any], defaults: Mapping[str, Any
     the key being ignored as ROS 2 ignores an undeclared override. Nothing to do without overrides that change the
     defaults (validated when loaded), nor without defaults (no vehicle file found).
 
-    Raises :class:`ConfigError` naming key, value and allowed range (``str()`` is the first issue, one line).
-    """
+    Raises :class:`ConfigError` naming key, value and allowed range (``str()`` is the first issue, one line)."""
     changed = {k: v for k, v in overrides.items() if k not in defaults or defaults[k] != v}
     if not changed or not defaults:
         return  # no vehicle file to complete a partial set: the node's own keys are still validated
@@ -212,8 +207,7 @@ def declare_node_parameter(node: Any, name: str, spec: Spec, default: Any) -> An
 
     spec: type, range and one-line meaning (its ``doc`` becomes the description, its range the
     ``additional_constraints`` and the descriptor's range). Raises :class:`ConfigError` naming the parameter, the
-    value and the allowed range (one line) for a value of the wrong type or out of range.
-    """
+    value and the allowed range (one line) for a value of the wrong type or out of range."""
     desc = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                                dynamic_typing=True)
     value = _plain(node.declare_parameter(name, default, desc).value)
@@ -248,8 +242,7 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     ValueError (or ConfigError) with the reason to refuse it. locked(): '' while a change may be applied, else the
     reason it is refused (``ArmedWatch.refusal``: safety-relevant keys are read-only while armed); required with
     dynamic keys. Returns a :class:`VehicleConfig` holding the node's keys only (``flat``). Raises
-    :class:`ConfigError` (one line per issue) on a missing, mistyped or out-of-range value.
-    """
+    :class:`ConfigError` (one line per issue) on a missing, mistyped or out-of-range value."""
     generic = select_schema_keys(keys)
     dynamic = tuple(dynamic)
     if dynamic and (on_change is None or locked is None):

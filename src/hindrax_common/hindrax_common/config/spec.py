@@ -2,15 +2,13 @@
 errors (:class:`ConfigIssue`, :class:`ConfigError`) and the check of one value against its Spec.
 
 Why our own validator: the errors must name ROS parameter keys in the one-line form users see from
-``hindrax config check``, and the same checks must run on a YAML file and on the parameters of a
-running rclpy node; no maintained schema library covers ROS parameter overrides.
-generate_parameter_library generates a C++ and Python parameter module per node at colcon build time
-(a CMake step), while this stack installs pip wheels and runs from an editable venv without a colcon
-build, and the library is not on PyPI. Its schema is per node; ours is per section of one vehicle
-file shared by every node, validated as a whole with cross-key checks that need Python. A Spec holds
-the fields of one of its entries (``kind`` -> ``type``, ``doc`` -> ``description``, ``lo``/``hi`` ->
-``bounds<>``, ``choices`` -> ``one_of<>``, ``length`` -> ``fixed_size<>``), should the stack move.
-"""
+``hindrax config check``, and the same checks must run on a YAML file and on the parameters of a running rclpy node; no
+maintained schema library covers ROS parameter overrides. generate_parameter_library generates a C++ and Python
+parameter module per node at colcon build time (a CMake step), while this stack installs pip wheels and runs from an
+editable venv without a colcon build, and the library is not on PyPI. Its schema is per node; ours is per section of one
+vehicle file shared by every node, validated as a whole with cross-key checks that need Python. A Spec holds the fields
+of one of its entries (``kind`` -> ``type``, ``doc`` -> ``description``, ``lo``/``hi`` -> ``bounds<>``,
+``choices`` -> ``one_of<>``, ``length`` -> ``fixed_size<>``), should the stack move."""
 from __future__ import annotations
 
 import math
@@ -52,8 +50,7 @@ class Spec:
 
     kind: one of "float", "int", "str", "bool", "float[]", "str[]".
     lo/hi: inclusive numeric bounds (for lists: of every element). length: required list length.
-    choices: allowed values (str or int). doc: one-line meaning (with unit and source).
-    """
+    choices: allowed values (str or int). doc: one-line meaning (with unit and source)."""
 
     kind: str
     doc: str
@@ -140,8 +137,7 @@ class ConfigIssue:
 class ConfigError(ValueError):
     """Raised when a configuration does not validate. ``issues`` lists every problem found.
 
-    ``str(error)`` is the first issue as one line (what a node prints when it refuses to start).
-    """
+    ``str(error)`` is the first issue as one line (what a node prints when it refuses to start)."""
 
     def __init__(self, issues: Sequence[ConfigIssue], source: str = ""):
         self.issues = list(issues)

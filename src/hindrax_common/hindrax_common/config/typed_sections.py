@@ -1,15 +1,12 @@
 """Typed configuration sections: frozen dataclasses of the vehicle file (GENERATED).
 
-Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_common.config.SCHEMA``;
-the tests check that this file is current. Field names are the keys' last segments, nested
-dataclasses follow the nesting of the keys (sibling sections with the same keys share one class,
-``HydrodynamicsSurgeSwaySection``: a section's dotted path is given when it is built), optional keys
-are ``X | None`` (None when absent) and lists are tuples. Build them through
-:class:`hindrax_common.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A
-required key that a node did not declare among its parameters is absent from its configuration:
-reading it raises KeyError naming the key. Each field's unit and meaning: its key's ``Spec.doc`` in
-SCHEMA.
-"""
+Do not edit: written by ``scripts/gen_config_sections.py`` from ``hindrax_common.config.SCHEMA``; the tests check that
+this file is current. Field names are the keys' last segments, nested dataclasses follow the nesting of the keys
+(sibling sections with the same keys share one class, ``HydrodynamicsSurgeSwaySection``: a section's dotted path is
+given when it is built), optional keys are ``X | None`` (None when absent) and lists are tuples. Build them through
+:class:`hindrax_common.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A required key that a node
+did not declare among its parameters is absent from its configuration: reading it raises KeyError naming the key. Each
+field's unit and meaning: its key's ``Spec.doc`` in SCHEMA."""
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, dataclass_transform
 
@@ -19,13 +16,11 @@ ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 
 @dataclass_transform(frozen_default=True, eq_default=False)
 class Section:
-    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is
-    the dotted path (the ``prefix`` class keyword of a subclass,
-    ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
+    """Base of the generated sections, each a frozen dataclass compared by identity: ``PREFIX`` is the dotted path (the
+    ``prefix`` class keyword of a subclass, ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
-    read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`.
-    """
+    read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`."""
 
     PREFIX: ClassVar[str] = ""
 

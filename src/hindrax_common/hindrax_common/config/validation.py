@@ -1,8 +1,7 @@
 """Validation of a flat vehicle configuration (dotted key -> value) against the sections' schema: unknown keys
 (with the closest known key suggested), wrong types, out-of-range values, missing required keys, then every
 section's checks across keys (:func:`hindrax_common.config.sections.cross_checks`). Each issue is one line naming
-key, value and allowed range (:class:`~hindrax_common.config.spec.ConfigIssue`).
-"""
+key, value and allowed range (:class:`~hindrax_common.config.spec.ConfigIssue`)."""
 from __future__ import annotations
 
 import difflib
@@ -43,8 +42,7 @@ def validate_flat(flat: Mapping[str, Any], source: str = "") -> dict[str, Any]:
 
     Keys outside :data:`SECTIONS` are an error (unknown section). Returns the coerced mapping.
     Raises :class:`ConfigError` listing every issue (unknown keys, wrong types, out-of-range values,
-    missing required keys, cross-key inconsistencies).
-    """
+    missing required keys, cross-key inconsistencies)."""
     issues: list[ConfigIssue] = []
     names_raw = flat.get("thrusters.names", [])
     names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []

@@ -2,17 +2,15 @@
 from the flat dotted keys, derived views (rigid-body and added-mass matrices, hydrodynamics per DOF,
 calibration forces) and the ROS-parameter conversion.
 
-Typed access (``cfg.esc.output_latency_s``, ``cfg.supervisor.min_rate.imu_hz``): a misspelt name is
-an AttributeError that mypy and the import of a module's tests catch, not a KeyError on the vehicle.
-The classes live in :mod:`.typed_sections` (its docstring: fields, absent keys), generated from the
-schema by ``scripts/gen_config_sections.py`` (a test checks the file is current): written by hand
-next to a 250-key schema they would drift, and generated at import time they would hide from mypy.
-Section objects are built once per configuration (it is immutable). ``cfg.thrusters`` is the
-hand-written :class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys);
-``cfg.dof_hydrodynamics(dof)`` and ``cfg.known_forces`` are derived views over ``cfg.hydrodynamics``
-and ``cfg.calibration``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion,
-overrides and validation; modules outside the configuration do not index it by a literal key.
-"""
+Typed access (``cfg.esc.output_latency_s``, ``cfg.supervisor.min_rate.imu_hz``): a misspelt name is an AttributeError
+that mypy and the import of a module's tests catch, not a KeyError on the vehicle. The classes live in
+:mod:`.typed_sections` (its docstring: fields, absent keys), generated from the schema by
+``scripts/gen_config_sections.py`` (a test checks the file is current): written by hand next to a 250-key schema they
+would drift, and generated at import time they would hide from mypy. Section objects are built once per configuration
+(it is immutable). ``cfg.thrusters`` is the hand-written :class:`~.sections.thrusters.ThrustersConfig` (per-thruster
+keys); ``cfg.dof_hydrodynamics(dof)`` and ``cfg.known_forces`` are derived views over ``cfg.hydrodynamics`` and
+``cfg.calibration``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion, overrides and
+validation; modules outside the configuration do not index it by a literal key."""
 from __future__ import annotations
 
 import dataclasses
@@ -49,8 +47,7 @@ def build_section(cls: type[_S], flat: Mapping[str, Any], prefix: str | None = N
     ``prefix`` (default ``cls.PREFIX``) from validated flat keys.
 
     Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
-    held as ABSENT and raises KeyError naming the key when read.
-    """
+    held as ABSENT and raises KeyError naming the key when read."""
     prefix = cls.PREFIX if prefix is None else prefix
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
@@ -90,12 +87,10 @@ class VehicleConfig:
     """The validated vehicle configuration.
 
     Typed sections (built once, on first use), each under its section's name: ``vehicle``, ``environment``,
-    ``hydrodynamics``, ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``,
-    ``limits``, ``supervisor``, ``identification``, ``calibration``, ``control``, ``simulation``, ``recording``
-    (module docstring). Derived views: rigid-body and added-mass matrices, ``dof_hydrodynamics(dof)``,
-    ``known_forces``. ``flat`` holds every validated key (dotted names, SI values) for the ROS-parameter
-    conversion and overrides.
-    """
+    ``hydrodynamics``, ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``, ``limits``,
+    ``supervisor``, ``identification``, ``calibration``, ``control``, ``simulation``, ``recording`` (module docstring).
+    Derived views: rigid-body and added-mass matrices, ``dof_hydrodynamics(dof)``, ``known_forces``. ``flat`` holds
+    every validated key (dotted names, SI values) for the ROS-parameter conversion and overrides."""
 
     flat: Mapping[str, Any]
     source: str = ""

@@ -23,8 +23,7 @@ publishes (transient local) on every goal state change (ROS 2 design, "Actions":
   result came within ``resend_every_s`` (``get_result`` is idempotent).
 
 Times are wall-clock seconds (``time.monotonic``); spinning is the caller's (one executor spin per call of
-``spin``), as in :func:`hindrax_common.process.conditions.wait_until`.
-"""
+``spin``), as in :func:`hindrax_common.process.conditions.wait_until`."""
 from __future__ import annotations
 
 import sys
@@ -50,8 +49,7 @@ def send_goal_response_type(goal: Any) -> type:
 
     rosidl generates the action ``pkg/action/Name`` as the class ``Name`` next to ``Name_Goal`` in one module;
     the response class is ``Name.Impl.SendGoalService.Response`` (what rclpy's ActionClient and ActionServer
-    use). Raises ``TypeError`` if ``goal`` is not a generated action goal message.
-    """
+    use). Raises ``TypeError`` if ``goal`` is not a generated action goal message."""
     goal_type = type(goal)
     action_name = goal_type.__name__.removesuffix("_Goal")
     action = getattr(sys.modules.get(goal_type.__module__), action_name, None)
@@ -70,8 +68,7 @@ class GoalSender:
 
     node: the client's node (a subscription to ``<action_name>/_action/status`` is created on it);
     client: the ActionClient; action_name: the name the client was created with (resolved the same way);
-    resend_every_s: how long to wait for a response or a status before sending the request again.
-    """
+    resend_every_s: how long to wait for a response or a status before sending the request again."""
 
     def __init__(self, node: Any, client: Any, action_name: str, resend_every_s: float = 2.0) -> None:
         self._node, self._client = node, client
@@ -106,8 +103,7 @@ class GoalSender:
 
         Returns a handle whose ``accepted`` is False when the server rejected the goal. Raises
         :class:`GoalNotAnswered` when neither came within ``timeout_s`` seconds (the request is sent
-        ``1 + timeout_s / resend_every_s`` times at most).
-        """
+        ``1 + timeout_s / resend_every_s`` times at most)."""
         response_type = send_goal_response_type(goal)
         goal_id = UUID(uuid=list(uuidlib.uuid4().bytes))
         key = bytes(goal_id.uuid)
@@ -139,8 +135,7 @@ class GoalSender:
         """The goal's result response (``.status``, ``.result``) once it arrived, else None.
 
         Call once per spin. Requests the result on the first call, and again when the status topic has shown the
-        goal ended for more than ``resend_every_s`` without a result arriving.
-        """
+        goal ended for more than ``resend_every_s`` without a result arriving."""
         key = bytes(handle.goal_id.uuid)
         if key in self._results and self._results[key].done():
             return self._results[key].result()

@@ -17,11 +17,9 @@ Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid
 state that became unknown while armed counts as still armed. When the ESC is gone the last state
 stays: each reader says in its docstring what that means for it.
 
-Arm lock (:class:`ArmedWatch`): refuses a change while the thrusters may run
-(``pressure/zero_depth`` and every vehicle key a node applies while running,
-:func:`hindrax_common.config.node_parameters.declare_vehicle_parameters`): while the last state
-says armed (or unknown after armed) and before any state has arrived (fail closed).
-"""
+Arm lock (:class:`ArmedWatch`): refuses a change while the thrusters may run (``pressure/zero_depth`` and every vehicle
+key a node applies while running, :func:`hindrax_common.config.node_parameters.declare_vehicle_parameters`): while the
+last state says armed (or unknown after armed) and before any state has arrived (fail closed)."""
 from __future__ import annotations
 
 import math

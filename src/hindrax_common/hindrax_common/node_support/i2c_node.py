@@ -2,8 +2,7 @@
 one-shot timer of the waits, and the start-up's failure path (ERROR with the reason, the bus closed, the start-up
 retried every :data:`RETRY_PERIOD_S`). A subclass calls :meth:`I2cSensorNode.setup_device` after its configuration,
 implements ``_start`` (beginning with :meth:`~I2cSensorNode.open_device`) and ``_diag_extra``, and keeps its
-periodic timer in ``periodic``.
-"""
+periodic timer in ``periodic``."""
 from __future__ import annotations
 
 from typing import Any

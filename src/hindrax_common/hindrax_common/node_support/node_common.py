@@ -3,8 +3,7 @@ configuration loading and the process entry point.
 
 Keeping them here (docs/architecture.md §2: "no copy-paste between devices") means each device node only wires its
 transport to its protocol module. All time here is ROS time from the node's clock (``use_sim_time``
-supported), except rate windows, which use the same clock.
-"""
+supported), except rate windows, which use the same clock."""
 from __future__ import annotations
 
 import collections
@@ -52,8 +51,7 @@ class DeviceDiagnostics:
     name: status name, e.g. ``"hindrax/dvl75"``; hardware_id: port or I2C address; the output rate
     is counted over a sliding window of ``window_s`` seconds. Error kinds: ``"bad_checksum"``,
     ``"garbage_bytes"``, ``"i2c_error"`` ...; states: ``"connected"``, ``"disconnected"`` ...
-    Thread-safe: transports may call :meth:`count` from their own threads.
-    """
+    Thread-safe: transports may call :meth:`count` from their own threads."""
 
     def __init__(self, name: str, hardware_id: str, now_s: Callable[[], float], window_s: float = 5.0):
         self.name = name
@@ -191,19 +189,16 @@ class RawDataPublisher:
     :meth:`i2c_tap` as an I2C helper's raw tap ``(kind 'read'|'write', address, register, data, t)``.
     Stamps are the node's ROS time at publication. Safe to call from transport threads.
 
-    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: one
-    message per parsed report (a host->device write flushes first: one direction per message). I2C:
-    kept until ``i2c_period_s`` (:data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest, or
-    :data:`RAW_I2C_MAX_BYTES` are pending (a publish costs far more than its bytes,
-    docs/architecture.md §10.1), then one message of records ``<direction u8, address u8, register
-    i16, length u16 (little-endian), data>`` with ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a
-    plain message for one transaction; :func:`raw_transactions` unpacks both, in wire order.
-    ``flush(force=True)`` publishes what is pending; a tap outside a batch publishes it at once,
-    so the order on the wire is kept.
-    """
+    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: one message per parsed
+    report (a host->device write flushes first: one direction per message). I2C: kept until ``i2c_period_s``
+    (:data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest, or :data:`RAW_I2C_MAX_BYTES` are pending (a
+    publish costs far more than its bytes, docs/architecture.md §10.1), then one message of records
+    ``<direction u8, address u8, register i16, length u16 (little-endian), data>`` with
+    ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a plain message for one transaction; :func:`raw_transactions` unpacks
+    both, in wire order. ``flush(force=True)`` publishes what is pending; a tap outside a batch publishes it at once, so
+    the order on the wire is kept."""
 
-    def __init__(self, node: Any, device_name: str, topic: str | None = None,
-                 i2c_period_s: float = RAW_I2C_PERIOD_S):
+    def __init__(self, node: Any, device_name: str, topic: str | None = None, i2c_period_s: float = RAW_I2C_PERIOD_S):
         self._node = node
         self.device_name = device_name
         self.publisher = node.create_publisher(RawDeviceData, topic or f"raw/{device_name}", 100)
@@ -269,15 +264,13 @@ class RawDataPublisher:
             if end_batch:
                 self._batching = False
         if serial:
-            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
-                                             serial))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST, serial))
         if len(i2c) == 1:
             d, address, reg, data = i2c[0]
             self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
         elif i2c:
             packed = b"".join(_RAW_RECORD.pack(d, a, r, len(data)) + data for d, a, r, data in i2c)
-            self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1],
-                                             RAW_BATCH_REGISTER))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1], RAW_BATCH_REGISTER))
 
     def serial_tap(self, direction: str, data: bytes, _t: float | None = None) -> None:
         if direction == "rx":
@@ -285,8 +278,7 @@ class RawDataPublisher:
                 if self._batching:
                     self._serial += data
                     return
-            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
-                                             data))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST, data))
             return
         self.flush(end_batch=False)  # received bytes first: one direction per message, in wire order
         self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_HOST_TO_DEVICE, data))
@@ -319,8 +311,7 @@ def raw_transactions(msg: Any) -> list[tuple[int, int, int, bytes]]:
     """The I2C transactions of one RawDeviceData message: ``[(direction, address, register, data)]`` in wire
     order (one for a plain message, several for a batch, see :class:`RawDataPublisher`; ``register`` -1 = none).
 
-    Raises ValueError for a batch whose records do not add up to its data.
-    """
+    Raises ValueError for a batch whose records do not add up to its data."""
     data = bytes(msg.data)
     if int(msg.i2c_register) != RAW_BATCH_REGISTER:
         return [(int(msg.direction), int(msg.i2c_address), int(msg.i2c_register), data)]
@@ -350,8 +341,7 @@ class StuckDetector:
     """Flags a sensor whose readings stay bit-identical for ``limit`` consecutive samples.
 
     ``update(value) -> bool`` returns True while stuck. Real sensors always show noise in the last bits,
-    so identical raw readings mean a frozen device or bus (docs/devices.md emulator checklists).
-    """
+    so identical raw readings mean a frozen device or bus (docs/devices.md emulator checklists)."""
 
     def __init__(self, limit: int = 50):
         self.limit = limit
@@ -431,41 +421,34 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
     locked() gives the reason a change is refused now ('' = allowed: the ESC disarmed, ``ArmedWatch.refusal``).
     See :func:`hindrax_common.config.node_parameters.declare_vehicle_parameters` (the node must be created without
     ``automatically_declare_parameters_from_overrides``). Raises :class:`ConfigError`: :func:`run_node` prints its
-    one line once and exits with status 1.
-    """
+    one line once and exits with status 1."""
     return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change, locked=locked)
 
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,
              exit_process: bool = True) -> int:
-    """Process entry point of one node (``factory`` creates it after ``rclpy.init``):
-    :func:`run_nodes`."""
+    """Process entry point of one node (``factory`` creates it after ``rclpy.init``): :func:`run_nodes`."""
     return run_nodes([factory], args, executor, exit_process)
 
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
               executor: str | None = None, exit_process: bool = True) -> int:
-    """Process entry point of nodes composed in one process (:mod:`hindrax_bringup.layout.composition`):
-    the nodes are built in order after ``rclpy.init`` and spun by one executor; on exit they are
-    closed and destroyed in the reverse order (the last built first). executor: ``events``,
-    ``single`` or None for the default (:mod:`hindrax_common.process.ros_process`: the EventsExecutor
-    unless ``HINDRAX_EXECUTOR=single``). Returns the exit status: 0 on SIGINT/SIGTERM, 1 on an
-    invalid configuration (one line on stderr naming key, value, allowed range) or when another vehicle's live ESC
-    or supervisor is on the domain of a process running one (a node class's ``START_CHECK``: one line ``refused:
-    ...``, :func:`~hindrax_common.node_support.vehicle_graph.refuse_live_peer`, before any node is built); an exception
-    out
-    of any node's callback ends the whole process (every node's ``close()`` still runs). SIGINT
-    shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
-    (:class:`~hindrax_common.process.ros_process.RosProcess`, ``interrupt=False``). Before
-    ``rclpy.init`` the process takes the real-time priority its environment asks for
-    (:mod:`hindrax_common.process.scheduling`; a bad value of ``HINDRAX_REALTIME_PRIORITY`` is an
-    invalid configuration), and logs the outcome once its nodes are built. A shutdown that takes
-    longer than :data:`~hindrax_common.process.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
-    thread's traceback to stderr and exits with status 1
-    (:class:`~hindrax_common.process.ros_process.RosProcess`). exit_process: in the main thread the
-    process ends on return, without the DDS participant's teardown
-    (:mod:`hindrax_common.process.ros_process`): the exit status becomes the process's; False returns
-    it."""
+    """Process entry point of nodes composed in one process (:mod:`hindrax_bringup.layout.composition`): the nodes are
+    built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the reverse
+    order (the last built first). executor: ``events``, ``single`` or None for the default
+    (:mod:`hindrax_common.process.ros_process`: the EventsExecutor unless ``HINDRAX_EXECUTOR=single``). Returns the exit
+    status: 0 on SIGINT/SIGTERM, 1 on an invalid configuration (one line on stderr naming key, value, allowed range) or
+    when another vehicle's live ESC or supervisor is on the domain of a process running one (a node class's
+    ``START_CHECK``: one line ``refused: ...``, :func:`~hindrax_common.node_support.vehicle_graph.refuse_live_peer`,
+    before any node is built); an exception out of any node's callback ends the whole process (every node's ``close()``
+    still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
+    (:class:`~hindrax_common.process.ros_process.RosProcess`, ``interrupt=False``). Before ``rclpy.init`` the process
+    takes the real-time priority its environment asks for (:mod:`hindrax_common.process.scheduling`; a bad value of
+    ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built. A
+    shutdown that takes longer than :data:`~hindrax_common.process.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
+    thread's traceback to stderr and exits with status 1 (:class:`~hindrax_common.process.ros_process.RosProcess`).
+    exit_process: in the main thread the process ends on return, without the DDS participant's teardown
+    (:mod:`hindrax_common.process.ros_process`): the exit status becomes the process's; False returns it."""
     try:
         sched = apply_realtime_priority()
     except ValueError as exc:
@@ -494,10 +477,8 @@ def declare_frame_ids(node: Any, defaults: dict[str, str]) -> dict[str, str]:
     the ROS drivers do (nmea_navsat_driver, phidgets), a vehicle with other frame names sets them with
     ``-p frame_id:=...`` instead of editing code. A value that is already declared (a composed process) is reused.
 
-    Raises:
-        ValueError: an empty frame id or one starting with ``/`` (tf2 frame ids have no leading slash), naming the
-            parameter and the value in one line.
-    """
+    Raises ``ValueError``: an empty frame id or one starting with ``/`` (tf2 frame ids have no leading slash), naming
+    the parameter and the value in one line."""
     out: dict[str, str] = {}
     for name, default in defaults.items():
         if node.has_parameter(name):

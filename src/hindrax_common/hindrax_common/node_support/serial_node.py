@@ -1,5 +1,4 @@
-"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one
-tap.
+"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one tap.
 
 - configuration ``<section>.port`` (device path or pyserial URL) and ``<section>.baud_rate``
   (:func:`hindrax_common.node_support.node_common.load_node_config`: invalid -> one line, exit 1);
@@ -18,8 +17,7 @@ tap.
 Received bytes are decoded and published in the transport's reader thread; timers run in the
 executor. Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`, and may override
 :meth:`on_link_up`, :meth:`housekeeping` and :meth:`extra_diagnostics`. Node parameter
-``stuck_limit_samples`` (int >= 2, default 50): identical readings in a row that count as stuck.
-"""
+``stuck_limit_samples`` (int >= 2, default 50): identical readings in a row that count as stuck."""
 from __future__ import annotations
 
 import contextlib
@@ -53,9 +51,8 @@ def range_message(stamp_ns: int, frame_id: str, field_of_view_rad: float, min_ra
                   max_range_m: float, range_m: float) -> Range:
     """An ULTRASOUND ``sensor_msgs/Range`` stamped ``stamp_ns`` (ns); variance 0 (unknown, as
     Range.msg defines: no accuracy is documented)."""
-    msg = Range(radiation_type=Range.ULTRASOUND, field_of_view=float(field_of_view_rad),
-                min_range=float(min_range_m), max_range=float(max_range_m), range=float(range_m),
-                variance=0.0)
+    msg = Range(radiation_type=Range.ULTRASOUND, field_of_view=float(field_of_view_rad), min_range=float(min_range_m),
+                max_range=float(max_range_m), range=float(range_m), variance=0.0)
     msg.header.stamp, msg.header.frame_id = time_from_ns(stamp_ns), frame_id
     return msg
 
@@ -144,13 +141,10 @@ class SerialDeviceNode(VehicleNode):
         node_name: ROS node name.
         device_name: short device name (``raw/<device_name>``, diagnostics ``hindrax/<device_name>``).
         config_section: typed configuration section holding ``port`` and ``baud_rate`` (e.g.
-            :class:`~hindrax_common.config.typed_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys
-            declared.
+            :class:`~hindrax_common.config.typed_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys declared.
         command_gap_s: pause between start-up commands, s.
         **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
-    Raises:
-        ConfigError: invalid vehicle configuration or ``stuck_limit_samples``.
-    """
+    Raises ``ConfigError``: invalid vehicle configuration or ``stuck_limit_samples``."""
 
     def __init__(self, node_name: str, *, device_name: str,
                  config_section: type[SensorsDvl75Section] | type[SensorsPing1dSection], command_gap_s: float,
@@ -161,8 +155,7 @@ class SerialDeviceNode(VehicleNode):
         self.device_name = device_name
         self.port = str(self.settings.port)
         self.baud_rate = int(self.settings.baud_rate)
-        self.stuck_limit_samples = declare_node_parameter(self, "stuck_limit_samples",
-                                                          STUCK_LIMIT_SAMPLES, 50)
+        self.stuck_limit_samples = declare_node_parameter(self, "stuck_limit_samples", STUCK_LIMIT_SAMPLES, 50)
         self._closed = False
         self._ever_connected = False
         self._no_data = False
@@ -175,17 +168,15 @@ class SerialDeviceNode(VehicleNode):
         self.raw.begin_batch()  # raw/<device>: one message per parsed report (see _on_data), not per read chunk
         self.diag = DeviceDiagnostics(f"hindrax/{device_name}", self.port, self.now_s)
         self.diag.set_state("disconnected", DiagnosticStatus.ERROR, f"opening {self.port}")
-        self.transport = SerialTransport(self.port, self.baud_rate, on_data=self._on_data,
-                                         on_raw=self.raw.serial_tap, on_connect=self._on_connect,
-                                         on_disconnect=self._on_disconnect, start=False)
+        self.transport = SerialTransport(self.port, self.baud_rate, on_data=self._on_data, on_raw=self.raw.serial_tap,
+                                         on_connect=self._on_connect, on_disconnect=self._on_disconnect, start=False)
         self.commands = CommandSequencer(self.transport, command_gap_s, name=f"{device_name}-commands")
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._housekeeping_timer = self.create_timer(_HOUSEKEEPING_PERIOD_S, self._housekeeping)
 
     # -- helpers for subclasses
     def count_decoder_events(self, counts: dict[str, int]) -> None:
-        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total:
-        garbage bytes, bad
+        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total: garbage bytes, bad
         checksums, ...) grew by since the last call."""
         for kind, total in counts.items():
             delta = total - self._decoder_counts.get(kind, 0)

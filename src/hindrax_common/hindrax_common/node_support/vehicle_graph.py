@@ -1,24 +1,19 @@
-"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the
-processes that are it.
+"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the processes that are it.
 
-The project's tools must never speak for a vehicle they were not started as (docs/architecture.md,
-"Authority"): a replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed
-``wrench`` would drive the thrusters, a second ``bringup --sim`` on the vehicle's domain would mix
-its ESC and supervisor into the vehicle's safety graph.
+The project's tools must never speak for a vehicle they were not started as (docs/architecture.md, "Authority"): a
+replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed ``wrench`` would drive the thrusters, a
+second ``bringup --sim`` on the vehicle's domain would mix its ESC and supervisor into the vehicle's safety graph.
 
-- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics` (pure): the safety and actuation
-  topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``output_guard/*``,
-  ``wrench``, ``setpoint``, action and service topics) in any namespace; ``hindrax bag play``
-  withholds them unless asked with ``--safety-topics``.
+- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics` (pure): the safety and actuation topics (heartbeats,
+  ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``output_guard/*``, ``wrench``, ``setpoint``, action and
+  service topics) in any namespace; ``hindrax bag play`` withholds them unless asked with ``--safety-topics``.
 - :func:`foreign_vehicle_processes` (pure): the ESCs and supervisors a graph shows beyond the
   caller's own, each as one phrase naming the node.
-- :func:`graph_view`, :func:`own_view`, :class:`ForeignVehicleWatch` (over a discovery window, then
-  every :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start`
-  (from a bare look-out node before a tool creates anything: its heartbeat publishers, even for a
-  second, would disarm the vehicle's ESC).
+- :func:`graph_view`, :func:`own_view`, :class:`ForeignVehicleWatch` (over a discovery window, then every
+  :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start` (from a bare look-out
+  node before a tool creates anything: its heartbeat publishers, even for a second, would disarm the vehicle's ESC).
 - :func:`refuse_live_peer`: the same look-out for a vehicle's own ESC or supervisor process at its start: another
-  one's heartbeat arriving is a second vehicle on the domain (issue 74.2).
-"""
+  one's heartbeat arriving is a second vehicle on the domain (issue 74.2)."""
 from __future__ import annotations
 
 import re
@@ -173,8 +168,7 @@ class ForeignVehicleWatch:
     node: an rclpy node on the domain to check. own: callable returning the caller's own :class:`GraphView` (its
     nodes and heartbeat publishers; default nothing). what: the refusing tool, for the message (``hindrax run``).
     consequence: what the tool refuses to do. window_s: :data:`DISCOVERY_WINDOW_S`. period_s:
-    :data:`CHECK_PERIOD_S`. clock: monotonic seconds.
-    """
+    :data:`CHECK_PERIOD_S`. clock: monotonic seconds."""
 
     def __init__(self, node: Any, what: str, consequence: str, own: Callable[[], GraphView] = GraphView,
                  window_s: float = DISCOVERY_WINDOW_S, period_s: float = CHECK_PERIOD_S,
@@ -208,10 +202,9 @@ class ForeignVehicleWatch:
         return self.clock() - self.t0 >= self.window_s
 
     def check_every(self) -> Any:
-        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (the node's
-        clock) running :meth:`check`, so a foreign ESC or supervisor discovered later raises
-        :class:`ForeignVehicleError` out of the executor's spin, the same one line. Returns the rclpy timer (it
-        goes with the node)."""
+        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (the node's clock)
+        running :meth:`check`, so a foreign ESC or supervisor discovered later raises :class:`ForeignVehicleError` out
+        of the executor's spin, the same one line. Returns the rclpy timer (it goes with the node)."""
         return self.node.create_timer(self.period_s, self.check)
 
     def poll(self) -> None:

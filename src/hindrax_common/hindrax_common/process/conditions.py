@@ -2,8 +2,7 @@
 drives a graph step by step (``hindrax run``'s campaign, :meth:`hindrax_sim.graph.bringup.Graph.start_and_arm`) as well
 as for the tests and benchmarks (:mod:`hindrax_common.testing` re-exports these).
 
-A wait polls a condition (e.g. one executor spin per check), never sleeps a fixed time the caller relies on.
-"""
+A wait polls a condition (e.g. one executor spin per check), never sleeps a fixed time the caller relies on."""
 from __future__ import annotations
 
 import contextlib
@@ -29,10 +28,8 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Call
                message: str = "condition") -> Any:
     """Call ``poll`` (e.g. one executor spin) until ``predicate()`` is truthy; return its value.
 
-    poll: called between checks; default waits 5 ms on a threading.Event (a bounded poll interval, not a
-    fixed delay the caller relies on). Raises :class:`ConditionTimeout` after ``timeout_s`` seconds (wall clock,
-    ``time.monotonic``).
-    """
+    poll: called between checks; default waits 5 ms on a threading.Event (a bounded poll interval, not a fixed delay the
+    caller relies on). Raises :class:`ConditionTimeout` after ``timeout_s`` seconds (wall clock, ``time.monotonic``)."""
     ev = threading.Event()
     deadline = time.monotonic() + timeout_s
     while True:
@@ -74,8 +71,7 @@ def destroy_nodes_of(ctx: Context) -> int:
 
     The nodes are found among the objects that refer to the context (:func:`gc.get_referrers`, a few ms); a node
     destroyed already is destroyed again harmlessly. Errors while destroying are suppressed: this runs on the way
-    out of :func:`ros_context`, often after a failure.
-    """
+    out of :func:`ros_context`, often after a failure."""
     nodes = [obj for obj in gc.get_referrers(ctx) if isinstance(obj, Node) and obj.context is ctx]
     for node in nodes:
         with contextlib.suppress(Exception):

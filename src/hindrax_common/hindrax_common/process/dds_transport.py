@@ -1,20 +1,17 @@
 """The vehicle's DDS transport: Fast DDS over UDPv4 bound to 127.0.0.1, no shared memory.
 
-Fast DDS 2.14's shared-memory transport can sleep 333 ms holding a participant's send lock when it
-first sends to a new participant (Fast-DDS issue 6535): starting any ROS 2 process could silence a
-safety heartbeat past its 0.2 s timeout. The profile
-``share/hindrax_common/config/fastdds_loopback.xml`` gives every participant one UDPv4 transport
+Fast DDS 2.14's shared-memory transport can sleep 333 ms holding a participant's send lock when it first sends to a new
+participant (Fast-DDS issue 6535): starting any ROS 2 process could silence a safety heartbeat past its 0.2 s timeout.
+The profile ``share/hindrax_common/config/fastdds_loopback.xml`` gives every participant one UDPv4 transport
 white-listed to 127.0.0.1 (docs/architecture.md §11.4; the ``safety`` rows of ``make bench``).
 
-Not ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` alone: under it rmw_fastrtps 8.4 replaces the
-profile's transports by its own shared-memory + UDPv4 pair. So a process that asks for loopback gets
-``SYSTEM_DEFAULT`` plus the profile (``FASTRTPS_DEFAULT_PROFILES_FILE``; ``test_dds_transport.py``
-checks its sockets and that it maps no shared memory). ``SUBNET`` (the topside) keeps Fast DDS's
-default transports, with ``fastdds_topside.xml``'s 0.5 s announcement period.
+Not ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` alone: under it rmw_fastrtps 8.4 replaces the profile's transports by
+its own shared-memory + UDPv4 pair. So a process that asks for loopback gets ``SYSTEM_DEFAULT`` plus the profile
+(``FASTRTPS_DEFAULT_PROFILES_FILE``; ``test_dds_transport.py`` checks its sockets and that it maps no shared memory).
+``SUBNET`` (the topside) keeps Fast DDS's default transports, with ``fastdds_topside.xml``'s 0.5 s announcement period.
 
-Applied by ``vehicle.launch.xml`` (``<set_env>``), the ``hindrax`` command, the virtual pool's
-bring-up, the tests (:func:`hindrax_common.testing.child_env`) and ``make bench``. Standard library
-only, so ``hindrax --help`` stays fast.
+Applied by ``vehicle.launch.xml`` (``<set_env>``), the ``hindrax`` command, the virtual pool's bring-up, the tests
+(:func:`hindrax_common.testing.child_env`) and ``make bench``. Standard library only, so ``hindrax --help`` stays fast.
 """
 from __future__ import annotations
 
@@ -50,11 +47,10 @@ def wait_discovered(view: Callable[[], object], ready: Callable[[], bool], pause
                     bound_s: float = DISCOVERY_BOUND_S, quiet_s: float = ANNOUNCE_PERIOD_S,
                     cap_s: float = DISCOVERY_CAP_S, clock: Callable[[], float] = time.monotonic) -> bool:
     """Wait on discovery, the one way every tool does (the refusal look-out, the CLI's choice of vehicle): True once
-    ``ready()`` holds, ``bound_s`` has passed since the call (:data:`DISCOVERY_BOUND_S`: whatever runs has been
-    seen) and ``view()`` (what the graph shows: any value compared with ``==``) has not changed for ``quiet_s``
-    (one announcement period: names and endpoints follow their participant); False when ``cap_s`` passed first.
-    ``pause()`` runs between looks (spin an executor, or wait). What ``ready`` or ``view`` raise (a refusal)
-    propagates."""
+    ``ready()`` holds, ``bound_s`` has passed since the call (:data:`DISCOVERY_BOUND_S`: whatever runs has been seen)
+    and ``view()`` (what the graph shows: any value compared with ``==``) has not changed for ``quiet_s`` (one
+    announcement period: names and endpoints follow their participant); False when ``cap_s`` passed first. ``pause()``
+    runs between looks (spin an executor, or wait). What ``ready`` or ``view`` raise (a refusal) propagates."""
     start = clock()
     shown, changed_at = view(), start
     while True:
@@ -91,12 +87,11 @@ def profile_path(name: str = PROFILE_FILE) -> Path:
 
 
 def loopback_transport(env: MutableMapping[str, str] | None = None) -> MutableMapping[str, str]:
-    """Give ``env`` (default ``os.environ``, changed in place and returned) the loopback UDP transport when it asks
-    for loopback discovery: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` unset, empty or ``LOCALHOST`` becomes
-    ``SYSTEM_DEFAULT`` with ``FASTRTPS_DEFAULT_PROFILES_FILE`` = :func:`profile_path`. ``SUBNET`` (the topside)
-    keeps its transports and gets the topside profile (:data:`TOPSIDE_PROFILE_FILE`: the announcement period only)
-    unless a profile is already named. Any other range (``OFF``, ``SYSTEM_DEFAULT`` chosen by the user) is left as
-    it is.
+    """Give ``env`` (default ``os.environ``, changed in place and returned) the loopback UDP transport when it asks for
+    loopback discovery: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` unset, empty or ``LOCALHOST`` becomes ``SYSTEM_DEFAULT`` with
+    ``FASTRTPS_DEFAULT_PROFILES_FILE`` = :func:`profile_path`. ``SUBNET`` (the topside) keeps its transports and gets
+    the topside profile (:data:`TOPSIDE_PROFILE_FILE`: the announcement period only) unless a profile is already named.
+    Any other range (``OFF``, ``SYSTEM_DEFAULT`` chosen by the user) is left as it is.
 
     Call it before the process's first rclpy ``init`` (Fast DDS reads the profile file once per process).
     Raises FileNotFoundError when the profile is not installed."""

@@ -2,8 +2,7 @@
 
 Used to check that a vehicle participant listens on loopback only (docs/architecture.md §8.2): a socket bound to
 127.0.0.1, or to a multicast group (Fast DDS's discovery group, joined on loopback by the transport's white list),
-cannot be reached from the tether; one on 0.0.0.0, an interface address or IPv6 can.
-"""
+cannot be reached from the tether; one on 0.0.0.0, an interface address or IPv6 can."""
 from __future__ import annotations
 
 import os

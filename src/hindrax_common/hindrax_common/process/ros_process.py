@@ -9,10 +9,9 @@ Every process entry point (:func:`~hindrax_common.node_support.node_common.run_n
         proc.spin()
     return proc.status
 
-On leaving the block the clean-ups run, last registered first (for a node from
-:meth:`RosProcess.own`: its ``close()``, where the ESC writes neutral, then
-``RawDataPublisher.flush_pending``, then ``destroy_node()``), then the executor and the context
-shut down.
+On leaving the block the clean-ups run, last registered first (for a node from :meth:`RosProcess.own`: its ``close()``,
+where the ESC writes neutral, then ``RawDataPublisher.flush_pending``, then ``destroy_node()``), then the executor and
+the context shut down.
 
 Exceptions leaving the block: ``KeyboardInterrupt`` and ``ExternalShutdownException`` end the
 process normally; a type listed in ``errors`` is printed as one line ``"<prefix>: <first line>"``
@@ -42,8 +41,7 @@ seconds in ``set_listener(nullptr)`` (Fast-DDS issue 6513); main thread only, co
 that a full collection cannot stall the safety ticks against their 0.2 s heartbeat timeouts
 (docs/architecture.md §8; ``make bench``: ``gc_full_collection_cpu_ms_*``).
 
-rclpy is imported when the block is entered, not when this module is.
-"""
+rclpy is imported when the block is entered, not when this module is."""
 from __future__ import annotations
 
 import contextlib
@@ -171,8 +169,7 @@ class RosProcess:
     ``ValueError`` for another value. interrupt: whether SIGINT raises ``KeyboardInterrupt`` in the block.
     shutdown_budget_s: seconds the exit may take (module docstring); None, unbounded.
     exit_process: end the process on leaving the block, without the DDS participant's teardown
-    (module docstring); only in the main thread.
-    """
+    (module docstring); only in the main thread."""
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
                  executor: str | None = None, interrupt: bool = True,
@@ -229,8 +226,7 @@ class RosProcess:
         for sig in _STOP_SIGNALS:  # signal.signal runs the handlers of signals already received (absorbed here)
             signal.signal(sig, self._on_signal)
         for sig, previous in self._previous.items():
-            signal.signal(sig, signal.SIG_IGN if self.signals else
-                          previous if previous is not None else signal.SIG_DFL)
+            signal.signal(sig, signal.SIG_IGN if self.signals else previous if previous is not None else signal.SIG_DFL)
         self._previous = {}
 
     @property
@@ -309,8 +305,7 @@ class RosProcess:
             self._holder = _participant_holder()
 
     def _end_process(self, failure: BaseException | None) -> None:
-        """End the process now (module docstring): the traceback of
-        ``failure`` and status 1, or :attr:`status`."""
+        """End the process now (module docstring): the traceback of ``failure`` and status 1, or :attr:`status`."""
         status = self.status
         if failure is not None:
             traceback.print_exception(failure)
@@ -326,8 +321,7 @@ class RosProcess:
         os._exit(status)
 
     def _shut_down(self, exc_type: type | None, exc: BaseException | None) -> bool:
-        """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is
-        handled."""
+        """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is handled."""
         shutting_down = not rclpy.ok()  # before the clean-up: SIGINT/SIGTERM already shut the context down
         failed: list[Exception] = []
         while self._cleanups:

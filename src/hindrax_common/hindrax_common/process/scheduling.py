@@ -23,8 +23,7 @@ the compose file (docs/deployment.md §1). Without it the process runs on under 
 ``launch-prefix``) and says so in one warning naming the priority and the limit; it never stops a node.
 
 Own code, not a library's: the standard library's ``os.sched_setscheduler`` is the whole interface; what is here is
-the choice of threads and the report.
-"""
+the choice of threads and the report."""
 from __future__ import annotations
 
 import contextlib
@@ -62,10 +61,8 @@ class Scheduling:
 def requested_priority(environ: Mapping[str, str] | None = None) -> int:
     """The priority :data:`PRIORITY_ENV` asks for (0 when unset or empty).
 
-    Raises:
-        ValueError: a value that is not an integer in :data:`PRIORITY_RANGE` or 0, in one line naming the variable,
-            the value and the allowed range.
-    """
+    Raises ``ValueError``: a value that is not an integer in :data:`PRIORITY_RANGE` or 0, in one line naming the
+    variable, the value and the allowed range."""
     raw = (os.environ if environ is None else environ).get(PRIORITY_ENV, "").strip()
     if not raw:
         return 0

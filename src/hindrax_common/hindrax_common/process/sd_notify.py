@@ -13,8 +13,7 @@ supervisor send nothing: a live process's ping would keep a unit whose safety pr
 
 Why our own 30 lines: the protocol is one datagram on a Unix socket (``socket`` from the standard library);
 ``systemd-python`` needs libsystemd's headers and a compiler on the vehicle's image, and the ``sdnotify`` package
-is the same datagram, unmaintained since 2017.
-"""
+is the same datagram, unmaintained since 2017."""
 from __future__ import annotations
 
 import os

@@ -1,20 +1,17 @@
 """Emulated I2C bus with the ``smbus2.SMBus`` interface, for tests and simulation.
 
 The onboard I2C drivers talk to an object with the ``smbus2.SMBus`` interface (docs/architecture.md §2): on the
-Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an
-:class:`EmulatedI2CBus` holding register- or command-exact device emulators (MS5837, ICM-20948,
-AK09916, PCA9685).
+Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an :class:`EmulatedI2CBus` holding
+register- or command-exact device emulators (MS5837, ICM-20948, AK09916, PCA9685).
 
-Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the
-Linux i2c-dev driver does on the wire, so that the real driver code paths run unchanged: every SMBus
-call is broken into the I2C transactions the kernel issues (``read_i2c_block_data(addr, reg, n)`` is
-a 1-byte write of ``reg``, then, after a repeated start, an ``n``-byte read), each device emulator
-sees exactly what a real slave sees (:class:`I2CDeviceEmulator`), and an address nobody acknowledges
-fails with errno 121 as on Linux.
+Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the Linux i2c-dev driver
+does on the wire, so that the real driver code paths run unchanged: every SMBus call is broken into the I2C transactions
+the kernel issues (``read_i2c_block_data(addr, reg, n)`` is a 1-byte write of ``reg``, then, after a repeated start, an
+``n``-byte read), each device emulator sees exactly what a real slave sees (:class:`I2CDeviceEmulator`), and an address
+nobody acknowledges fails with errno 121 as on Linux.
 
 The module also provides :class:`RegisterPointerEmulator`, the shared base of every register-file
-device emulator (write = set pointer then data with auto-increment; read = continue from pointer).
-"""
+device emulator (write = set pointer then data with auto-increment; read = continue from pointer)."""
 
 from __future__ import annotations
 
@@ -49,12 +46,10 @@ def remote_io_error(address: int, detail: str = "") -> OSError:
 class I2CDeviceEmulator(Protocol):
     """Device side of the emulated bus: one call per I2C transaction.
 
-    ``i2c_write(data)``: one write transaction; ``data[0]`` is the register or command byte, the
-    rest are data bytes. ``i2c_read(n)``: one read transaction of ``n`` bytes continuing from the
-    device's internal pointer/state; must return exactly ``n`` bytes. Either may raise
-    ``OSError(errno.EREMOTEIO)`` to model a NACK. Optional: ``i2c_general_call(data)`` to react to
-    general-call (address 0x00) writes.
-    """
+    ``i2c_write(data)``: one write transaction; ``data[0]`` is the register or command byte, the rest are data bytes.
+    ``i2c_read(n)``: one read transaction of ``n`` bytes continuing from the device's internal pointer/state; must
+    return exactly ``n`` bytes. Either may raise ``OSError(errno.EREMOTEIO)`` to model a NACK. Optional:
+    ``i2c_general_call(data)`` to react to general-call (address 0x00) writes."""
 
     def i2c_write(self, data: bytes) -> None:  # pragma: no cover - protocol
         """Handle one write transaction (``data[0]`` = register/command)."""
@@ -93,12 +88,10 @@ class EmulatedI2CBus:
     ``OSError(errno.EBADF)`` after ``close()``; ``ValueError`` for out-of-range arguments
     (values not in 0..255, blocks longer than 32 bytes, as smbus2 does for block lengths).
 
-    Thread safety: every SMBus call holds one bus lock for its whole duration (a real adapter
-    serialises transfers the same way), so calls from several threads interleave only at call
-    boundaries.
+    Thread safety: every SMBus call holds one bus lock for its whole duration (a real adapter serialises transfers the
+    same way), so calls from several threads interleave only at call boundaries.
 
-    Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; docs/architecture.md §2.
-    """
+    Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; docs/architecture.md §2."""
 
     def __init__(
         self,
@@ -281,8 +274,7 @@ class EmulatedI2CBus:
     def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read word data: write ``[register]``, read 2 bytes, return them little-endian.
 
-        Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices).
-        """
+        Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices)."""
         check_byte("register", register)
         return int.from_bytes(self._call(i2c_addr, bytes([register]), 2), "little")
 
@@ -296,9 +288,7 @@ class EmulatedI2CBus:
             raise ValueError("Data length cannot exceed 32 bytes")
         self._call(i2c_addr, bytes([register]) + payload)
 
-    def read_i2c_block_data(
-        self, i2c_addr: int, register: int, length: int, force: bool | None = None
-    ) -> list[int]:
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int, force: bool | None = None) -> list[int]:
         """I2C block read: write ``[register]``, repeated start, read ``length`` (1..32) bytes."""
         check_byte("register", register)
         if not isinstance(length, int) or length < 0 or length > I2C_SMBUS_BLOCK_MAX:
@@ -309,10 +299,8 @@ class EmulatedI2CBus:
     def i2c_rdwr(self, *i2c_msgs: object) -> None:
         """Combined transfer of ``smbus2.i2c_msg`` messages (one ioctl, repeated starts).
 
-        Write messages (``flags & I2C_M_RD == 0``) are delivered with ``i2c_write``; read
-        messages are filled in place from ``i2c_read``. Any failure aborts the remaining messages,
-        as the kernel does.
-        """
+        Write messages (``flags & I2C_M_RD == 0``) are delivered with ``i2c_write``; read messages are filled in place
+        from ``i2c_read``. Any failure aborts the remaining messages, as the kernel does."""
         with self._lock:
             if not i2c_msgs:
                 raise ValueError("i2c_rdwr needs at least one message")
@@ -332,16 +320,14 @@ class EmulatedI2CBus:
 class RegisterPointerEmulator:
     """Shared base for register-file device emulators (ICM-20948, AK09916, PCA9685).
 
-    Model of a typical I2C register device: in a write transaction the first byte loads the
-    register pointer and every further byte is written at the pointer, which then advances with
-    :meth:`_next_pointer`; a read transaction returns bytes from the pointer, advancing the same
-    way. :meth:`_begin_transaction` runs at the start of every transaction (used for lazy, clock-
-    driven state updates), :meth:`_end_read` after every read transaction. All state access is
+    Model of a typical I2C register device: in a write transaction the first byte loads the register pointer and every
+    further byte is written at the pointer, which then advances with :meth:`_next_pointer`; a read transaction returns
+    bytes from the pointer, advancing the same way. :meth:`_begin_transaction` runs at the start of every transaction
+    (used for lazy, clock-driven state updates), :meth:`_end_read` after every read transaction. All state access is
     serialised by ``self._lock``.
 
     Subclasses implement ``_read_register(reg) -> int``, ``_write_register(reg, value)`` and may
-    override ``_next_pointer(reg) -> int`` (default: +1 modulo 256).
-    """
+    override ``_next_pointer(reg) -> int`` (default: +1 modulo 256)."""
 
     def __init__(self) -> None:
         self._lock = threading.RLock()
@@ -393,8 +379,7 @@ class ManualClock:
 
     Call it to read the time (s); pass :meth:`sleep` as the ``sleep`` function of an
     :class:`~hindrax_common.transport.i2c.I2CDevice` so that driver waits advance the emulators'
-    time instead of blocking. Thread-safe.
-    """
+    time instead of blocking. Thread-safe."""
 
     def __init__(self, start_s: float = 0.0) -> None:
         self._lock = threading.Lock()

@@ -1,8 +1,7 @@
 """Output lines through libgpiod (the ``gpiod`` Python bindings, v2 API), and their emulated stand-in.
 
 Used by the output guard (:mod:`hindrax_bringup.guard`) to drive the PCA9685 /OE pin (docs/architecture.md §8,
-docs/devices.md §5.1: /OE is active low; high = every output off, i.e. no pulses, which the Basic ESC treats as
-stop).
+docs/devices.md §5.1: /OE is active low; high = every output off, i.e. no pulses, which the Basic ESC treats as stop).
 
 Two objects with the same four methods, ``set_high(bool)``, ``is_high()``, ``release()`` and
 ``release_problem()`` ("" when a released line returns to its pull, else why not or why that is not known):
@@ -26,8 +25,7 @@ retriggerable monostable does), and :class:`WatchedOutputEnable` is /OE as the P
 high when the guard drives (or releases) its line high, or when the watchdog has run out.
 
 Why a thin wrapper of our own: the guard needs "drive high / drive low / release" and nothing else, and tests
-need the same three calls on an emulated line that a register-exact chip emulator honours.
-"""
+need the same three calls on an emulated line that a register-exact chip emulator honours."""
 from __future__ import annotations
 
 import contextlib
@@ -118,8 +116,7 @@ class EmulatedGpioLine:
 
     ``pull_high``: the level of the released line (the vehicle's /OE pull-up: True). ``persist``: a released line
     keeps driving its last level (a Raspberry Pi kernel without ``strict_gpiod``). Starts released. Thread-safe.
-    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release` without ``persist``).
-    """
+    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release` without ``persist``)."""
 
     def __init__(self, pull_high: bool = True, persist: bool = False) -> None:
         self._lock = threading.Lock()

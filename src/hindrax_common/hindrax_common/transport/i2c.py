@@ -14,8 +14,7 @@ simulation; docs/architecture.md §2) for one slave address and adds what smbus2
 * :class:`RegisterWrite` sequences (the "sequence as data" produced by the protocol modules)
   executed with their delays.
 
-The sleep function and the clock are injected, so tests run without real waiting.
-"""
+The sleep function and the clock are injected, so tests run without real waiting."""
 
 from __future__ import annotations
 
@@ -31,10 +30,9 @@ from .socket_i2c import SOCKET_ENV, SocketI2CBus
 
 __all__ = ["BusHandle", "I2CDevice", "I2CError", "I2CStats", "RawTap", "RegisterWrite", "open_smbus"]
 
-#: Raw tap signature: ``(kind, address, register, data, t_monotonic_s)``; ``kind`` is ``"write"``
-#: or ``"read"``; ``register`` is the register/command byte that started the transaction, or
-#: ``None`` for a plain read continuing from the device pointer; ``data`` are the data bytes
-#: written after the register byte, or the bytes read.
+#: Raw tap signature: ``(kind, address, register, data, t_monotonic_s)``; ``kind`` is ``"write"`` or ``"read"``;
+#: ``register`` is the register/command byte that started the transaction, or ``None`` for a plain read continuing from
+#: the device pointer; ``data`` are the data bytes written after the register byte, or the bytes read.
 RawTap = Callable[[str, int, Optional[int], bytes, float], None]
 
 
@@ -43,8 +41,7 @@ class I2CError(OSError):
     """An I2C operation failed after all retries.
 
     ``errno`` is the errno of the last failure (e.g. 121), ``device_name``/``address``/
-    ``operation`` identify the transfer, ``attempts`` is the number of attempts made.
-    """
+    ``operation`` identify the transfer, ``attempts`` is the number of attempts made."""
 
     def __init__(self, err_no: int | None, message: str, *, device_name: str, address: int,
                  operation: str, attempts: int) -> None:
@@ -65,8 +62,7 @@ class RegisterWrite:
         delay_after_s: time to wait after the write, in seconds (>= 0).
         note: short human description (which datasheet step), for logs.
 
-    Source: docs/architecture.md §2 (protocol layer: command sequences as data).
-    """
+    Source: docs/architecture.md §2 (protocol layer: command sequences as data)."""
 
     register: int
     value: int
@@ -111,8 +107,7 @@ def open_smbus(bus_number: int) -> Any:
 
     When the environment variable ``HINDRAX_I2C_SOCKET`` is set (tests and benchmarks only, never on the vehicle),
     the emulated bus served at that Unix socket instead (:mod:`.socket_i2c`), whatever the number.
-    Raises OSError (or ImportError without smbus2) with a message naming the device file.
-    """
+    Raises OSError (or ImportError without smbus2) with a message naming the device file."""
     if os.environ.get(SOCKET_ENV):
         return SocketI2CBus(os.environ[SOCKET_ENV])
     import smbus2
@@ -129,8 +124,7 @@ class BusHandle:
 
     A driver calls :meth:`reset` when a start-up attempt fails, so that its next attempt opens ``/dev/i2c-N``
     again: a bus that was absent at start, or went away and came back (the kernel driver reloaded, the emulated
-    bus of a test restarted), is picked up without restarting the process.
-    """
+    bus of a test restarted), is picked up without restarting the process."""
 
     def __init__(self, bus_number: int, bus: Any = None) -> None:
         self.bus_number = int(bus_number)
@@ -251,8 +245,7 @@ class I2CDevice:
     def write_byte(self, value: int) -> None:
         """Send one command byte (SMBus send byte), e.g. an MS5837 command.
 
-        Raw tap: ``("write", address, value, b"")``.
-        """
+        Raw tap: ``("write", address, value, b"")``."""
         check_byte("value", value)
         with self.lock:
             self._run(f"write_byte(0x{value:02x})", lambda: self.bus.write_byte(self.address, value))
@@ -261,8 +254,7 @@ class I2CDevice:
     def write_byte_data(self, register: int, value: int) -> None:
         """Write one register: transaction ``[register, value]``.
 
-        Raw tap: ``("write", address, register, bytes([value]))``.
-        """
+        Raw tap: ``("write", address, register, bytes([value]))``."""
         check_byte("register", register)
         check_byte("value", value)
         with self.lock:
@@ -273,8 +265,7 @@ class I2CDevice:
     def read_byte_data(self, register: int) -> int:
         """Read one register (write pointer, repeated start, read 1 byte).
 
-        Raw tap: ``("read", address, register, bytes([value]))``.
-        """
+        Raw tap: ``("read", address, register, bytes([value]))``."""
         check_byte("register", register)
         with self.lock:
             value = int(self._run(f"read_byte_data(0x{register:02x})",
@@ -286,8 +277,7 @@ class I2CDevice:
         """Write ``data`` starting at ``register`` in one transaction ``[register, *data]``.
 
         Up to 32 bytes use ``write_i2c_block_data``; longer writes use ``i2c_rdwr`` (one message).
-        Raw tap: ``("write", address, register, data)``.
-        """
+        Raw tap: ``("write", address, register, data)``."""
         check_byte("register", register)
         payload = bytes(data)
         with self.lock:
@@ -306,9 +296,7 @@ class I2CDevice:
         Up to 32 bytes use ``read_i2c_block_data``; longer reads use ``i2c_rdwr`` (write + read).
         Raw tap: ``("read", address, register, data)``.
 
-        Returns:
-            ``bytes`` of length ``length``.
-        """
+        Returns ``bytes`` of length ``length``."""
         check_byte("register", register)
         if not isinstance(length, int) or length < 1:
             raise ValueError(f"length must be an int >= 1, got {length!r}")
@@ -327,8 +315,7 @@ class I2CDevice:
             data = self._run(f"read_block(0x{register:02x}, {length})", call)
             if len(data) != length:
                 raise I2CError(None, f"{self.name}@0x{self.address:02x}: short read {len(data)}/{length}",
-                               device_name=self.name, address=self.address,
-                               operation="read_block", attempts=1)
+                               device_name=self.name, address=self.address, operation="read_block", attempts=1)
             self._tap("read", register, data)
             return data
 
@@ -336,8 +323,7 @@ class I2CDevice:
         """Execute register writes in order, sleeping ``delay_after_s`` after each.
 
         Holds the lock for the whole sequence. Raises :class:`I2CError` on the first write that
-        fails after retries (later writes are not attempted).
-        """
+        fails after retries (later writes are not attempted)."""
         with self.lock:
             for write in writes:
                 self.write_byte_data(write.register, write.value)

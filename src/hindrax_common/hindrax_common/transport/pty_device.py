@@ -9,8 +9,7 @@ Why our own code: pyserial's ``loop://`` and ``socket://`` URL handlers do not e
 termios, select and fd code path a real ``/dev/ttyUSB*`` uses, and ``socat`` would be an external
 process dependency.  ``os.openpty`` + ``tty.setraw`` gives a real tty with no extra dependency.
 
-Linux/POSIX only (pty, termios).
-"""
+Linux/POSIX only (pty, termios)."""
 
 from __future__ import annotations
 
@@ -40,8 +39,7 @@ class ByteStreamEmulator(Protocol):
     """Contract of an I/O-free serial device emulator (docs/architecture.md §2 layer 2).
 
     ``feed_host_bytes(data)`` receives bytes the host wrote; ``poll(t_s)`` returns the bytes the
-    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls).
-    """
+    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls)."""
 
     def feed_host_bytes(self, data: bytes) -> None:  # pragma: no cover - protocol
         ...
@@ -131,8 +129,7 @@ class StreamFaults:
             self._held, self._has_held = value, True
             return value
 
-    def transmit(self, messages: Iterable[bytes],
-                 corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
+    def transmit(self, messages: Iterable[bytes], corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
         """The bytes a device sends at one poll: the queued garbage, then each of ``messages``
         through :meth:`apply`; b"" while disconnected (the garbage is taken all the same)."""
         with self._lock:
@@ -147,11 +144,8 @@ class StreamFaults:
 
         Args:
             message: the complete message as the device would send it.
-            corrupt_checksum: protocol-specific function returning ``message`` with a wrong
-                checksum.
-        Returns:
-            the bytes to actually send (b"" when dropped).
-        """
+            corrupt_checksum: protocol-specific function returning ``message`` with a wrong checksum.
+        Returns the bytes to actually send (b"" when dropped)."""
         with self._lock:
             if self._drop:
                 self._drop -= 1
@@ -193,9 +187,7 @@ class PeriodicSchedule:
     def set_period(self, period_s: float) -> None:
         """Change the period; the next tick already scheduled is kept, later ones use the new one.
 
-        Raises:
-            ValueError: non-positive or non-finite period.
-        """
+        Raises ``ValueError``: non-positive or non-finite period."""
         if not (period_s > 0 and period_s < float("inf")):
             raise ValueError(f"period must be positive and finite, got {period_s}")
         if period_s != self._period_s and getattr(self, "_anchor_s", None) is not None:
@@ -240,11 +232,8 @@ class PtyDevice:
         link_name: file name of the stable symlink inside a private temporary directory.
         start: start the service thread immediately.
         realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
-            (:func:`hindrax_common.process.scheduling.set_this_thread`): bytes on time on a loaded
-            machine, as a UART's.
-    Raises:
-        OSError: if a pty cannot be created.
-    """
+            (:func:`hindrax_common.process.scheduling.set_this_thread`): bytes on time on a loaded machine, as a UART's.
+    Raises ``OSError``: if a pty cannot be created."""
 
     def __init__(self, emulator: ByteStreamEmulator, clock: Callable[[], float] = time.monotonic,
                  poll_period_s: float = 0.002, link_name: str = "tty", start: bool = True,
@@ -343,19 +332,15 @@ class PtyDevice:
                 self._stop.wait(self.poll_period_s)
 
     def service(self, t_s: Optional[float] = None, deliver: bool = True) -> int:
-        """One service cycle, synchronously and without waiting, for a caller that drives the device
-        itself instead of the thread (``start=False``; e.g. a simulator at every clock tick, so the
-        bytes go out at the simulated instant they are due): take the bytes the host wrote, then
-        write ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``). ``deliver=False`` discards the
-        output (counted in :attr:`bytes_dropped`), as a UART nobody listens to. Returns the number
-        of bytes delivered.
+        """One service cycle, synchronously and without waiting, for a caller that drives the device itself instead of
+        the thread (``start=False``; e.g. a simulator at every clock tick, so the bytes go out at the simulated instant
+        they are due): take the bytes the host wrote, then write ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``).
+        ``deliver=False`` discards the output (counted in :attr:`bytes_dropped`), as a UART nobody listens to. Returns
+        the number of bytes delivered.
 
-        Raises:
-            RuntimeError: while the service thread runs (one driver of the emulator at a time).
-        """
+        Raises ``RuntimeError``: while the service thread runs (one driver of the emulator at a time)."""
         if self._thread is not None:
-            raise RuntimeError("PtyDevice.service() needs start=False: "
-                               "the service thread drives this device")
+            raise RuntimeError("PtyDevice.service() needs start=False: the service thread drives this device")
         before = self.bytes_to_host
         self._cycle(0.0, t_s, deliver)
         return self.bytes_to_host - before

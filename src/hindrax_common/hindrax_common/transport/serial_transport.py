@@ -4,17 +4,15 @@ docs/architecture.md §2: transports are injected; serial goes through pyserial 
 simulator use pseudo-terminals so the real pyserial code path runs).  This module owns a port, reads it
 in a background thread and hands byte chunks to a callback; drivers stay protocol-only.
 
-The port is opened with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a
-pyserial URL), 8N1 (both devices use 115200 8N1, docs/devices.md §1.1 and §2.1). When it disappears
-(read/write error, USB unplug, pty closed) the reader thread closes it and re-opens it with
-exponential backoff; ``on_connect()`` after every open lets the driver resend its start-up commands.
-Callback exceptions are caught and counted: they never kill the reader thread. The raw tap lets a
-node record the traffic (docs/architecture.md §7); :meth:`SerialTransport.pump` reads in the
-caller's thread instead (a simulator's lock-step: :mod:`hindrax_sim.hardware`).
+The port is opened with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a pyserial URL), 8N1 (both
+devices use 115200 8N1, docs/devices.md §1.1 and §2.1). When it disappears (read/write error, USB unplug, pty closed)
+the reader thread closes it and re-opens it with exponential backoff; ``on_connect()`` after every open lets the driver
+resend its start-up commands. Callback exceptions are caught and counted: they never kill the reader thread. The raw tap
+lets a node record the traffic (docs/architecture.md §7); :meth:`SerialTransport.pump` reads in the caller's thread
+instead (a simulator's lock-step: :mod:`hindrax_sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
-error and has no reconnect, state, or tap.
-"""
+error and has no reconnect, state, or tap."""
 
 from __future__ import annotations
 
@@ -71,8 +69,7 @@ class SerialTransport:
         port: device path or pyserial URL.
         baudrate: bit rate (8N1).
         on_data: called from the reader thread (or :meth:`pump`'s) with each received chunk (bytes).
-        on_raw: raw tap ``(direction 'rx'|'tx', data, t_monotonic_s)``; 'tx' is called from the
-            writing thread.
+        on_raw: raw tap ``(direction 'rx'|'tx', data, t_monotonic_s)``; 'tx' is called from the writing thread.
         on_connect: called from the reader thread after every successful (re)open.
         on_disconnect: called with the error text when the port is lost (from the reader thread, or
             from the writing thread when a write fails).
@@ -80,17 +77,12 @@ class SerialTransport:
         read_timeout_s: pyserial read timeout (bounds close() latency), s (writes: 1 s).
         clock: monotonic clock for tap timestamps (default ``time.monotonic``).
         start: start the reader thread immediately (it opens the port itself).
-    Raises:
-        ValueError: non-positive timing parameters.
-    """
+    Raises ``ValueError``: non-positive timing parameters."""
 
-    def __init__(self, port: str, baudrate: int = 115200, *,
-                 on_data: Optional[Callable[[bytes], None]] = None,
+    def __init__(self, port: str, baudrate: int = 115200, *, on_data: Optional[Callable[[bytes], None]] = None,
                  on_raw: Optional[Callable[[str, bytes, float], None]] = None,
-                 on_connect: Optional[Callable[[], None]] = None,
-                 on_disconnect: Optional[Callable[[str], None]] = None,
-                 reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0,
-                 read_timeout_s: float = 0.05,
+                 on_connect: Optional[Callable[[], None]] = None, on_disconnect: Optional[Callable[[str], None]] = None,
+                 reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0, read_timeout_s: float = 0.05,
                  clock: Callable[[], float] = time.monotonic, start: bool = True) -> None:
         if reconnect_initial_s <= 0 or reconnect_max_s < reconnect_initial_s:
             raise ValueError("need 0 < reconnect_initial_s <= reconnect_max_s")
@@ -133,14 +125,11 @@ class SerialTransport:
     def start(self) -> None:
         """Start the reader thread (idempotent).
 
-        Raises:
-            SerialTransportError: after :meth:`close`.
-        """
+        Raises ``SerialTransportError``: after :meth:`close`."""
         if self._closed:
             raise SerialTransportError("transport is closed")
         if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name=f"SerialTransport({self.port})",
-                                            daemon=True)
+            self._thread = threading.Thread(target=self._run, name=f"SerialTransport({self.port})", daemon=True)
             self._thread.start()
 
     @property
@@ -151,21 +140,19 @@ class SerialTransport:
     def status(self) -> TransportStatus:
         """Consistent snapshot of counters and state."""
         with self._stats_lock:
-            return TransportStatus(self.port, self.connected, self._last_error, self._bytes_rx,
-                                   self._bytes_tx, self._reconnects, self._open_failures,
-                                   self._callback_errors, self._closed, self._bytes_handled,
-                                   self._connections)
+            return TransportStatus(self.port, self.connected, self._last_error, self._bytes_rx, self._bytes_tx,
+                                   self._reconnects, self._open_failures, self._callback_errors, self._closed,
+                                   self._bytes_handled, self._connections)
 
     def wait_connected(self, timeout_s: float) -> bool:
         """Block until connected or ``timeout_s`` passes; returns :attr:`connected`."""
         return self._connected_event.wait(timeout_s)
 
     def pump(self, n_bytes: int, timeout_s: float) -> bool:
-        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since
-        construction, as ``status().bytes_handled``) have been through the tap and ``on_data``, or
-        ``timeout_s`` of wall time passed without a byte (a read in progress may add
-        ``read_timeout_s``); True when they have. The first call takes
-        the reading over from the reader thread for good (it then sleeps until the port is lost)."""
+        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since construction, as
+        ``status().bytes_handled``) have been through the tap and ``on_data``, or ``timeout_s`` of wall time passed
+        without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call takes the
+        reading over from the reader thread for good (it then sleeps until the port is lost)."""
         if not self._caller_reads:
             self._caller_reads = True
             ser = self._ser
@@ -184,10 +171,8 @@ class SerialTransport:
     def write(self, data: bytes) -> int:
         """Write all of ``data``; returns the number of bytes written.  Thread-safe.
 
-        Raises:
-            SerialTransportError: port not open, or the write failed (the port is then closed and the
-                reader thread reconnects).
-        """
+        Raises ``SerialTransportError``: port not open, or the write failed (the port is then closed and the reader
+        thread reconnects)."""
         data = bytes(data)
         failure: Optional[str] = None
         with self._ser_lock:
@@ -305,9 +290,8 @@ class SerialTransport:
                 self._stop.wait(delay)
 
     def _read_chunk(self, ser: Any) -> bool:
-        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and
-        ``on_data``; False when
-        the read failed (the port is then closed, ``on_disconnect`` told)."""
+        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and ``on_data``; False when the
+        read failed (the port is then closed, ``on_disconnect`` told)."""
         try:
             data = ser.read(max(1, ser.in_waiting))
             # the rest of a message: one chunk, one callback

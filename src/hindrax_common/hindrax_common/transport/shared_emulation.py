@@ -19,8 +19,7 @@ Processes pick the server up through the environment: :data:`SOCKET_ENV` names t
 :func:`hindrax_bringup.guard.outputs_off.open_output_enable`).
 
 Why our own code: ``multiprocessing.connection`` (standard library) carries the calls; nothing on PyPI emulates an
-I2C adapter and a GPIO chip shared across processes.
-"""
+I2C adapter and a GPIO chip shared across processes."""
 from __future__ import annotations
 
 import contextlib
@@ -43,8 +42,7 @@ class EmulationServer:
     """Serves ``bus`` and ``lines`` (name -> EmulatedGpioLine) on the Unix socket ``path``, a thread per client.
 
     ``lock`` (optional) is held around every bus call (share it with whatever else drives the emulators).
-    :meth:`close` stops accepting and removes the socket.
-    """
+    :meth:`close` stops accepting and removes the socket."""
 
     def __init__(self, path: str, bus: Any = None, lines: Mapping[str, Any] | None = None,
                  lock: threading.Lock | None = None) -> None:

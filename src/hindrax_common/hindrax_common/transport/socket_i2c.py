@@ -3,12 +3,11 @@ machine without the hardware (docs/deployment.md §9).
 
 A driver started as its own process (the vehicle's launch layout: ``ros2 launch``, or the project's
 :class:`~.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus with
-:func:`~hindrax_common.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket,
-that function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an
-:class:`I2CSocketServer` in another process serves an
-:class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` (the register-exact MS5837, ICM-20948 and PCA9685
-emulators) there. A transaction is then one request and one answer on the socket (two system calls and a pickle
-each way), standing in for the ``ioctl`` of a real ``smbus2.SMBus``.
+:func:`~hindrax_common.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket, that
+function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an :class:`I2CSocketServer` in
+another process serves an :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` (the register-exact MS5837,
+ICM-20948 and PCA9685 emulators) there. A transaction is then one request and one answer on the socket (two system calls
+and a pickle each way), standing in for the ``ioctl`` of a real ``smbus2.SMBus``.
 
 The failures a driver sees are a real bus's: a socket that does not exist (or refuses) is ``OSError`` from the open,
 as a missing ``/dev/i2c-N`` (the bus is "absent"); an address nobody acknowledges is ``OSError`` 121 from the
@@ -17,8 +16,7 @@ adapter that was removed, until the driver opens the bus again. Never set :data:
 
 Why our own code: the processes must share one emulated bus (the simulator reads the PCA9685's registers the ESC
 process writes), and there is no I2C-over-socket adapter in smbus2 or the kernel; ``multiprocessing.connection``
-does the framing.
-"""
+does the framing."""
 from __future__ import annotations
 
 import contextlib
@@ -34,8 +32,7 @@ from smbus2 import i2c_msg
 from ..process.scheduling import set_this_thread
 from .emulated_i2c import I2C_M_RD
 
-__all__ = ["SOCKET_ENV", "SMBUS_METHODS", "I2CSocketServer", "SocketI2CBus",
-           "forward_smbus_methods"]
+__all__ = ["SOCKET_ENV", "SMBUS_METHODS", "I2CSocketServer", "SocketI2CBus", "forward_smbus_methods"]
 
 #: environment variable: path of an :class:`I2CSocketServer` socket that ``open_smbus`` connects to instead of
 #: opening ``/dev/i2c-N`` (tests and benchmarks only)
@@ -63,8 +60,7 @@ class SocketI2CBus:
     """Client side of :class:`I2CSocketServer`: the ``smbus2.SMBus`` methods the drivers use, forwarded.
 
     Raises ``OSError`` from the constructor when nobody serves ``path`` (ENOENT, ECONNREFUSED), ``OSError`` with the
-    emulator's errno for a NACK (as ``smbus2`` does), and ``OSError`` ENODEV once the connection is lost.
-    """
+    emulator's errno for a NACK (as ``smbus2`` does), and ``OSError`` ENODEV once the connection is lost."""
 
     def __init__(self, path: str) -> None:
         try:
@@ -92,8 +88,7 @@ class SocketI2CBus:
     def i2c_rdwr(self, *i2c_msgs):
         """``smbus2.i2c_msg`` transfers (ctypes, not picklable) sent as (address, flags, bytes or
         length); the read messages' buffers are filled from the answer, as the kernel fills them."""
-        spec = [(int(m.addr), int(m.flags),
-                 int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
+        spec = [(int(m.addr), int(m.flags), int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
                 for m in i2c_msgs]
         reads = (m for m in i2c_msgs if m.flags & I2C_M_RD)
         for m, data in zip(reads, self._bus_call("i2c_rdwr", spec)):
@@ -107,8 +102,7 @@ class SocketI2CBus:
 def _rdwr(bus: Any, spec: list) -> list[bytes]:
     """Run a :meth:`SocketI2CBus.i2c_rdwr` request on ``bus``: its messages as ``smbus2.i2c_msg``;
     returns what the read messages read, in order."""
-    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data)
-            for addr, flags, data in spec]
+    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data) for addr, flags, data in spec]
     bus.i2c_rdwr(*msgs)
     return [bytes(m) for m in msgs if m.flags & I2C_M_RD]
 

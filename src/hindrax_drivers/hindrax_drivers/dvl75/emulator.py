@@ -22,8 +22,7 @@ Behaviour (docs/devices.md §1.1-§1.6, especially the §1.6 checklist):
 
 Truth -> measurement model (the emulator's own modelling choices are marked [EMULATOR]):
 - ``DvlTruth`` is given in the marine convention: body velocity over ground in FRD, attitude as
-  roll/pitch/yaw with yaw = heading clockwise from north (NED), altitude = vertical distance to a flat
-  bottom.
+  roll/pitch/yaw with yaw = heading clockwise from north (NED), altitude = vertical distance to a flat bottom.
 - ``$DVPDL`` deltas: trapezoidal integral of the FRD velocity over ``dtu``; angle deltas are wrapped
   differences of (roll, pitch, yaw) [EMULATOR: the firmware's exact definition is undocumented].
 - ``$DVEXT``: roll as is, pitch negated (DVL Euler angles are right-handed about X bow / Y port,
@@ -38,8 +37,7 @@ Truth -> measurement model (the emulator's own modelling choices are marked [EMU
   ``true_speed_of_sound_m_s`` is given; SET-VELOCITY-ADJUSTMENT multiplies velocities.
 - Not emulated: re-tweeted IMU/GPS lines, ``$DVKFA``/``$DVKFB`` (layout unverified, docs/devices.md §6),
   Ethernet/UDP, mounting-orientation mismatch (the truth is taken to be in the configured vehicle
-  frame), declination effects on heading.
-"""
+  frame), declination effects on heading."""
 
 from __future__ import annotations
 
@@ -81,9 +79,8 @@ class DvlTruth:
             (yaw = heading clockwise from true north), rad.
         bottom_lock: False forces "searching" whatever the geometry.
         confidence_pct: ``$DVPDL`` confidence when locked, 0..100 %.
-        beam_locked, beam_velocity_m_s, beam_range_m, beam_gain_db: optional per-beam values in the
-            order A port, B stern, C starboard, D bow (4-tuples) reported verbatim instead of the
-            emulator's geometric model.
+        beam_locked, beam_velocity_m_s, beam_range_m, beam_gain_db: optional per-beam values in the order A port, B
+            stern, C starboard, D bow (4-tuples) reported verbatim instead of the emulator's geometric model.
     """
 
     velocity_frd_m_s: Tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -166,17 +163,15 @@ class Dvl75Emulator:
         min_altitude_m, max_altitude_m: lock envelope (docs/devices.md §1.1).
         seed: seed of the fault generator.
     Attributes:
-        faults: :class:`StreamFaults` (garbage, bad checksums, truncated/dropped lines, stuck values,
-            disconnect).
+        faults: :class:`StreamFaults` (garbage, bad checksums, truncated/dropped lines, stuck values, disconnect).
         flash: the :class:`DvlFlash` in use.
         sent_counts: sentences generated per sentence id (before faults).
         commands_received: every command line received, decoded.
     """
 
-    def __init__(self, truth_source: TruthSource, *, rate_hz: float = 10.0,
-                 flash: Optional[DvlFlash] = None, beam_tilt_rad: float = BEAM_TILT_RAD,
-                 true_speed_of_sound_m_s: Optional[float] = None, min_altitude_m: float = 0.3,
-                 max_altitude_m: float = 40.0, seed: int = 0) -> None:
+    def __init__(self, truth_source: TruthSource, *, rate_hz: float = 10.0, flash: Optional[DvlFlash] = None,
+                 beam_tilt_rad: float = BEAM_TILT_RAD, true_speed_of_sound_m_s: Optional[float] = None,
+                 min_altitude_m: float = 0.3, max_altitude_m: float = 40.0, seed: int = 0) -> None:
         if isinstance(truth_source, DvlTruth):
             constant = truth_source
             truth_source = lambda _t: constant  # noqa: E731
@@ -204,9 +199,7 @@ class Dvl75Emulator:
     def set_rate_hz(self, rate_hz: float) -> None:
         """Change the output rate (5..20 Hz, docs/devices.md §1.1); takes effect from the next cycle.
 
-        Raises:
-            ValueError: outside 5..20 Hz.
-        """
+        Raises ``ValueError``: outside 5..20 Hz."""
         if not 5.0 <= rate_hz <= 20.0:
             raise ValueError(f"DVL-75 rate {rate_hz} Hz outside 5..20 Hz")
         self._schedule.set_period(1.0 / float(rate_hz))
@@ -343,9 +336,8 @@ class Dvl75Emulator:
         self._prev_tu, self._prev_truth = tu, truth
         self._prev_velocity = velocity if locked else None
 
-    def _extended(self, truth: DvlTruth, locked: bool, dt: float, velocity: np.ndarray,
-                  v_ned: np.ndarray, r_nb: np.ndarray, range_scale: float,
-                  gps_fresh: bool) -> DvlExtended:
+    def _extended(self, truth: DvlTruth, locked: bool, dt: float, velocity: np.ndarray, v_ned: np.ndarray,
+                  r_nb: np.ndarray, range_scale: float, gps_fresh: bool) -> DvlExtended:
         alt = truth.altitude_m if truth.altitude_m is not None else 0.0
         if locked:
             along_axis = alt / (math.cos(truth.roll_rad) * math.cos(truth.pitch_rad)) * range_scale

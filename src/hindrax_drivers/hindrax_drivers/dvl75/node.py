@@ -5,38 +5,34 @@ Run alone: ``python -m hindrax_drivers.dvl75.node --ros-args --params-file ros_w
 (device path or pyserial URL), ``baud_rate``, ``position_frd_m`` (lever arm), ``sensor_orientation_rpy_rad``,
 ``speed_of_sound_m_s``, ``velocity_std_m_s``. Node parameter ``stuck_limit_samples`` (default 50).
 
-Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as
-the BlueOS driver does [D17], :func:`hindrax_drivers.dvl75.protocol.startup_commands` (the
-CONFIGURATION reply is logged at debug level). The sequence is sent again when the DVL reboots
-(``tu`` goes backwards) and when ``$DVEXT`` keeps arriving without ``$DVPDL`` for
-``MISSING_DVPDL_TIMEOUT_S``.
+Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as the BlueOS driver
+does [D17], :func:`hindrax_drivers.dvl75.protocol.startup_commands` (the CONFIGURATION reply is logged at debug level).
+The sequence is sent again when the DVL reboots (``tu`` goes backwards) and when ``$DVEXT`` keeps arriving without
+``$DVPDL`` for ``MISSING_DVPDL_TIMEOUT_S``.
 
 Publishes (QoS reliable, depth 10):
 
-- ``dvl/data`` (hindrax_msgs/Dvl, frame ``base_link``): one message per ``$DVPDL``, with lock, attitude,
-  altitude and beams from the latest ``$DVEXT`` (at most one ping cycle older; see
-  :mod:`hindrax_drivers.dvl75.report` for every field, the FRD -> FLU conversion, the lever-arm
-  correction and the validity rule). A velocity is **never** published from an unlocked or
-  zero-confidence report: ``velocity_valid`` false, NaN velocity and delta position. When no ``$DVPDL``
-  has arrived for 1 s, one message per ``$DVEXT`` is published instead (velocity never valid).
+- ``dvl/data`` (hindrax_msgs/Dvl, frame ``base_link``): one message per ``$DVPDL``, with lock, attitude, altitude and
+  beams from the latest ``$DVEXT`` (at most one ping cycle older; see :mod:`hindrax_drivers.dvl75.report` for every
+  field, the FRD -> FLU conversion, the lever-arm correction and the validity rule). A velocity is **never** published
+  from an unlocked or zero-confidence report: ``velocity_valid`` false, NaN velocity and delta position. When no
+  ``$DVPDL`` has arrived for 1 s, one message per ``$DVEXT`` is published instead (velocity never valid).
 - ``dvl/twist`` (geometry_msgs/TwistWithCovarianceStamped, ``base_link``): the same velocity, only when
   valid; covariance linear block ``velocity_std_m_s**2 * I``, angular block -1 on the diagonal
   (angular velocity not measured here: 0 with unknown variance), 0 elsewhere.
-- ``dvl/altitude`` (sensor_msgs/Range, frame ``dvl_link``, ULTRASOUND): one per ``$DVEXT``, the distance
-  to the bottom along the sensor axis; ``+inf`` when unlocked (REP-117 "no detection"). Limits
-  0.3..40 m and field of view :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (docs/devices.md §1.1 envelope); variance 0
-  (unknown, as Range.msg defines).
+- ``dvl/altitude`` (sensor_msgs/Range, frame ``dvl_link``, ULTRASOUND): one per ``$DVEXT``, the distance to the bottom
+  along the sensor axis; ``+inf`` when unlocked (REP-117 "no detection"). Limits 0.3..40 m and field of view
+  :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (docs/devices.md §1.1 envelope); variance 0 (unknown, as Range.msg defines).
 - ``raw/dvl75`` (hindrax_msgs/RawDeviceData): every byte in both directions, receive/send time stamps.
-- ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
-  ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.malformed``,
-  ``errors.unknown_sentence`` (see :mod:`hindrax_drivers.dvl75.stream`), ``errors.implausible_velocity``
-  and the ERROR ``implausible`` (a ``$DVPDL`` outside the plausibility gates ``sensors.dvl75.max_speed_m_s``,
-  ``min_interval_s``, ``max_interval_s``: published with ``velocity_valid`` false, see
-  :mod:`hindrax_drivers.dvl75.report`; diagnostics published at once, cleared ``IMPLAUSIBLE_HOLD_S`` after the
-  last rejected report), the ERROR ``stuck``
-  (identical ``$DVPDL`` deltas with confidence > 0, or identical ``$DVEXT`` attitude/altitude/beam data,
-  for ``stuck_limit_samples`` reports: from then on, until the data change, every velocity is published
-  not valid and ``dvl/altitude`` is not published), clock-offset estimate, start-up state.
+- ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age, ``errors.garbage_bytes``,
+  ``errors.truncated``, ``errors.bad_checksum``, ``errors.malformed``, ``errors.unknown_sentence`` (see
+  :mod:`hindrax_drivers.dvl75.stream`), ``errors.implausible_velocity`` and the ERROR ``implausible`` (a ``$DVPDL``
+  outside the plausibility gates ``sensors.dvl75.max_speed_m_s``, ``min_interval_s``, ``max_interval_s``: published with
+  ``velocity_valid`` false, see :mod:`hindrax_drivers.dvl75.report`; diagnostics published at once, cleared
+  ``IMPLAUSIBLE_HOLD_S`` after the last rejected report), the ERROR ``stuck`` (identical ``$DVPDL`` deltas with
+  confidence > 0, or identical ``$DVEXT`` attitude/altitude/beam data, for ``stuck_limit_samples`` reports: from then
+  on, until the data change, every velocity is published not valid and ``dvl/altitude`` is not published), clock-offset
+  estimate, start-up state.
 
 Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time`` supported):
 
@@ -46,8 +42,7 @@ Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time``
   offset = minimum over the last 10 s of (receive ROS time - ``tu``), i.e. ``tu`` plus the smallest
   transport latency seen, re-estimated after a DVL reboot (``tu`` backwards) or a ROS time jump.
 - ``dvl/altitude`` and messages built from ``$DVEXT`` alone use the receive time: ``$DVEXT`` carries no
-  device time (its field 14 is an EKF step length, docs/devices.md §1.3.2).
-"""
+  device time (its field 14 is an EKF step length, docs/devices.md §1.3.2)."""
 from __future__ import annotations
 
 import math
@@ -89,9 +84,7 @@ IMPLAUSIBLE_HOLD_S = 2.0
 class Dvl75Node(SerialDeviceNode):
     """DVL-75 serial driver node (see the module docstring). ``**kwargs`` go to ``rclpy.node.Node``.
 
-    Raises:
-        ConfigError: invalid configuration (one line logged; ``main`` exits with status 1).
-    """
+    Raises ``ConfigError``: invalid configuration (one line logged; ``main`` exits with status 1)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("dvl75", device_name="dvl75", config_section=SensorsDvl75Section,
@@ -100,10 +93,8 @@ class Dvl75Node(SerialDeviceNode):
         s = self.cfg.sensors.dvl75
         self.sensor_orientation_rpy_rad = tuple(float(a) for a in s.sensor_orientation_rpy_rad)
         self.speed_of_sound_m_s = float(s.speed_of_sound_m_s)
-        self.builder = DvlReportBuilder(position_frd_m=s.position_frd_m,
-                                        velocity_std_m_s=float(s.velocity_std_m_s),
-                                        max_speed_m_s=float(s.max_speed_m_s),
-                                        min_interval_s=float(s.min_interval_s),
+        self.builder = DvlReportBuilder(position_frd_m=s.position_frd_m, velocity_std_m_s=float(s.velocity_std_m_s),
+                                        max_speed_m_s=float(s.max_speed_m_s), min_interval_s=float(s.min_interval_s),
                                         max_interval_s=float(s.max_interval_s),
                                         max_angular_rate_rad_s=float(s.max_angular_rate_rad_s))
         self.decoder = DvlStreamDecoder()

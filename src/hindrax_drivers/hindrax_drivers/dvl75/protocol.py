@@ -22,8 +22,7 @@ Why our own code: there is no maintained Python parser for these sentences (the 
 [D18] only adds two sentence types and raises generic errors), and the checksum, signed fields and
 trailing empty field need exact control.
 
-Frames (docs/devices.md §1.3.1, §1.5): each record's docstring gives the frame of each field.
-"""
+Frames (docs/devices.md §1.3.1, §1.5): each record's docstring gives the frame of each field."""
 
 from __future__ import annotations
 
@@ -33,13 +32,11 @@ from dataclasses import dataclass
 from functools import reduce
 from typing import Any, Callable, Optional, Sequence, Tuple, Union
 
-__all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown",
-           "DvlRecord", "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD",
-           "beam_directions_frd", "LINE_TERMINATOR", "KNOT_M_S", "nmea_checksum", "format_sentence",
-           "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext", "parse_gprmc",
-           "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
-           "build_command", "cmd_send", "cmd_set_sensor_orientation", "cmd_set_speed_of_sound",
-           "startup_commands"]
+__all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown", "DvlRecord",
+           "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD", "beam_directions_frd", "LINE_TERMINATOR",
+           "KNOT_M_S", "nmea_checksum", "format_sentence", "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext",
+           "parse_gprmc", "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
+           "build_command", "cmd_send", "cmd_set_sensor_orientation", "cmd_set_speed_of_sound", "startup_commands"]
 
 #: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"
@@ -89,8 +86,7 @@ class DvlPositionDelta:
         delta_roll_rad, delta_pitch_rad, delta_yaw_rad: fields ``adr, adp, ady``, rad, about X (bow),
             Y (starboard), Z (down).
         delta_x_m, delta_y_m, delta_z_m: fields ``pdx, pdy, pdz``, m, forward / starboard / down.
-        confidence_pct: field ``c``, 0..100 % (0 = none; then every field after ``dtu`` is garbage
-            [D4b]).
+        confidence_pct: field ``c``, 0..100 % (0 = none; then every field after ``dtu`` is garbage [D4b]).
     """
 
     time_since_boot_s: float
@@ -171,8 +167,7 @@ class DvlGprmc:
     as a position command (§1.4).
 
     Attributes:
-        time_of_day_s: UTC time of day in s (for the DVL: time since power-on, power-on = midnight);
-            None when empty.
+        time_of_day_s: UTC time of day in s (for the DVL: time since power-on, power-on = midnight); None when empty.
         valid: status ``A`` (True) or ``V`` (False).
         latitude_deg, longitude_deg: decimal degrees (+N, +E); None when empty.
         speed_m_s: speed over ground (knots on the wire), m/s; None when empty.
@@ -244,10 +239,8 @@ def nmea_checksum(body: Union[bytes, str]) -> int:
 
     Args:
         body: sentence body without ``$`` and ``*hh``; str is encoded as UTF-8.
-    Returns:
-        int 0..255.
-    Source: docs/devices.md §1.2 ("NMEA standard", verified on real captures [D21]).
-    """
+    Returns int 0..255.
+    Source: docs/devices.md §1.2 ("NMEA standard", verified on real captures [D21])."""
     return reduce(lambda acc, b: acc ^ b, _to_bytes(body), 0)
 
 
@@ -257,9 +250,7 @@ def format_sentence(body: str, *, with_checksum: bool = True) -> bytes:
     Args:
         body: printable ASCII without ``$``, ``*``, CR or LF, e.g. ``"DVPDL,1,2,..."``.
         with_checksum: False gives ``$<body>\r\n`` (how ``$DVTXT`` is documented [D10]).
-    Raises:
-        ValueError: if ``body`` is not printable ASCII or contains ``$`` or ``*``.
-    """
+    Raises ``ValueError``: if ``body`` is not printable ASCII or contains ``$`` or ``*``."""
     raw = body.encode("ascii")  # UnicodeEncodeError is a ValueError
     if any(b < 0x20 or b > 0x7E for b in raw) or b"$" in raw or b"*" in raw:
         raise ValueError(f"sentence body must be printable ASCII without '$' or '*': {body!r}")
@@ -274,10 +265,8 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
     Trailing CR/LF are ignored.  A checksum is recognised when the line ends in ``*`` + two hex
     digits; ``checksum_ok`` is None when there is none.
 
-    Raises:
-        DvlParseError: line does not start with ``$``, has a malformed sentence id, or its checksum
-            does not verify (docs/devices.md §1.2).
-    """
+    Raises ``DvlParseError``: line does not start with ``$``, has a malformed sentence id, or its checksum does not
+    verify (docs/devices.md §1.2)."""
     raw = _to_bytes(line).rstrip(b"\r\n")
     if not raw.startswith(b"$"):
         raise DvlParseError(f"not an NMEA sentence (no leading '$'): {raw[:40]!r}")
@@ -288,9 +277,7 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
         expected = int(raw[-2:].decode("ascii"), 16)
         computed = nmea_checksum(body)
         if computed != expected:
-            raise DvlParseError(
-                f"checksum mismatch: line says {expected:02X}, computed {computed:02X}: {raw[:60]!r}"
-            )
+            raise DvlParseError(f"checksum mismatch: line says {expected:02X}, computed {computed:02X}: {raw[:60]!r}")
         checksum_ok = True
     text = body.decode("utf-8", errors="replace")
     parts = text.split(",")
@@ -333,9 +320,7 @@ def parse_dvpdl(fields: Sequence[str]) -> DvlPositionDelta:
 
     Args:
         fields: the fields after the sentence id (checksum already verified and removed).
-    Raises:
-        DvlParseError: wrong field count, malformed number, negative time, confidence outside 0..100.
-    """
+    Raises ``DvlParseError``: wrong field count, malformed number, negative time, confidence outside 0..100."""
     if len(fields) != _DVPDL_FIELDS - 1:
         raise DvlParseError(f"$DVPDL: expected {_DVPDL_FIELDS - 1} fields, got {len(fields)}")
     tu = _int(fields[0], "tu")
@@ -363,9 +348,7 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
     format"): integer µs times, ``%.6f`` angle deltas, ``%.3f`` position deltas, integer confidence,
     ``*HH`` checksum, CR LF.  Quantisation: 1 µs, 1e-6 rad, 1 mm.
 
-    Raises:
-        ValueError: negative times, non-finite values or confidence outside 0..100.
-    """
+    Raises ``ValueError``: negative times, non-finite values or confidence outside 0..100."""
     tu = round(record.time_since_boot_s * 1e6)
     dtu = round(record.delta_time_s * 1e6)
     if tu < 0 or dtu < 0:
@@ -376,8 +359,7 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
               record.delta_x_m, record.delta_y_m, record.delta_z_m)
     if not all(math.isfinite(v) for v in values):
         raise ValueError("non-finite delta")
-    body = "DVPDL,%d,%d,%.6f,%.6f,%.6f,%.3f,%.3f,%.3f,%d" % (
-        tu, dtu, *values, int(record.confidence_pct))
+    body = "DVPDL,%d,%d,%.6f,%.6f,%.6f,%.3f,%.3f,%.3f,%d" % (tu, dtu, *values, int(record.confidence_pct))
     return format_sentence(body)
 
 
@@ -403,13 +385,10 @@ _DVEXT_FOURS = (("orientation_wxyz", "q", _float, "%.6f".__mod__),
                 ("beam_range_m", "range", _float, "%.3f".__mod__))
 
 def parse_dvext(fields: Sequence[str]) -> DvlExtended:
-    """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty
-    field 35 that real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is
-    accepted too.
+    """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty field 35 that
+    real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is accepted too.
 
-    Raises:
-        DvlParseError: wrong field count, non-empty field 35, malformed number or flag.
-    """
+    Raises ``DvlParseError``: wrong field count, non-empty field 35, malformed number or flag."""
     n = _DVEXT_FIELDS - 1
     if len(fields) == n + 1:
         if fields[n] != "":
@@ -442,9 +421,7 @@ def format_dvext(record: DvlExtended) -> bytes:
     north/east ``%.3f``, lat/lon ``%.9f``, elapsed time ``%.3f``, quaternion ``%.6f``, gains integer
     dB, beam velocities ``%.4f``, beam ranges ``%.3f``.
 
-    Raises:
-        ValueError: non-finite values, or a GPS status / calibration field that is not printable.
-    """
+    Raises ``ValueError``: non-finite values, or a GPS status / calibration field that is not printable."""
     r = record
     floats = [getattr(r, attr) for attr, _, fmt in _DVEXT_SCALARS if fmt != "%d"] + [
         v for attr, _, parse, _ in _DVEXT_FOURS if parse is _float for v in getattr(r, attr)]
@@ -459,8 +436,7 @@ def format_dvext(record: DvlExtended) -> bytes:
 
 
 # $GPRMC
-def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str,
-                negative: str) -> Optional[float]:
+def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str, negative: str) -> Optional[float]:
     if value == "" and hemi == "":
         return None
     v = _float(value, name)
@@ -482,9 +458,7 @@ def parse_gprmc(fields: Sequence[str]) -> DvlGprmc:
     """Parse the data fields of ``$GPRMC`` (docs/devices.md §1.3.3): time, status, lat, N/S, lon, E/W,
     speed (knots), track (deg), date, magnetic variation, E/W, and an optional mode field.
 
-    Raises:
-        DvlParseError: wrong field count, malformed time/position/number, status not A/V.
-    """
+    Raises ``DvlParseError``: wrong field count, malformed time/position/number, status not A/V."""
     if len(fields) not in (11, 12):
         raise DvlParseError(f"$GPRMC: expected 11 or 12 fields, got {len(fields)}")
     t = fields[0]
@@ -515,9 +489,7 @@ def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float
     Args:
         time_of_day_s: s since midnight (wrapped to one day).
         track_rad: rad clockwise from north (printed as 0..360 deg).
-    Raises:
-        ValueError: non-finite inputs.
-    """
+    Raises ``ValueError``: non-finite inputs."""
     if not all(math.isfinite(v) for v in (time_of_day_s, speed_m_s, track_rad)):
         raise ValueError("non-finite $GPRMC input")
     centis = round((time_of_day_s % 86400.0) * 100) % 8640000
@@ -546,9 +518,7 @@ def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float
 def format_dvtxt(text: str) -> bytes:
     """Format a free-form ``$DVTXT,<text>`` line, without checksum as documented [D10] (§1.2).
 
-    Raises:
-        ValueError: text not printable ASCII (or containing ``*``/``$``).
-    """
+    Raises ``ValueError``: text not printable ASCII (or containing ``*``/``$``)."""
     return format_sentence("DVTXT," + text, with_checksum=False)
 
 
@@ -571,10 +541,8 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     ``GPS:$``, unknown ``$`` sentences) -> :class:`DvlUnknown`.  Bytes that are not UTF-8 are
     tolerated (replaced) and make numeric fields fail cleanly.
 
-    Raises:
-        DvlParseError: empty line, bad checksum on any ``$`` sentence, missing checksum on a data
-            sentence, malformed fields, or a non-``$`` line with non-printable bytes.
-    """
+    Raises ``DvlParseError``: empty line, bad checksum on any ``$`` sentence, missing checksum on a data sentence,
+    malformed fields, or a non-``$`` line with non-printable bytes."""
     raw = _to_bytes(line).rstrip(b"\r\n")
     if not raw:
         raise DvlParseError("empty line")
@@ -595,8 +563,7 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     for prefix in ("IMU:", "GPS:"):
         if text.startswith(prefix):
             rest = text[len(prefix):]
-            return DvlUnknown(sentence_id=prefix[:-1], fields=tuple(rest.split(",")), line=text,
-                              checksum_ok=None)
+            return DvlUnknown(sentence_id=prefix[:-1], fields=tuple(rest.split(",")), line=text, checksum_ok=None)
     return DvlText(text=text, sentence_id="", checksum_ok=None)
 
 
@@ -614,8 +581,7 @@ class DvlLineFramer:
     does not depend on how the stream is chunked.
 
     Args:
-        max_line_bytes: longest accepted line in bytes (a ``$DVEXT`` is about 250).
-    """
+        max_line_bytes: longest accepted line in bytes (a ``$DVEXT`` is about 250)."""
 
     def __init__(self, max_line_bytes: int = 1024) -> None:
         if max_line_bytes < 16:
@@ -679,9 +645,7 @@ def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
     command, LF-terminated, CR ignored).  Keywords are upper-cased (case sensitivity of the real
     firmware is undocumented).
 
-    Raises:
-        DvlParseError: empty line or non-printable bytes.
-    """
+    Raises ``DvlParseError``: empty line or non-printable bytes."""
     raw = _to_bytes(line).rstrip(b"\r\n").strip(b" \t")
     if not raw:
         raise DvlParseError("empty command")
@@ -700,9 +664,7 @@ def build_command(keyword: str, argument: Optional[str] = None) -> bytes:
     r"""Build one command line ``KEYWORD[ argument]\r\n`` (docs/devices.md §1.4; CR LF as the BlueOS
     driver sends [D17]).  Commands carry no checksum.
 
-    Raises:
-        ValueError: keyword/argument not printable ASCII, or keyword empty / containing spaces.
-    """
+    Raises ``ValueError``: keyword/argument not printable ASCII, or keyword empty / containing spaces."""
     if not keyword or " " in keyword:
         raise ValueError(f"invalid command keyword {keyword!r}")
     text = keyword if argument is None else f"{keyword} {argument}"
@@ -727,9 +689,7 @@ def cmd_send(message: str, enabled: bool) -> bytes:
     GPRMC, FREEFORM, DVKFA/DVKFB (the command table spells DVFKA/DVFKB, possibly a typo [UNVERIFIED];
     both spellings pass through verbatim).
 
-    Raises:
-        ValueError: unknown message name.
-    """
+    Raises ``ValueError``: unknown message name."""
     name = message.upper()
     if name not in _SEND_TARGETS:
         raise ValueError(f"unknown SEND- target {message!r}; expected one of {_SEND_TARGETS}")
@@ -740,9 +700,7 @@ def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: f
     """``SET-SENSOR-ORIENTATION <roll>,<pitch>,<heading>`` in degrees (docs/devices.md §1.4): the
     sensor -> vehicle rotation, each angle within ±180 deg; factory (0,0,0) = downward-looking.
 
-    Raises:
-        ValueError: an angle outside ±pi rad (±180 deg) or non-finite.
-    """
+    Raises ``ValueError``: an angle outside ±pi rad (±180 deg) or non-finite."""
     degs = [math.degrees(a) for a in (roll_rad, pitch_rad, heading_rad)]
     for d in degs:
         if not math.isfinite(d) or abs(d) > 180.0 + 1e-9:
@@ -753,17 +711,14 @@ def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: f
 def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
     """``SET-SPEED-OF-SOUND <m/s>`` (docs/devices.md §1.4: 1100..1950 m/s, sticky; factory 1484).
 
-    Raises:
-        ValueError: outside 1100..1950 m/s.
-    """
+    Raises ``ValueError``: outside 1100..1950 m/s."""
     if not 1100.0 <= speed_of_sound_m_s <= 1950.0:
         raise ValueError(f"speed of sound {speed_of_sound_m_s} m/s outside 1100..1950")
     return build_command("SET-SPEED-OF-SOUND", _num(speed_of_sound_m_s, 1))
 
 
 def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 0.0, 0.0),
-                     speed_of_sound_m_s: Optional[float] = None,
-                     request_configuration: bool = True) -> list:
+                     speed_of_sound_m_s: Optional[float] = None, request_configuration: bool = True) -> list:
     """The command lines a driver sends at start-up, modelled on the BlueOS sequence [D17]
     (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT ON``,
     ``SEND-GPRMC OFF``, ``RETWEET-IMU OFF``, ``RETWEET-GPS OFF``, ``SET-SENSOR-ORIENTATION``,
@@ -772,11 +727,8 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     Args:
         sensor_orientation_rad: (roll, pitch, heading) sensor -> vehicle rotation, rad.
         speed_of_sound_m_s: None leaves the DVL's sticky value alone.
-    Returns:
-        list of bytes, one command line each (CR LF terminated).
-    Raises:
-        ValueError: out-of-range arguments (see the individual builders).
-    """
+    Returns list of bytes, one command line each (CR LF terminated).
+    Raises ``ValueError``: out-of-range arguments (see the individual builders)."""
     cmds = [cmd_send("DVPDL", True), cmd_send("DVEXT", True), cmd_send("GPRMC", False),
             build_command("RETWEET-IMU", "OFF"), build_command("RETWEET-GPS", "OFF"),
             cmd_set_sensor_orientation(*sensor_orientation_rad)]

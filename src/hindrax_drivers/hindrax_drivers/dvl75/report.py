@@ -37,8 +37,7 @@ Conventions and sources
     when unlocked or not positive.
   - beam velocities: the DVL's sign is + approaching (the only documented sign, Tracker-650 [D16],
     docs/devices.md §1.3.4; [UNVERIFIED for the DVL-75]); ``hindrax_msgs/Dvl`` wants + away from the
-    transducer, so the sign is flipped. Beams without lock report NaN range and velocity.
-"""
+    transducer, so the sign is flipped. Beams without lock report NaN range and velocity."""
 from __future__ import annotations
 
 import math
@@ -123,9 +122,7 @@ class DvlReportBuilder:
         max_angular_rate_rad_s: gate on |delta_theta| / dtu, rad/s (``sensors.dvl75.max_angular_rate_rad_s``);
             None: only finiteness. The speed gate applies to the lever-arm-corrected velocity (the one published):
             a wild attitude delta over a small displacement would otherwise pass as a huge CG velocity.
-    Raises:
-        ValueError: position not 3 finite numbers, negative std or age, non-positive gate.
-    """
+    Raises ``ValueError``: position not 3 finite numbers, negative std or age, non-positive gate."""
 
     def __init__(self, position_frd_m: Sequence[float] = (0.0, 0.0, 0.0), velocity_std_m_s: float = 0.02,
                  max_extended_age_s: float = 1.0, max_speed_m_s: Optional[float] = None,
@@ -227,8 +224,7 @@ class DvlReportBuilder:
         """``report`` with its velocity withdrawn (NaN, not valid, covariances unknown) for ``reason``
         (e.g. a stuck device): everything else (attitude, altitude, beams) is kept."""
         return replace(report, velocity_valid=False, velocity_flu_m_s=_NAN3, delta_position_flu_m=_NAN3,
-                       velocity_covariance=UNKNOWN_COVARIANCE_3X3,
-                       twist_covariance=_UNKNOWN_TWIST,
+                       velocity_covariance=UNKNOWN_COVARIANCE_3X3, twist_covariance=_UNKNOWN_TWIST,
                        rejection=report.rejection or reason)
 
     def _report(self, ext: Optional[DvlExtended], *, device_time_ns, valid, velocity, delta, delta_time_s,

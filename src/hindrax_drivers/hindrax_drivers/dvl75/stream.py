@@ -21,16 +21,14 @@ Error kinds (keys of :attr:`DvlStreamDecoder.counts`):
 Counting truncated sentences without access to the framer's internals: every DVL sentence starts with
 exactly one ``$`` (``$DVTXT`` free text and ``GPS:$`` re-tweets are kept whole by the framer), so the
 ``$`` bytes of the completed lines that do not reappear in the lines the framer returns belong to
-sentences that were cut short. The count is exact for any chunking of the stream.
-"""
+sentences that were cut short. The count is exact for any chunking of the stream."""
 from __future__ import annotations
 
 import collections
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Union
 
-from .protocol import (DvlLineFramer, DvlParseError, DvlRecord, DvlUnknown, nmea_checksum,
-                       parse_line)
+from .protocol import DvlLineFramer, DvlParseError, DvlRecord, DvlUnknown, nmea_checksum, parse_line
 
 __all__ = ["DvlStreamDecoder", "DvlStreamError", "ERROR_KINDS", "classify_line_error"]
 
@@ -62,8 +60,7 @@ def classify_line_error(line: bytes) -> str:
 
     ``$...*hh`` with a wrong checksum -> ``bad_checksum``; ``$...*hh`` with a right one -> ``malformed``
     (its fields are wrong); ``$...`` without checksum -> ``truncated`` (only data sentences require one,
-    so the end was lost); anything else -> ``malformed``.
-    """
+    so the end was lost); anything else -> ``malformed``."""
     raw = bytes(line).rstrip(b"\r\n")
     if raw.startswith(b"$"):
         if len(raw) >= 4 and raw[-3:-2] == b"*" and raw[-2] in _HEX and raw[-1] in _HEX:
@@ -137,8 +134,7 @@ class DvlStreamDecoder:
         return out
 
     def reset(self) -> None:
-        """Drop a partial line (after a reconnect): a started sentence counts as truncated, other bytes
-        as garbage."""
+        """Drop a partial line (after a reconnect): a started sentence counts as truncated, other bytes as garbage."""
         discarded_before = self._framer.discarded_bytes
         self._framer.reset()
         discarded = self._framer.discarded_bytes - discarded_before

@@ -1,14 +1,12 @@
-"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4), run by the node
-(:mod:`.node`) from its timers through injected I2C ports, tested step by step against the
-register-exact emulator.
+"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4), run by the node (:mod:`.node`) from
+its timers through injected I2C ports, tested step by step against the register-exact emulator.
 
 - Settings (:class:`ImuSettings`): register fields, noise variances, AK09916 mode and publishing
   rates from ``sensors.icm20948.*`` (§4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the
   bank cached (§4.1), unknown after a failed transfer or a DEVICE_RESET.
-- :class:`StartupSequence` (§4.3): steps each giving the datasheet's wait. A wrong WHO_AM_I or an
-  I2C failure ends the attempt (the node retries); a silent magnetometer is reported through
-  ``on_magnetometer``, never a start-up failure; ``magnetometer_only=True`` brings a lost AK09916
-  back without resetting the chip.
+- :class:`StartupSequence` (§4.3): steps each giving the datasheet's wait. A wrong WHO_AM_I or an I2C failure ends the
+  attempt (the node retries); a silent magnetometer is reported through ``on_magnetometer``, never a start-up failure;
+  ``magnetometer_only=True`` brings a lost AK09916 back without resetting the chip.
 - :class:`GyroBias`: the mean over the first ``gyro_bias_duration_s``, subtracted only when every
   axis's gyro and accelerometer std shows a still vehicle, else a WARN says why.
 - :func:`read_poll`: one burst per poll. With ``require_data_ready`` a poll without
@@ -18,11 +16,9 @@ register-exact emulator.
   block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`) make the node read
   the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
   samples unpublished, the start-up run again. An all-zero block is never published.
-- Magnetometer: an ``i2c_master`` block read under SLV0_NACK is old (:class:`MagNackFilter`, counted
-  ``mag_nack``). :class:`MagnetometerWatch`: none for ``mag_stale_timeout_s`` raises the ERROR
-  ``magnetometer`` and re-initialises the magnetometer alone, one step per poll, retried every
-  ``mag_retry_interval_s`` (``mag_retries``).
-"""
+- Magnetometer: an ``i2c_master`` block read under SLV0_NACK is old (:class:`MagNackFilter`, counted ``mag_nack``).
+  :class:`MagnetometerWatch`: none for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises the
+  magnetometer alone, one step per poll, retried every ``mag_retry_interval_s`` (``mag_retries``)."""
 from __future__ import annotations
 
 import collections
@@ -117,8 +113,7 @@ class ImuSettings:
         temperature_every = max(1, round(odr / TEMPERATURE_PUBLISH_HZ))
         mag_every = max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[mag_mode], odr) / MAG_PUBLISH_HZ))
         return cls(config, odr, mag_mode, rot, a_var, g_var, (rot * a_var) @ rot.T, (rot * g_var) @ rot.T,
-                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, temperature_every, mag_every,
-                   tuple(warnings))
+                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, temperature_every, mag_every, tuple(warnings))
 
 
 def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
@@ -128,9 +123,7 @@ def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: flo
     Full scale: the FS_SEL whose range equals the setting (2/4/8/16 g, 250/500/1000/2000 dps). DLPF: the
     same DLPFCFG for accel and gyro (FCHOICE = 1). Divider for both: ``round(1125 / rate) - 1`` in 0..255.
 
-    Raises:
-        Icm20948Error: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate.
-    """
+    Raises ``Icm20948Error``: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate."""
     try:
         accel_fs = p.ACCEL_RANGE_G.index(float(accel_full_scale_g))
         gyro_fs = p.GYRO_RANGE_DPS.index(float(gyro_full_scale_dps))
@@ -148,9 +141,8 @@ def imu_noise_variances(config: p.ImuConfig) -> tuple[float, float]:
     """Per-axis white-noise variances (accel m^2/s^4, gyro rad^2/s^2) for ``config``.
 
     variance = density^2 * noise_bandwidth(DLPFCFG) + LSB^2 / 12, with the datasheet densities
-    (:data:`ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ`, :data:`GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ`), the noise
-    bandwidths of docs/devices.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest
-    bandwidth (DLPFCFG 7) is used.
+    (:data:`ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ`, :data:`GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ`), the noise bandwidths of
+    docs/devices.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest bandwidth (DLPFCFG 7) is used.
     """
     a_cfg = 7 if config.accel_dlpfcfg is None else config.accel_dlpfcfg
     g_cfg = 7 if config.gyro_dlpfcfg is None else config.gyro_dlpfcfg
@@ -179,8 +171,7 @@ class BankedRegisters:
         device: the chip on the bus (``write_byte_data``, ``read_block``; raises ``I2CError``).
 
     :attr:`bank` is None while unknown: before the first selection, after a failed selection, after
-    :meth:`invalidate` (a failed transfer elsewhere) and after a DEVICE_RESET (reset-to-bank-0 is only assumed).
-    """
+    :meth:`invalidate` (a failed transfer elsewhere) and after a DEVICE_RESET (reset-to-bank-0 is only assumed)."""
 
     def __init__(self, device: I2CPort):
         self.device = device
@@ -276,8 +267,7 @@ class StartupSequence:
         """Run steps until one asks for a wait, a step fails, or none is left.
 
         An I2C failure or a wrong identity ends the attempt (``failure``); a magnetometer that does not answer does
-        not (``on_magnetometer(False, reason)``).
-        """
+        not (``on_magnetometer(False, reason)``)."""
         while self._steps:
             step = self._steps.popleft()
             try:
@@ -431,8 +421,7 @@ class GyroBias:
 
     :meth:`start` after each start-up begins the window once (True while it runs); :meth:`add` feeds
     it and returns a :class:`GyroBiasResult` once (at least two samples and ``duration_s``);
-    ``bias_rad_s`` (3,) is what the node subtracts: zero until a still window gave one.
-    """
+    ``bias_rad_s`` (3,) is what the node subtracts: zero until a still window gave one."""
 
     def __init__(self, enabled: bool, duration_s: float, gyro_var: float, accel_var: float) -> None:
         if not duration_s > 0.0:
@@ -724,15 +713,13 @@ class PollResult:
 
 def read_poll(regs: BankedRegisters, mag_device: I2CPort, mag_mode: str, mag_available: bool,
               require_data_ready: bool, nack_filter: MagNackFilter) -> PollResult:
-    """The reads of one poll, in bank 0 (module docstring of the node): one burst ending with the
-    sensor block from ACCEL_XOUT_H (plus the AK09916 block in ``i2c_master`` mode), starting early
-    enough to take the status registers the poll needs in the same transfer: I2C_MST_STATUS (0x17,
-    SLV0_NACK through ``nack_filter``) in ``i2c_master`` mode, else INT_STATUS_1 (0x1A,
-    RAW_DATA_0_RDY) when ``require_data_ready``, else ACCEL_XOUT_H itself. One bus transaction (one
-    system call, one wake-up) per poll instead of three; the status registers between them
-    (INT_STATUS, INT_STATUS_2/3) are read and cleared too, which no step uses. In ``bypass`` mode
-    the AK09916 block is a second read, at 0x0C:0x10. Only the burst's failure is an error (the poll
-    is dropped)."""
+    """The reads of one poll, in bank 0 (module docstring of the node): one burst ending with the sensor block from
+    ACCEL_XOUT_H (plus the AK09916 block in ``i2c_master`` mode), starting early enough to take the status registers the
+    poll needs in the same transfer: I2C_MST_STATUS (0x17, SLV0_NACK through ``nack_filter``) in ``i2c_master`` mode,
+    else INT_STATUS_1 (0x1A, RAW_DATA_0_RDY) when ``require_data_ready``, else ACCEL_XOUT_H itself. One bus transaction
+    (one system call, one wake-up) per poll instead of three; the status registers between them (INT_STATUS,
+    INT_STATUS_2/3) are read and cleared too, which no step uses. In ``bypass`` mode the AK09916 block is a second read,
+    at 0x0C:0x10. Only the burst's failure is an error (the poll is dropped)."""
     counters: list[str] = []
     master = mag_mode == "i2c_master" and mag_available
     first = p.I2C_MST_STATUS if master else p.INT_STATUS_1 if require_data_ready else p.ACCEL_XOUT_H

@@ -1,15 +1,13 @@
 """ICM-20948 and AK09916 device emulators (register-exact), for tests and simulation.
 
-:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md
-§4.8:
+:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md §4.8:
 
 * four banks selected by REG_BANK_SEL (0x7F, bits 5:4), WHO_AM_I = 0xEA, reset values PWR_MGMT_1 =
   0x41 (asleep), LP_CONFIG = 0x40, ACCEL_CONFIG = 0x01, GYRO_CONFIG_1 = 0x01 [UNVERIFIED];
   DEVICE_RESET restores them and selects bank 0 [assumed in §4.1]; bursts auto-increment;
 * data registers follow a truth source ``t_s -> (specific_force_m_s2 (3,), angular_rate_rad_s (3,),
-  magnetic_field_t (3,), temperature_c)`` in the SENSOR frame, sampled at the configured output data
-  rate and quantised with the full scale; frozen while SLEEP; INT_STATUS_1.RAW_DATA_0_RDY set on new
-  data, cleared on read;
+  magnetic_field_t (3,), temperature_c)`` in the SENSOR frame, sampled at the configured output data rate and quantised
+  with the full scale; frozen while SLEEP; INT_STATUS_1.RAW_DATA_0_RDY set on new data, cleared on read;
 * the AK09916 (:class:`Ak09916Emulator`: DRDY/DOR/HOFL, ST2 read-lock, modes) is reached directly
   through :attr:`Icm20948Emulator.aux_port` when BYPASS_EN = 1 and I2C_MST_EN = 0 (else it NACKs),
   or through the I2C master: SLV0..SLV3 once per master cycle (gyro ODR tick, and at once on a
@@ -19,8 +17,7 @@
   bus errors are injected by the bus.
 
 Not modelled: FIFO, DMP, interrupt pins, low-power cycling, self-test, the start-up delay after
-wake, filter dynamics (the DLPF only sets the output rate).
-"""
+wake, filter dynamics (the DLPF only sets the output rate)."""
 
 from __future__ import annotations
 
@@ -55,13 +52,11 @@ class Ak09916Emulator(RegisterPointerEmulator):
             applies the axis flip of §4.7 (hx = Bx, hy = -By, hz = -Bz).
         clock: monotonic clock, s.
 
-    Semantics: continuous modes measure every 1/rate s from the mode write; a measurement that
-    finds unread data (DRDY = 1), or arrives while a read is in progress (a data register was read
-    but ST2 not yet), sets DOR and, in the second case, is discarded. DRDY and DOR clear when a data
-    register or ST2 is read; reading ST2 ends the read lock. Values beyond +-32752 counts are
-    clamped with ST2.HOFL = 1. Writing the current mode again keeps its timing; the self-test mode
-    is stored but produces no measurement. ``stuck = True`` freezes the data registers.
-    """
+    Semantics: continuous modes measure every 1/rate s from the mode write; a measurement that finds unread data
+    (DRDY = 1), or arrives while a read is in progress (a data register was read but ST2 not yet), sets DOR and, in the
+    second case, is discarded. DRDY and DOR clear when a data register or ST2 is read; reading ST2 ends the read lock.
+    Values beyond +-32752 counts are clamped with ST2.HOFL = 1. Writing the current mode again keeps its timing; the
+    self-test mode is stored but produces no measurement. ``stuck = True`` freezes the data registers."""
 
     def __init__(self, field_truth: Callable[[float], Sequence[float]],
                  clock: Callable[[], float] = time.monotonic) -> None:
@@ -389,8 +384,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
         addr = self._get(p.I2C_SLV4_ADDR)
         status = p.I2C_MST_STATUS_SLV4_DONE
         try:
-            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl,
-                                  self._get(p.I2C_SLV4_DO), 1)
+            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl, self._get(p.I2C_SLV4_DO), 1)
             if addr & p.I2C_SLV_ADDR_RNW:
                 self._set(p.I2C_SLV4_DI, data[0])
         except OSError:
@@ -465,8 +459,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
                     self._banks[0][p.EXT_SLV_SENS_DATA_00.address:
                                    p.EXT_SLV_SENS_DATA_00.address + p.EXT_SLV_SENS_DATA_LENGTH] = bytes(24)
                     self._set(p.I2C_MST_STATUS, 0)
-                self._set(p.USER_CTRL, value & ~(p.USER_CTRL_I2C_MST_RST | p.USER_CTRL_SRAM_RST
-                                                 | p.USER_CTRL_DMP_RST))
+                self._set(p.USER_CTRL, value & ~(p.USER_CTRL_I2C_MST_RST | p.USER_CTRL_SRAM_RST | p.USER_CTRL_DMP_RST))
                 if self.master_enabled and not was_enabled and not self.sleeping and not self._stuck:
                     gyro_odr_hz = self.config.gyro_odr_hz
                     self._last_master_t = math.floor(float(self.clock()) * gyro_odr_hz) / gyro_odr_hz

@@ -12,8 +12,7 @@ the gyro bias), ``imu/mag`` sensor_msgs/MagneticField (tesla, (hx, -hy, -hz), do
 unknown), ``imu/temperature`` (degC), ``raw/icm20948`` (a poll's I2C transactions) and ``/diagnostics`` (ERRORs
 ``stuck``, ``chip_reset``, ``magnetometer``, ``data_ready``). The bus: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on
 the Pi, an :class:`~hindrax_drivers.icm20948.emulator.Icm20948Emulator` on an emulated bus in tests and simulation.
-Alone: ``python -m hindrax_drivers.icm20948.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
-"""
+Alone: ``python -m hindrax_drivers.icm20948.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
 from __future__ import annotations
 
 from typing import Any

@@ -1,11 +1,10 @@
 """TDK InvenSense ICM-20948 (with AK09916 magnetometer): pure protocol layer (no I/O, no clocks).
 
-The registers the driver uses (the full map: docs/devices.md §4.1), identity values, the reset/wake
-and configuration sequences as data (lists of register writes), full-scale / DLPF / sample-rate
-register values from SI settings, conversion of raw burst reads to SI (accel m/s^2, gyro rad/s,
-temperature degC, magnetic field T rotated into the accel/gyro frame), the AK09916 status flags, and
-the device-side quantisation used by the emulator. Everything is from docs/devices.md §4 (datasheet
-DS-000189 [I1], SparkFun [I2], Pimoroni [I3], PX4 [I4]).
+The registers the driver uses (the full map: docs/devices.md §4.1), identity values, the reset/wake and configuration
+sequences as data (lists of register writes), full-scale / DLPF / sample-rate register values from SI settings,
+conversion of raw burst reads to SI (accel m/s^2, gyro rad/s, temperature degC, magnetic field T rotated into the
+accel/gyro frame), the AK09916 status flags, and the device-side quantisation used by the emulator. Everything is from
+docs/devices.md §4 (datasheet DS-000189 [I1], SparkFun [I2], Pimoroni [I3], PX4 [I4]).
 
 Why our own code: the available Python packages (Pimoroni ``icm20948``) do I/O inside the
 conversion code, hard-code one configuration and write a questionable I2C_MST_CTRL value
@@ -14,8 +13,7 @@ conversion code, hard-code one configuration and write a questionable I2C_MST_CT
 Facts used that docs/devices.md marks as unverified or that go beyond it are flagged in the
 docstrings: gyro base rate 1125 Hz (§4.4 discrepancy), gyro ODR with the DLPF bypassed (9 kHz,
 datasheet spec table, not in docs/devices.md), INT_STATUS_1 / I2C_MST_STATUS bit positions (datasheet
-register descriptions), temperature room offset 0 (§4.4).
-"""
+register descriptions), temperature room offset 0 (§4.4)."""
 
 from __future__ import annotations
 
@@ -27,10 +25,9 @@ import numpy as np
 
 from hindrax_common.transport.i2c import RegisterWrite
 
-__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
-           "flatten_writes", "reset_wake_sequence", "configure_sequence",
-           "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
-           "ak09916_direct_init_writes", "parse_sensor_block",
+__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample", "flatten_writes",
+           "reset_wake_sequence", "configure_sequence", "slave_read_writes", "slave_write_writes",
+           "mag_master_sequence", "mag_bypass_sequence", "ak09916_direct_init_writes", "parse_sensor_block",
            "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
            "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
 
@@ -209,10 +206,8 @@ def accel_odr_hz(smplrt_div: int, fchoice: int) -> float:
 def gyro_odr_hz(smplrt_div: int, fchoice: int, dlpfcfg: int) -> float:
     """Gyro output data rate (docs/devices.md §4.4).
 
-    1125/(1 + div) when FCHOICE = 1 and 0 < DLPFCFG < 7 (the divider only takes effect then);
-    1125 Hz for FCHOICE = 1 with DLPFCFG 0 or 7; 9 kHz with the DLPF bypassed (flagged, see
-    :data:`GYRO_BYPASS_ODR_HZ`).
-    """
+    1125/(1 + div) when FCHOICE = 1 and 0 < DLPFCFG < 7 (the divider only takes effect then); 1125 Hz for FCHOICE = 1
+    with DLPFCFG 0 or 7; 9 kHz with the DLPF bypassed (flagged, see :data:`GYRO_BYPASS_ODR_HZ`)."""
     if not fchoice:
         return GYRO_BYPASS_ODR_HZ
     if 0 < int(dlpfcfg) < 7:
@@ -318,9 +313,7 @@ def flatten_writes(writes: Iterable[BankedWrite], current_bank: int | None = Non
     treated as unknown at the start (``current_bank=None``) and after a DEVICE_RESET write (the
     reset-to-bank-0 behaviour is only assumed in docs/devices.md §4.1), so it is always re-selected.
 
-    Raises:
-        Icm20948Error: a value outside 0..255 or an AK09916 register (bank None).
-    """
+    Raises ``Icm20948Error``: a value outside 0..255 or an AK09916 register (bank None)."""
     out: list[RegisterWrite] = []
     bank = current_bank
     for w in writes:
@@ -344,8 +337,7 @@ def reset_wake_sequence(reset_wait_s: float = 0.010, wake_wait_s: float = 0.020)
 
     PWR_MGMT_1 = 0x80 (DEVICE_RESET), wait ~10 ms; PWR_MGMT_1 = 0x01 (SLEEP = 0, CLKSEL auto),
     wait 20 ms (accel start-up from sleep [I1 p12]); PWR_MGMT_2 = 0x00 (all axes on). Check
-    WHO_AM_I == 0xEA before (step 1) with a read of bank 0 register 0x00.
-    """
+    WHO_AM_I == 0xEA before (step 1) with a read of bank 0 register 0x00."""
     return [
         BankedWrite(PWR_MGMT_1, PWR_MGMT_1_DEVICE_RESET, reset_wait_s, "DEVICE_RESET"),
         BankedWrite(PWR_MGMT_1, CLKSEL_AUTO, wake_wait_s, "wake, CLKSEL auto"),
@@ -368,8 +360,7 @@ def slave_read_writes(slave: int, address: int, register: int, length: int) -> l
     """Configure I2C master slave ``slave`` to read ``length`` bytes each cycle (docs/devices.md §4.6b).
 
     The slave is disabled first, so no master cycle can run with a half-updated configuration;
-    the bytes land in EXT_SLV_SENS_DATA in slave order.
-    """
+    the bytes land in EXT_SLV_SENS_DATA in slave order."""
     if not 1 <= length <= 15:
         raise Icm20948Error(f"slave read length must be 1..15, got {length}")
     a, r, c, _ = slave_registers(slave)
@@ -377,14 +368,11 @@ def slave_read_writes(slave: int, address: int, register: int, length: int) -> l
             BankedWrite(r, register & 0xFF), BankedWrite(c, I2C_SLV_CTRL_EN | length)]
 
 
-def slave_write_writes(slave: int, address: int, register: int, value: int,
-                       wait_s: float = 0.0) -> list[BankedWrite]:
+def slave_write_writes(slave: int, address: int, register: int, value: int, wait_s: float = 0.0) -> list[BankedWrite]:
     """Make the I2C master write ``value`` to ``register`` of ``address`` (docs/devices.md §4.6b step 4).
 
-    SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The
-    master repeats the write every cycle until the slave is reconfigured; wait ``wait_s`` (at
-    least one master cycle) after enabling.
-    """
+    SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The master repeats the write
+    every cycle until the slave is reconfigured; wait ``wait_s`` (at least one master cycle) after enabling."""
     a, r, c, d = slave_registers(slave)
     return [BankedWrite(c, 0x00), BankedWrite(a, address & 0x7F), BankedWrite(r, register & 0xFF),
             BankedWrite(d, value & 0xFF), BankedWrite(c, I2C_SLV_CTRL_EN | 1, wait_s)]
@@ -393,14 +381,11 @@ def slave_write_writes(slave: int, address: int, register: int, value: int,
 def mag_master_sequence(config: ImuConfig, mode: int = AK_MODE_CONTINUOUS_100HZ) -> list[BankedWrite]:
     """Reach the AK09916 through the ICM I2C master (docs/devices.md §4.6 (b)).
 
-    BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = I2C_MST_EN; via SLV0: CNTL3 = SRST, then
-    CNTL2 = ``mode``; finally SLV0 reads 9 bytes from ST1 (0x10) every cycle into
-    EXT_SLV_SENS_DATA_00..08. Each SLV0 write waits three master cycles (the master runs at the
-    gyro ODR, an assumption: the I2C_MST_ODR_CONFIG formula is unverified, §6).
+    BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = I2C_MST_EN; via SLV0: CNTL3 = SRST, then CNTL2 = ``mode``; finally
+    SLV0 reads 9 bytes from ST1 (0x10) every cycle into EXT_SLV_SENS_DATA_00..08. Each SLV0 write waits three master
+    cycles (the master runs at the gyro ODR, an assumption: the I2C_MST_ODR_CONFIG formula is unverified, §6).
 
-    Raises:
-        Icm20948Error: ``mode`` not an AK09916 CNTL2 mode.
-    """
+    Raises ``Icm20948Error``: ``mode`` not an AK09916 CNTL2 mode."""
     if mode not in (AK_MODE_POWER_DOWN, AK_MODE_SINGLE, AK_MODE_SELF_TEST, *AK_CONTINUOUS_MODE_RATE_HZ):
         raise Icm20948Error(f"0x{mode:02x} is not an AK09916 CNTL2 mode")
     cycle_wait_s = max(3.0 / config.gyro_odr_hz, AK_RESET_WAIT_S)
@@ -471,9 +456,7 @@ def parse_sensor_block(data: bytes | Sequence[int], config: ImuConfig) -> ImuSam
     Layout: accel X/Y/Z, gyro X/Y/Z, temperature, each int16 big-endian. accel = raw/LSB_per_g * g;
     gyro = raw/LSB_per_dps in rad/s; temperature = raw/333.87 + 21 degC.
 
-    Raises:
-        Icm20948Error: not 14 bytes.
-    """
+    Raises ``Icm20948Error``: not 14 bytes."""
     raw = np.frombuffer(_as_bytes(data, SENSOR_BLOCK_LENGTH, "ICM-20948 sensor block"), dtype=">i2")
     accel_raw = (int(raw[0]), int(raw[1]), int(raw[2]))
     gyro_raw = (int(raw[3]), int(raw[4]), int(raw[5]))
@@ -518,9 +501,7 @@ def parse_ak09916_block(data: bytes | Sequence[int]) -> MagSample:
     EXT_SLV_SENS_DATA_00..08 filled by SLV0 (docs/devices.md §4.5-4.7). Data are int16
     little-endian; 0.15 uT/LSB; axes flipped to the accel frame (m_x = hx, m_y = -hy, m_z = -hz).
 
-    Raises:
-        Icm20948Error: not 9 bytes.
-    """
+    Raises ``Icm20948Error``: not 9 bytes."""
     raw_bytes = _as_bytes(data, AK09916_BLOCK_LENGTH, "AK09916 block")
     st1, st2 = raw_bytes[0], raw_bytes[8]
     h = np.frombuffer(raw_bytes[1:7], dtype="<i2").astype(float)

@@ -16,8 +16,7 @@
 - Zero depth (:class:`ZeroDepth`): the surface pressure becomes the mean of the last :data:`ZERO_DEPTH_WINDOW_S`;
   refused while the ESC may be thrusting (:class:`hindrax_common.node_support.esc_state.ArmedWatch`'s reason) and when
   that mean is further than ``zero_depth_margin_pa`` from the pressure the node started with (a zero taken at 1.5 m
-  would move every depth, and the depth limits with it, 1.5 m down).
-"""
+  would move every depth, and the depth limits with it, 1.5 m down)."""
 from __future__ import annotations
 
 import collections
@@ -48,8 +47,7 @@ TEMPERATURE_RESOLUTION_C = 0.01
 def pressure_variance_pa2(variant: p.Variant) -> float:
     """Variance of one pressure reading, Pa^2: resolution^2 (taken as 1 sigma) + output LSB^2 / 12.
 
-    Output LSB: 10 Pa (30BA, 0.1 mbar) or 1 Pa (02BA, 0.01 mbar) (docs/devices.md §3.4, §3.6).
-    """
+    Output LSB: 10 Pa (30BA, 0.1 mbar) or 1 Pa (02BA, 0.01 mbar) (docs/devices.md §3.4, §3.6)."""
     lsb_pa = 1.0 / p.pressure_counts_per_pa(variant)
     return PRESSURE_RESOLUTION_PA[p.Variant(variant)] ** 2 + lsb_pa ** 2 / 12.0
 
@@ -115,13 +113,11 @@ def depth_covariance(pressure_variance_pa2: float, rho_g: float) -> list[float]:
 class DepthGate:
     """Range and rate-of-change gate on the depth after conversion (pure; see the module docstring).
 
-    ``check(t_s, depth_m)`` returns '' to publish, else the reason; ``invalid()`` tells it that a cycle gave no
-    reading (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted
-    one, accepted at most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and
-    accepted when the very next cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise
-    passes only when two consecutive garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well
-    under 1 m/s.
-    """
+    ``check(t_s, depth_m)`` returns '' to publish, else the reason; ``invalid()`` tells it that a cycle gave no reading
+    (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted one, accepted at
+    most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and accepted when the very next
+    cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise passes only when two consecutive
+    garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well under 1 m/s."""
 
     def __init__(self, min_depth_m: float, max_depth_m: float, max_rate_m_s: float, noise_m: float = 0.05,
                  max_age_s: float = 0.5) -> None:

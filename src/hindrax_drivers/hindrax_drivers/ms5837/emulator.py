@@ -1,7 +1,6 @@
 """TE MS5837-30BA / -02BA device emulator (command-exact, I2C address 0x76).
 
-For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device side of
-docs/devices.md §3.1 and §3.8:
+For :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`; the device side of docs/devices.md §3.1 and §3.8:
 
 * commands: reset (0x1E), PROM read (0xA0 + 2k, MSB first), D1/D2 conversions with OSR, ADC read
   (0x00, 3 bytes MSB first);
@@ -11,13 +10,11 @@ docs/devices.md §3.1 and §3.8:
 * raw values from a truth source ``t_s -> (pressure_pa, temperature_c)`` at the start of each
   conversion, through the inverse compensation (§3.8, :func:`invert_to_raw`);
 * faults: stuck outputs, corrupted or blank PROM, forced ADC counts (``raw_override``), a power
-  cycle (:meth:`Ms5837Emulator.power_cycle`: ADC reads 0 until the next reset); NACKs are injected
-  by the bus.
+  cycle (:meth:`Ms5837Emulator.power_cycle`: ADC reads 0 until the next reset); NACKs are injected by the bus.
 
 Modelling choices: reset is instantaneous; conversion time per OSR is
 :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (§3.1); unknown commands are ignored;
-reads not preceded by PROM/ADC commands return zeros.
-"""
+reads not preceded by PROM/ADC commands return zeros."""
 
 from __future__ import annotations
 
@@ -66,17 +63,15 @@ def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int,
     return a if abs(f(a) - target) < abs(f(b) - target) else b
 
 
-def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calibration,
-                  variant: p.Variant, apply_second_order: bool = True,
-                  hint: tuple[int, int] | None = None) -> tuple[int, int]:
+def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calibration, variant: p.Variant,
+                  apply_second_order: bool = True, hint: tuple[int, int] | None = None) -> tuple[int, int]:
     """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
 
     Implements docs/devices.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
-    ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts.
-    Instead of the closed-form estimate plus +-1 adjustment we bisect on the exact integer forward
-    model (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and
-    also covers the second-order branches. Both are clamped to 24 bits, so targets outside the
-    representable range saturate.
+    ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts. Instead of the
+    closed-form estimate plus +-1 adjustment we bisect on the exact integer forward model
+    (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and also covers the second-order
+    branches. Both are clamped to 24 bits, so targets outside the representable range saturate.
 
     Args:
         pressure_pa: absolute pressure, Pa.
@@ -88,13 +83,10 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
 
     Returns:
         (D1, D2), each 0..2^24-1. The round trip error is within half an output LSB
-        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with
-        the second-order model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a
-        value.
+        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with the second-order
+        model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a value.
 
-    Raises:
-        Ms5837Error: non-finite inputs.
-    """
+    Raises ``Ms5837Error``: non-finite inputs."""
     if not all(map(lambda v: v == v and abs(v) != float("inf"), (pressure_pa, temperature_c))):
         raise p.Ms5837Error(f"truth values must be finite, got {pressure_pa}, {temperature_c}")
     variant = p.Variant(variant)
@@ -135,15 +127,13 @@ class Ms5837Emulator:
         ``blank_prom``: every PROM word reads 0 (whose CRC-4 is 0: it passes the CRC check).
         ``raw_override``: (D1, D2) counts every conversion returns instead of the truth's, or None.
 
-    Counter: ``zero_reads`` (ADC reads that returned 0).
-    """
+    Counter: ``zero_reads`` (ADC reads that returned 0)."""
 
     address = p.ADDRESS
 
     def __init__(self, truth: TruthSource, clock: Callable[[], float] = time.monotonic,
-                 variant: p.Variant | str = p.Variant.MS5837_30BA,
-                 coefficients: Sequence[int] | None = None, word0: int | None = None,
-                 apply_second_order: bool = True,
+                 variant: p.Variant | str = p.Variant.MS5837_30BA, coefficients: Sequence[int] | None = None,
+                 word0: int | None = None, apply_second_order: bool = True,
                  conversion_time_s: dict[int, float] | None = None) -> None:
         self._lock = threading.RLock()
         self.truth = truth

@@ -13,13 +13,11 @@ Publishes (reliable, depth 10): ``pressure/fluid_pressure`` (Pa, frame ``pressur
 geometry_msgs/PoseWithCovarianceStamped (frame ``odom``, ``position.z = -depth_m`` of the port; docs/architecture.md
 §3), ``raw/ms5837`` (a cycle's I2C transactions in one message), ``/diagnostics``. Service ``pressure/zero_depth``
 (std_srvs/Trigger): the surface pressure becomes the mean of the last second, also in the node's
-``environment.surface_pressure_pa`` parameter; it and a change of that parameter are refused while the ESC reports
-armed or has not reported (:class:`hindrax_common.node_support.esc_state.ArmedWatch`), with the same reason; a
-change of the parameter also passes zero_depth's checks: at the surface, and within
-``sensors.ms5837.zero_depth_margin_pa`` of the mean reading
-(:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`).
-Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
-"""
+``environment.surface_pressure_pa`` parameter; it and a change of that parameter are refused while the ESC reports armed
+or has not reported (:class:`hindrax_common.node_support.esc_state.ArmedWatch`), with the same reason; a change of the
+parameter also passes zero_depth's checks: at the surface, and within ``sensors.ms5837.zero_depth_margin_pa`` of the
+mean reading (:meth:`~hindrax_drivers.ms5837.core.ZeroDepth.check_value`). Run alone:
+``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
 from __future__ import annotations
 
 from typing import Any

@@ -1,19 +1,16 @@
 """TE MS5837-30BA / MS5837-02BA pressure sensor: pure protocol layer (no I/O, no clocks).
 
-Commands, PROM parsing and CRC-4, first- and second-order compensation, variant detection, unit
-conversion and depth, all from docs/devices.md §3 (TE datasheets [M1][M2][M3], Blue Robotics and TE
-libraries [M4][M5][M6]).
+Commands, PROM parsing and CRC-4, first- and second-order compensation, variant detection, unit conversion and depth,
+all from docs/devices.md §3 (TE datasheets [M1][M2][M3], Blue Robotics and TE libraries [M4][M5][M6]).
 
-Why our own code instead of Blue Robotics' ``ms5837-python``: that library is not in the local
-package index, needs I/O in the same class, and uses float division, which does not reproduce the
-datasheet's integer examples (docs/devices.md §0 item 5, §3.7). Here every step uses the datasheet's integer
-arithmetic with **floor** semantics (Python ``//``, equal to an arithmetic right shift), which
-reproduces both worked examples exactly.
+Why our own code instead of Blue Robotics' ``ms5837-python``: that library is not in the local package index, needs I/O
+in the same class, and uses float division, which does not reproduce the datasheet's integer examples (docs/devices.md
+§0 item 5, §3.7). Here every step uses the datasheet's integer arithmetic with **floor** semantics (Python ``//``, equal
+to an arithmetic right shift), which reproduces both worked examples exactly.
 
 Vendor-document issue handled here: the 30BA datasheet example prints OFF = 2381326464, a digit
 typo for 2381323464 (docs/devices.md §3.7); we implement the formula, and the tests check the corrected
-value together with the printed P = 39998.
-"""
+value together with the printed P = 39998."""
 
 from __future__ import annotations
 
@@ -23,18 +20,15 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 __all__ = ["Ms5837Error", "Variant", "ADDRESS", "CMD_RESET", "CMD_ADC_READ", "CMD_PROM_READ_BASE",
-           "CMD_CONVERT_D1_BASE", "CMD_CONVERT_D2_BASE", "OSR_VALUES", "CONVERSION_TIME_S",
-           "RESET_TIME_S", "ADC_MAX", "PRODUCT_CODE_30BA26", "EXAMPLE_COEFFICIENTS_30BA",
-           "EXAMPLE_COEFFICIENTS_02BA",
-           "EXAMPLE_WORD0_30BA", "EXAMPLE_WORD0_02BA", "EXAMPLE_D1_30BA", "EXAMPLE_D2_30BA",
-           "EXAMPLE_D1_02BA", "EXAMPLE_D2_02BA", "GRAVITY_M_S2", "FRESH_WATER_DENSITY_KG_M3",
-           "SALT_WATER_DENSITY_KG_M3", "STANDARD_SURFACE_PRESSURE_PA", "TEMPERATURE_MIN_C",
-           "TEMPERATURE_MAX_C", "Command", "parse_variant", "prom_sanity_issue",
-           "convert_d1_command", "convert_d2_command", "prom_read_command", "decode_command",
-           "conversion_time_s", "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word",
-           "crc4", "prom_with_crc", "Calibration", "detect_variant", "Compensation", "Reading",
-           "first_order", "second_order", "compensate", "pressure_pa_from_counts",
-           "pressure_counts_per_pa", "depth_m"]
+           "CMD_CONVERT_D1_BASE", "CMD_CONVERT_D2_BASE", "OSR_VALUES", "CONVERSION_TIME_S", "RESET_TIME_S", "ADC_MAX",
+           "PRODUCT_CODE_30BA26", "EXAMPLE_COEFFICIENTS_30BA", "EXAMPLE_COEFFICIENTS_02BA", "EXAMPLE_WORD0_30BA",
+           "EXAMPLE_WORD0_02BA", "EXAMPLE_D1_30BA", "EXAMPLE_D2_30BA", "EXAMPLE_D1_02BA", "EXAMPLE_D2_02BA",
+           "GRAVITY_M_S2", "FRESH_WATER_DENSITY_KG_M3", "SALT_WATER_DENSITY_KG_M3", "STANDARD_SURFACE_PRESSURE_PA",
+           "TEMPERATURE_MIN_C", "TEMPERATURE_MAX_C", "Command", "parse_variant", "prom_sanity_issue",
+           "convert_d1_command", "convert_d2_command", "prom_read_command", "decode_command", "conversion_time_s",
+           "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word", "crc4", "prom_with_crc", "Calibration",
+           "detect_variant", "Compensation", "Reading", "first_order", "second_order", "compensate",
+           "pressure_pa_from_counts", "pressure_counts_per_pa", "depth_m"]
 
 
 class Ms5837Error(ValueError):
@@ -96,8 +90,7 @@ class Command:
     """Decoded command byte.
 
     ``kind`` is one of ``"reset"``, ``"adc_read"``, ``"prom_read"`` (``index`` = word 0..7),
-    ``"convert_d1"`` / ``"convert_d2"`` (``osr`` = oversampling ratio).
-    """
+    ``"convert_d1"`` / ``"convert_d2"`` (``osr`` = oversampling ratio)."""
 
     kind: str
     index: int | None = None
@@ -114,8 +107,7 @@ def _osr_index(osr: int) -> int:
 def convert_d1_command(osr: int) -> int:
     """Command byte starting a pressure (D1) conversion: 0x40 + 2*index(osr) (docs/devices.md §3.1).
 
-    Raises Ms5837Error for an OSR not in :data:`OSR_VALUES`.
-    """
+    Raises Ms5837Error for an OSR not in :data:`OSR_VALUES`."""
     return CMD_CONVERT_D1_BASE + 2 * _osr_index(osr)
 
 
@@ -134,9 +126,7 @@ def prom_read_command(index: int) -> int:
 def decode_command(byte: int) -> Command:
     """Decode a command byte (device side; used by the emulator). Source: docs/devices.md §3.1.
 
-    Raises:
-        Ms5837Error: the byte is not an MS5837 command.
-    """
+    Raises ``Ms5837Error``: the byte is not an MS5837 command."""
     if not isinstance(byte, int) or not 0 <= byte <= 0xFF:
         raise Ms5837Error(f"command must be a byte, got {byte!r}")
     if byte == CMD_RESET:
@@ -173,9 +163,7 @@ def parse_adc(data: bytes | Sequence[int]) -> int:
 
     A value of 0 means "no completed conversion" (read too early, twice, or corrupted) and raises.
 
-    Raises:
-        Ms5837Error: not 3 bytes, or value 0.
-    """
+    Raises ``Ms5837Error``: not 3 bytes, or value 0."""
     raw = _as_bytes(data, 3, "ADC read")
     value = int.from_bytes(raw, "big")
     if value == 0:
@@ -194,8 +182,7 @@ def encode_adc(value: int) -> bytes:
 def parse_prom_word(data: bytes | Sequence[int]) -> int:
     """16-bit PROM word from the 2 bytes read after 0xA0+2k, MSB first (docs/devices.md §3.1).
 
-    Note that ``SMBus.read_word_data`` returns the bytes little-endian; use a 2-byte block read.
-    """
+    Note that ``SMBus.read_word_data`` returns the bytes little-endian; use a 2-byte block read."""
     return int.from_bytes(_as_bytes(data, 2, "PROM read"), "big")
 
 
@@ -225,12 +212,9 @@ def crc4(words: Sequence[int]) -> int:
         words: PROM words 0..6 (word 7, if given, is ignored and taken as 0); word 0's CRC nibble
             (bits 15:12) is ignored.
 
-    Returns:
-        The 4-bit CRC (0..15), to compare with ``words[0] >> 12``.
+    Returns The 4-bit CRC (0..15), to compare with ``words[0] >> 12``.
 
-    Raises:
-        Ms5837Error: wrong number of words or a word outside 0..65535.
-    """
+    Raises ``Ms5837Error``: wrong number of words or a word outside 0..65535."""
     n = _prom_words(words)[:7] + [0]
     n[0] &= 0x0FFF
     rem = 0
@@ -277,8 +261,7 @@ class Calibration:
     Attributes:
         words: the 8 PROM words (word 7 may be 0).
     Properties: ``c1``..``c6`` (C1 SENS_T1, C2 OFF_T1, C3 TCS, C4 TCO, C5 T_REF, C6 TEMPSENS),
-    ``crc`` (stored nibble), ``product_code`` (bits 11:5 of word 0; bits 4:0 are factory settings).
-    """
+    ``crc`` (stored nibble), ``product_code`` (bits 11:5 of word 0; bits 4:0 are factory settings)."""
 
     words: tuple[int, ...]
 
@@ -286,9 +269,7 @@ class Calibration:
     def from_words(cls, words: Sequence[int], check_crc: bool = True) -> "Calibration":
         """Validate and wrap 7 or 8 PROM words.
 
-        Raises:
-            Ms5837Error: wrong count/range, or CRC mismatch when ``check_crc``.
-        """
+        Raises ``Ms5837Error``: wrong count/range, or CRC mismatch when ``check_crc``."""
         w = _prom_words(words)
         if len(w) == 7:
             w.append(0)
@@ -325,11 +306,9 @@ class Calibration:
 def prom_sanity_issue(calibration: Calibration) -> str:
     """Why ``calibration`` cannot be a factory-programmed PROM, or "" when it can.
 
-    A blank (all-zero) PROM has CRC-4 0 and passes the check of docs/devices.md §3.3; an unanswered read
-    on a bus held high gives 0xFFFF words. Every coefficient C1..C6 of a real part is a non-zero 16-bit
-    value (the datasheet examples: 34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000
-    or 0xFFFF rejects the PROM.
-    """
+    A blank (all-zero) PROM has CRC-4 0 and passes the check of docs/devices.md §3.3; an unanswered read on a bus held
+    high gives 0xFFFF words. Every coefficient C1..C6 of a real part is a non-zero 16-bit value (the datasheet examples:
+    34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000 or 0xFFFF rejects the PROM."""
     bad = [f"C{k}" for k, c in enumerate(calibration.words[1:7], start=1) if c in (0, 0xFFFF)]
     if bad:
         return (f"PROM coefficient(s) {', '.join(bad)} read 0x0000 or 0xFFFF (blank or unread PROM; an all-zero "
@@ -341,9 +320,7 @@ def parse_variant(value: Variant | str | None) -> Variant | None:
     """Variant from configuration: ``Variant``, ``"30BA"``/``"02BA"`` (case-insensitive, optional
     ``"MS5837-"`` prefix), or None/``"auto"`` meaning "detect" (returns None).
 
-    Raises:
-        Ms5837Error: any other value.
-    """
+    Raises ``Ms5837Error``: any other value."""
     if value is None or isinstance(value, Variant):
         return value
     name = str(value).strip().upper().replace("MS5837-", "").replace("MS5837_", "")
@@ -366,9 +343,7 @@ def detect_variant(calibration: Calibration, configured: Variant | str | None = 
         configured: ``Variant``, ``"30BA"``/``"02BA"`` (case-insensitive, optional "MS5837-"
             prefix), or None/``"auto"`` for the heuristic.
 
-    Raises:
-        Ms5837Error: unknown configured name, or C1 outside the recognised range.
-    """
+    Raises ``Ms5837Error``: unknown configured name, or C1 outside the recognised range."""
     variant = parse_variant(configured)
     if variant is not None:
         return variant
@@ -384,8 +359,7 @@ class Compensation:
 
     ``dt`` (dT), ``temp`` (TEMP, 0.01 degC), ``off`` (OFF), ``sens`` (SENS), ``p`` (P: 0.1 mbar for
     30BA, 0.01 mbar for 02BA). For second order, ``temp``/``off``/``sens``/``p`` are TEMP2/OFF2/
-    SENS2/P2 and ``ti``/``offi``/``sensi`` hold the corrections (all 0 for first order).
-    """
+    SENS2/P2 and ``ti``/``offi``/``sensi`` hold the corrections (all 0 for first order)."""
 
     dt: int
     temp: int
@@ -419,9 +393,7 @@ def first_order(d1: int, d2: int, calibration: Calibration, variant: Variant) ->
 
     dT = D2 - C5*2^8; TEMP = 2000 + dT*C6/2^23; OFF/SENS/P per variant table.
 
-    Raises:
-        Ms5837Error: D1/D2 not 24-bit ints.
-    """
+    Raises ``Ms5837Error``: D1/D2 not 24-bit ints."""
     _check_adc("D1", d1)
     _check_adc("D2", d2)
     c = calibration
@@ -462,16 +434,14 @@ def second_order(d1: int, first: Compensation, variant: Variant) -> Compensation
     """Apply the second-order correction to a first-order result (docs/devices.md §3.5).
 
     OFF2 = OFF - OFFi, SENS2 = SENS - SENSi, TEMP2 = TEMP - Ti, P recomputed with the same
-    divisors. Raises Ms5837Error if D1 is not 24-bit.
-    """
+    divisors. Raises Ms5837Error if D1 is not 24-bit."""
     _check_adc("D1", d1)
     variant = Variant(variant)
     ti, offi, sensi = _second_order_terms(first.dt, first.temp, variant)
     off2 = first.off - offi
     sens2 = first.sens - sensi
     p2 = _pressure(d1, sens2, off2, _SHIFTS[variant][4])
-    return Compensation(dt=first.dt, temp=first.temp - ti, off=off2, sens=sens2, p=p2,
-                        ti=ti, offi=offi, sensi=sensi)
+    return Compensation(dt=first.dt, temp=first.temp - ti, off=off2, sens=sens2, p=p2, ti=ti, offi=offi, sensi=sensi)
 
 
 def pressure_counts_per_pa(variant: Variant) -> float:
@@ -508,9 +478,7 @@ def compensate(d1: int, d2: int, calibration: Calibration, variant: Variant,
     Never raises for 24-bit D1/D2 and any calibration (Python integers do not overflow); a result
     outside the specified temperature range is flagged, not rejected.
 
-    Raises:
-        Ms5837Error: D1/D2 not 24-bit ints, or an unknown variant.
-    """
+    Raises ``Ms5837Error``: D1/D2 not 24-bit ints, or an unknown variant."""
     try:
         variant = Variant(variant)
     except ValueError:
@@ -535,15 +503,12 @@ def _check_density_gravity(fluid_density_kg_m3: float, gravity_m_s2: float) -> N
 
 
 def depth_m(pressure_pa: float, fluid_density_kg_m3: float = FRESH_WATER_DENSITY_KG_M3,
-            surface_pressure_pa: float = STANDARD_SURFACE_PRESSURE_PA,
-            gravity_m_s2: float = GRAVITY_M_S2) -> float:
+            surface_pressure_pa: float = STANDARD_SURFACE_PRESSURE_PA, gravity_m_s2: float = GRAVITY_M_S2) -> float:
     """Depth below the surface: (P - P_surface) / (rho * g), in m (positive down; docs/devices.md §3.6).
 
     Defaults: fresh water 997 kg/m^3, P_surface 101300 Pa, g = 9.80665 m/s^2. Measure the surface
     pressure at the start of a dive and pass it for best accuracy (§3.6).
 
-    Raises:
-        Ms5837Error: non-positive or non-finite density/gravity.
-    """
+    Raises ``Ms5837Error``: non-positive or non-finite density/gravity."""
     _check_density_gravity(fluid_density_kg_m3, gravity_m_s2)
     return (pressure_pa - surface_pressure_pa) / (fluid_density_kg_m3 * gravity_m_s2)

@@ -4,8 +4,7 @@
 :class:`~hindrax_common.transport.i2c.I2CDevice` (``smbus2`` on the Pi, the emulated bus in tests). Every method
 raises :class:`~hindrax_common.transport.i2c.I2CError` when the chip does not answer; what that means for the
 outputs (UNKNOWN, disarm, retry) is :class:`.core.EscCore`'s. Registers and sequences: :mod:`.protocol`
-(datasheet §7.3, docs/devices.md §5.1).
-"""
+(datasheet §7.3, docs/devices.md §5.1)."""
 from __future__ import annotations
 
 from typing import Any, Sequence
@@ -40,15 +39,13 @@ class EscChip:
     lights'; ``reference``: (channel, us) of a constant pulse on a channel no ESC is on, or None. ``raw``: an object
     with ``begin_batch()`` and ``flush()`` (the node's ``raw/pca9685`` recorder), so that
     the transactions of one update go out in one message. :attr:`device` is None until the bus is open.
-    :attr:`written` (n,) holds the thruster widths on the chip as decoded from the counts written, us.
-    """
+    :attr:`written` (n,) holds the thruster widths on the chip as decoded from the counts written, us."""
 
     #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending
     EXPECTED_MODE1 = p.MODE1_AI | p.MODE1_ALLCALL
 
-    def __init__(self, address: int, prescale: int, oscillator_hz: float, channels: Sequence[int],
-                 lights_channel: int, raw: Any, device: I2CDevice | None = None,
-                 reference: tuple[int, float] | None = None) -> None:
+    def __init__(self, address: int, prescale: int, oscillator_hz: float, channels: Sequence[int], lights_channel: int,
+                 raw: Any, device: I2CDevice | None = None, reference: tuple[int, float] | None = None) -> None:
         self.address, self.prescale, self.oscillator_hz = int(address), int(prescale), float(oscillator_hz)
         self.channels = [int(c) for c in channels]
         self.lights_channel = int(lights_channel)
@@ -125,8 +122,7 @@ class EscChip:
         self.raw.begin_batch()
         decoded: dict[int, float] = {}
         for run in channel_runs(sorted(per_channel)):
-            block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale,
-                                                       self.oscillator_hz)
+            block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale, self.oscillator_hz)
             decoded.update(zip(run, widths))
             if known_on_chip and block == b"".join(self._expected.get(c, b"") for c in run):
                 continue  # these registers already hold exactly these bytes

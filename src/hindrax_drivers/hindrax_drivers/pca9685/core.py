@@ -36,8 +36,7 @@ Rules (one test row each in ``test/test_esc_core.py``):
 * **Watchdog**: armed, a command older than ``watchdog_timeout_s`` (ROS time) gives neutral; so does no command
   for ``steady_watchdog_s`` of steady time (:meth:`EscCore.steady_check`: a stopped ROS clock).
 * **Output**: armed with a fresh valid command -> the command's widths through :class:`EscOutput` (reversal,
-  trim, slew limit, PCA9685 counts rounded away from neutral outside the deadband); otherwise neutral.
-"""
+  trim, slew limit, PCA9685 counts rounded away from neutral outside the deadband); otherwise neutral."""
 from __future__ import annotations
 
 import math
@@ -206,8 +205,7 @@ class EscOutput:
 
     ``target(command, dt_s)`` returns the (n,) widths to write now. Raises :class:`ValueError` for a command of
     the wrong length or with a non-finite value. Without a slew limit the widths of a command are computed once
-    (the same command object again returns them as they are); a new object, or :meth:`neutral`, computes anew.
-    """
+    (the same command object again returns them as they are); a new object, or :meth:`neutral`, computes anew."""
 
     def __init__(self, channels, reversed_, trim_us, min_us: float, neutral_us: float, max_us: float,
                  slew_rate_us_per_s: float = 0.0, count_us: float = 0.0, deadband_us: float = 0.0,
@@ -258,8 +256,7 @@ class EscOutput:
         mid = self.channel_neutral()
         x = widths_us / self.count_us
         outside = np.abs(widths_us - mid) >= self.deadband_us - 1e-9
-        counts = np.where(outside, np.where(widths_us > mid, np.ceil(x - 1e-9), np.floor(x + 1e-9)),
-                          np.floor(x + 0.5))
+        counts = np.where(outside, np.where(widths_us > mid, np.ceil(x - 1e-9), np.floor(x + 1e-9)), np.floor(x + 0.5))
         # never beyond the ESC's range: the nearest count inside it there
         lo, hi = self._grid_bounds
         return np.clip(counts, lo, hi) * self.count_us
@@ -404,9 +401,8 @@ class EscCore:
             return True
         return self.clock() - self.last_attempt >= self.retry_s
 
-    def chip_result(self, kind: str, *, error: str = "", no_bus: bool = False, mismatch: str = "",
-                    wrote: bool = False, written_us: np.ndarray | None = None,
-                    output_state: int = OUTPUT_NEUTRAL) -> ChipOutcome:
+    def chip_result(self, kind: str, *, error: str = "", no_bus: bool = False, mismatch: str = "", wrote: bool = False,
+                    written_us: np.ndarray | None = None, output_state: int = OUTPUT_NEUTRAL) -> ChipOutcome:
         """A chip job done (module docstring, Chip results): ``kind`` (:data:`CONFIGURE`, :data:`WRITE`,
         :data:`NEUTRAL`, :data:`READBACK`), its ``error`` ('' or why the bus failed; ``no_bus``: it could not be
         opened), a read-back ``mismatch`` ('' or what differed), ``wrote`` and ``written_us`` (n,) what is on the chip

@@ -3,8 +3,7 @@
 Models docs/devices.md §5.1:
 
 * reset values MODE1 = 0x11, MODE2 = 0x04, PRE_SCALE = 0x1E, every LEDn full OFF; reserved H bits
-  7:5 read 0; ALL_LED registers are write-only and write all 16 channels; TestMode (0xFF) and
-  0x46..0xF9 ignore writes;
+  7:5 read 0; ALL_LED registers are write-only and write all 16 channels; TestMode (0xFF) and 0x46..0xF9 ignore writes;
 * auto-increment only with MODE1.AI, wrapping 0x45 -> 0x00 and 0xFE -> 0x00;
 * PRE_SCALE written only while SLEEP, values below 3 forced to 3;
 * SLEEP/RESTART [Q1 §7.3.1.1]: sleeping with a channel active sets RESTART and stops the outputs,
@@ -18,8 +17,7 @@ Models docs/devices.md §5.1:
   output carries no pulse.
 
 Not modelled: sub-addresses and All-Call decoding, OUTNE, OCH (updates apply at STOP), the
-oscillator's 500 us start-up, update at the end of the cycle.
-"""
+oscillator's 500 us start-up, update at the end of the cycle."""
 
 from __future__ import annotations
 
@@ -54,9 +52,8 @@ class Pca9685Emulator(RegisterPointerEmulator):
         output_enable_line: the /OE line (``is_high()``: outputs off), or None (tied low: always enabled).
     """
 
-    def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ,
-                 clock: Callable[[], float] = time.monotonic, external_clock_hz: float | None = None,
-                 output_enable_line=None) -> None:
+    def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ, clock: Callable[[], float] = time.monotonic,
+                 external_clock_hz: float | None = None, output_enable_line=None) -> None:
         super().__init__()
         self.output_enable_line = output_enable_line
         if not oscillator_hz > 0.0:
@@ -136,8 +133,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
         """High time per period that ``channel`` actually outputs, in us (docs/devices.md §5.1).
 
         0 while /OE is high (no signal), while sleeping, while stopped awaiting RESTART, or when full OFF; the
-        full period when full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement.
-        """
+        full period when full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement."""
         if self.outputs_disabled():
             return 0.0
         with self._lock:

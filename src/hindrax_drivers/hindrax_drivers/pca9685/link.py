@@ -5,8 +5,7 @@ reported.
 each result to :meth:`.core.EscCore.chip_result` and acts on the outcome: the diagnostics state and counters, a
 re-initialisation after a read-back mismatch, neutral after a failed thrust write. It schedules the chip's
 (re)configuration (:meth:`.core.EscCore.retry_due`) and read-back (every ``readback_interval_s``), and turns a bus
-call that has not returned within the worker's bound into a lost chip (UNKNOWN: the node's heartbeat says ERROR).
-"""
+call that has not returned within the worker's bound into a lost chip (UNKNOWN: the node's heartbeat says ERROR)."""
 from __future__ import annotations
 
 import math
@@ -26,8 +25,7 @@ class ChipLink:
     """``core``: the ESC's :class:`~.core.EscCore`; ``worker``: its :class:`~.worker.ChipWorker`; ``diag``: the
     node's :class:`~hindrax_common.node_support.node_common.DeviceDiagnostics`; ``log_error(text)``; ``lights_us()``:
     the lights' width now, us; ``readback_interval_s``: ``esc.readback_interval_s``. Methods that take results return
-    True when a result changed what is on the chip or its state (the node then publishes ``thrusters/pulse_width``).
-    """
+    True when a result changed what is on the chip or its state (the node then publishes ``thrusters/pulse_width``)."""
 
     def __init__(self, core: EscCore, worker: ChipWorker, diag: Any, log_error: Callable[[str], None],
                  lights_us: Callable[[], float], readback_interval_s: float) -> None:

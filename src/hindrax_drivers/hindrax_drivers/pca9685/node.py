@@ -23,25 +23,23 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   (:meth:`EscNode.steady_check`: heartbeats, a stuck bus, chip retries and read-back, the steady-clock watchdog,
   ROS-time steps) and then the output tick (:meth:`EscNode.tick`: the ROS-time command watchdog); with
   ``use_sim_time`` the output tick is a ROS-time timer of its own.
-- Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output
-  state; on every confirmed write or change of state, and repeated by the output tick when nothing went out for
-  :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz armed and under the identification's 25 Hz commands; disarmed at
-  neutral every :data:`DISARMED_REPEAT_S`),
-  ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick, at once in one two periods
-  late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest
-  guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign
-  of life and release condition), ``esc/output_state`` (the same state, latched: on a change of
-  armed or output state and every 1 s, :mod:`hindrax_common.node_support.esc_state`; for nodes that need only
-  "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on disarm,
-  on an exception in the output path and on shutdown (:meth:`EscNode.close`; SIGINT/SIGTERM).
+- Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output state;
+  on every confirmed write or change of state, and repeated by the output tick when nothing went out for
+  :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz armed and under the identification's 25 Hz commands; disarmed at neutral
+  every :data:`DISARMED_REPEAT_S`), ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick, at once in one
+  two periods late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest guard beat
+  handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign of life and release condition),
+  ``esc/output_state`` (the same state, latched: on a change of armed or output state and every 1 s,
+  :mod:`hindrax_common.node_support.esc_state`; for nodes that need only "armed"), ``raw/pca9685`` (every I2C
+  transaction), ``/diagnostics``. Neutral is written on disarm, on an exception in the output path and on shutdown
+  (:meth:`EscNode.close`; SIGINT/SIGTERM).
 - Node parameters outside the vehicle file (read-only, declared in
   :mod:`hindrax_common.config.sections.esc`): ``heartbeat_timeout_s`` (default ``esc.heartbeat_timeout_s``),
   ``steady_watchdog_timeout_s`` (default ``esc.watchdog_timeout_s``).
 
 The bus: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, or injected (an
 :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` holding a
-:class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation).
-"""
+:class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation)."""
 from __future__ import annotations
 
 import math

@@ -7,8 +7,7 @@ verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and
 is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
 (:class:`~.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
 :func:`.core.heartbeat_verdict`'s. Node parameter (read-only, config.sections.esc): ``heartbeat_timeout_s``
-(default ``esc.heartbeat_timeout_s``).
-"""
+(default ``esc.heartbeat_timeout_s``)."""
 from __future__ import annotations
 
 import time
@@ -60,8 +59,7 @@ class EscPeers:
                         "guard": HeartbeatWatch(node, "guard", self.on_guard_heartbeat, armed)}
 
     def tick(self) -> None:
-        """Advance both ages to now (the safety tick and an arm request; the beats arrive by
-        callbacks, a stale one's
+        """Advance both ages to now (the safety tick and an arm request; the beats arrive by callbacks, a stale one's
         waiting beats are taken first: :meth:`~hindrax_common.node_support.liveness.HeartbeatWatch.fresh`)."""
         for kind, age in (("supervisor", self.supervisor_age), ("guard", self.guard_age)):
             age.tick()

@@ -7,11 +7,9 @@ configuration check, are defined in :mod:`hindrax_common.base.hardware_limits` a
 Sources: docs/devices.md §5.1 (NXP datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2
 (Blue Robotics Basic ESC [E1]-[E5]).
 
-Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an
-``smbus2.SMBus`` object, hides the register arithmetic, and computes counts from the *requested*
-frequency; docs/devices.md §5.1 requires using the actual prescale and (calibrated) oscillator
-frequency, which is what every function here takes.
-"""
+Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an ``smbus2.SMBus`` object,
+hides the register arithmetic, and computes counts from the *requested* frequency; docs/devices.md §5.1 requires using
+the actual prescale and (calibrated) oscillator frequency, which is what every function here takes."""
 
 from __future__ import annotations
 
@@ -100,14 +98,11 @@ def count_duration_us(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_
     return (check_prescale(prescale) + 1) / check_oscillator(oscillator_hz) * 1e6
 
 
-def pulse_width_to_counts(pulse_width_us: float, prescale: int,
-                          oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
+def pulse_width_to_counts(pulse_width_us: float, prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
     """Counts = round(pulse_us * f_osc / ((PRE_SCALE + 1) * 1e6)) (docs/devices.md §5.1 table note).
 
-    Raises:
-        Pca9685Error: non-finite or negative pulse, or one that needs more than 4095 counts
-        (use full ON for a constant high level).
-    """
+    Raises ``Pca9685Error``: non-finite or negative pulse, or one that needs more than 4095 counts (use full ON for a
+    constant high level)."""
     if not (math.isfinite(pulse_width_us) and pulse_width_us >= 0.0):
         raise Pca9685Error(f"pulse_width_us must be finite and >= 0, got {pulse_width_us}")
     counts = math.floor(pulse_width_us / count_duration_us(prescale, oscillator_hz) + 0.5)
@@ -117,8 +112,7 @@ def pulse_width_to_counts(pulse_width_us: float, prescale: int,
     return counts
 
 
-def counts_to_pulse_width_us(counts: float, prescale: int,
-                             oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+def counts_to_pulse_width_us(counts: float, prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
     """High time in us of ``counts`` counts (0..4096) at the given prescale and oscillator."""
     if not 0 <= counts <= COUNTS_PER_PERIOD:
         raise Pca9685Error(f"counts must be 0..4096, got {counts}")
@@ -176,8 +170,7 @@ def high_time_counts(setting: ChannelRegisters) -> int:
     """Counts per period the output is high, 0..4096 (docs/devices.md §5.1 output semantics).
 
     Full OFF wins (0); full ON gives 4096; otherwise ``(OFF - ON) mod 4096``, with ON == OFF
-    giving 0 (the measured behaviour quoted in §5.1).
-    """
+    giving 0 (the measured behaviour quoted in §5.1)."""
     if setting.full_off:
         return 0
     if setting.full_on:
@@ -191,9 +184,7 @@ def channel_bytes_for_pulse(pulse_width_us: float, prescale: int,
 
     A pulse of 0 counts is encoded as full OFF (never ON == OFF, §5.1).
 
-    Raises:
-        Pca9685Error: see :func:`pulse_width_to_counts`; ``on_count`` not 0..4095.
-    """
+    Raises ``Pca9685Error``: see :func:`pulse_width_to_counts`; ``on_count`` not 0..4095."""
     counts = pulse_width_to_counts(pulse_width_us, prescale, oscillator_hz)
     if counts == 0:
         return ChannelRegisters.full_off_setting().to_bytes()
@@ -209,9 +200,7 @@ def channel_block_for_pulses(pulse_widths_us: Sequence[float], prescale: int,
     The same counts as :func:`channel_bytes_for_pulse` per channel (half-up rounding, 0 counts = full OFF), for a
     whole auto-increment block at once (the ESC node's hot path). Returns ``(4 * n bytes, n decoded widths us)``.
 
-    Raises:
-        Pca9685Error: a non-finite or negative width, or one needing more than 4095 counts.
-    """
+    Raises ``Pca9685Error``: a non-finite or negative width, or one needing more than 4095 counts."""
     count_us = count_duration_us(prescale, oscillator_hz)
     out = bytearray()
     decoded = []
@@ -253,10 +242,8 @@ def startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> li
     """MODE2 (totem-pole outputs, the reset value 0x04) then :func:`set_frequency_sequence`.
 
     Channel registers are not touched: at power-up every channel is full OFF (no pulses, which the
-    ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel.
-    """
-    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"),
-            *set_frequency_sequence(prescale, mode1)]
+    ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel."""
+    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
 
 
 def safe_startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL
@@ -270,8 +257,7 @@ def safe_startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL
 
     Why: :func:`startup_sequence` wakes and RESTARTs first, and RESTART resumes whatever the channel registers
     still hold (datasheet §7.3.1.1), e.g. the 1700 us of a previous process that died while armed, until the
-    driver writes neutral. Here the registers hold neutral (or full OFF) before RESTART.
-    """
+    driver writes neutral. Here the registers hold neutral (or full OFF) before RESTART."""
     freq = set_frequency_sequence(prescale, mode1)
     before = [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"),
               RegisterWrite(ALL_LED_OFF_H, FULL_BIT, 0.0, "every output full OFF before anything can restart"),
@@ -289,10 +275,8 @@ def oscillator_from_measurement(measured_us: float, commanded_us: float, prescal
     ``commanded_us``) removes the rounding to one count. E.g. 1500 us commanded at 25 MHz, prescale 30: 1210
     counts; a 24.06 MHz part shows 1559.0 us, giving 24.06 MHz back.
 
-    Raises:
-        Pca9685Error: non-finite or non-positive reading, or a result outside 20-30 MHz (a wrong channel,
-        trigger or unit: real parts measure 23-27 MHz, docs/devices.md §5.1).
-    """
+    Raises ``Pca9685Error``: non-finite or non-positive reading, or a result outside 20-30 MHz (a wrong channel, trigger
+    or unit: real parts measure 23-27 MHz, docs/devices.md §5.1)."""
     if not (math.isfinite(measured_us) and measured_us > 0.0):
         raise Pca9685Error(f"measured pulse must be finite and > 0 us, got {measured_us}")
     counts = pulse_width_to_counts(commanded_us, prescale, oscillator_hz)

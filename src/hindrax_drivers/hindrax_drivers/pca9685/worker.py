@@ -12,12 +12,10 @@ Queue rules (one test each in ``test/test_esc_worker.py``):
   posted after it run after it (a disarm reaches the chip before any later thrust);
 * a read-back or a configure already pending is not queued twice.
 
-A bus call that has not returned after ``call_timeout_s`` is a fault the node acts on (:meth:`ChipWorker.stuck_s`;
-the heartbeat then says ERROR and the output guard's /OE stops the outputs, docs/watchdog.md): the worker itself
-cannot abandon a call that hangs. ``threaded=False`` runs each job in the posting thread instead (a lock-step
-simulation, whose chip writes must land at the simulated instant of the command); the jobs, their order and their
-results are the same.
-"""
+A bus call that has not returned after ``call_timeout_s`` is a fault the node acts on (:meth:`ChipWorker.stuck_s`; the
+heartbeat then says ERROR and the output guard's /OE stops the outputs, docs/watchdog.md): the worker itself cannot
+abandon a call that hangs. ``threaded=False`` runs each job in the posting thread instead (a lock-step simulation, whose
+chip writes must land at the simulated instant of the command); the jobs, their order and their results are the same."""
 from __future__ import annotations
 
 import threading
@@ -35,20 +33,18 @@ from .core import CONFIGURE, NEUTRAL, READBACK, WRITE
 __all__ = ["BUS_CALL_TIMEOUT_S", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "ChipJob", "ChipResult", "ChipWorker"]
 
 #: the default of ``esc.bus_call_timeout_s`` (the vehicle file sets it): a bus call that has not returned after this
-#: long is a fault, s: the output guard's ESC-heartbeat timeout is 0.2 s
-#: (``esc.guard_heartbeat_timeout_s``), so the ERROR heartbeat that follows at the next 25 Hz beat (40 ms) reaches it
-#: no later than silence would; a PCA9685 block write takes 0.9 ms at 400 kHz, an emulated-bus round trip 7-10 ms on
-#: a loaded machine
+#: long is a fault, s: the output guard's ESC-heartbeat timeout is 0.2 s (``esc.guard_heartbeat_timeout_s``), so the
+#: ERROR heartbeat that follows at the next 25 Hz beat (40 ms) reaches it no later than silence would; a PCA9685 block
+#: write takes 0.9 ms at 400 kHz, an emulated-bus round trip 7-10 ms on a loaded machine
 BUS_CALL_TIMEOUT_S = 0.15
 
 
 
 @dataclass
 class ChipJob:
-    """What the chip should do: ``kind`` (:data:`.core.CONFIGURE`, ``WRITE``, ``NEUTRAL``, ``READBACK``),
-    the thruster widths ``widths_us`` (n,) and the lights' ``lights_us`` (us; unused by a read-back), the
-    ``output_state`` the widths give, and ``reason`` (text the node reports with it). ``seq`` is set by
-    :meth:`ChipWorker.post` (increasing)."""
+    """What the chip should do: ``kind`` (:data:`.core.CONFIGURE`, ``WRITE``, ``NEUTRAL``, ``READBACK``), the thruster
+    widths ``widths_us`` (n,) and the lights' ``lights_us`` (us; unused by a read-back), the ``output_state`` the widths
+    give, and ``reason`` (text the node reports with it). ``seq`` is set by :meth:`ChipWorker.post` (increasing)."""
 
     kind: str
     widths_us: np.ndarray | None = None
@@ -100,8 +96,7 @@ class ChipWorker:
     ``open_bus()`` returns an SMBus-like object or raises ``OSError``/``ImportError`` (called in the worker when the
     chip has no device); ``raw_tap`` is the device's raw tap; ``clock``: steady time, s."""
 
-    def __init__(self, chip: EscChip, open_bus: Callable[[], Any], raw_tap: Any = None,
-                 *, threaded: bool = True,
+    def __init__(self, chip: EscChip, open_bus: Callable[[], Any], raw_tap: Any = None, *, threaded: bool = True,
                  call_timeout_s: float = BUS_CALL_TIMEOUT_S, clock: Callable[[], float] = time.monotonic) -> None:
         self.chip, self._open_bus, self._raw_tap = chip, open_bus, raw_tap
         self.threaded, self.call_timeout_s, self.clock = bool(threaded), float(call_timeout_s), clock

@@ -28,8 +28,7 @@ Truth -> measurement [EMULATOR choices where marked]:
   1 m .. ``max_range_m`` [EMULATOR].  Manual mode uses the configured range.  No echo inside the scan
   window (or truth None) -> distance 0, confidence 0 [EMULATOR].
 - Transmit duration, gain choice in auto mode and the profile samples (a Gaussian echo on 200 points,
-  as brping's simulator uses [P4]) are [EMULATOR] models.
-"""
+  as brping's simulator uses [P4]) are [EMULATOR] models."""
 
 from __future__ import annotations
 
@@ -41,14 +40,12 @@ from typing import Callable, Dict, List, Optional, Union
 import numpy as np
 
 from hindrax_common.transport.pty_device import PeriodicSchedule, StreamFaults
-from .protocol import (Ack, ContinuousStart, ContinuousStop, DeviceId, DeviceInformation, Distance,
-                       DistanceSimple, FirmwareVersion, GainSetting, GeneralInfo, GeneralRequest,
-                       ModeAuto, Nack, PcbTemperature, Ping1dFramer, Ping1dId, Ping1dMessage,
-                       Ping1dParseError, Ping1dPayload, PingEnable, PingInterval,
-                       ProcessorTemperature, Profile, ProtocolVersion, Range, SetDeviceId,
-                       SetGainSetting, SetModeAuto, SetPingEnable, SetPingInterval, SetRange,
-                       SetSpeedOfSound, SpeedOfSound, TransmitDuration, Voltage5, decode_message,
-                       encode_message)
+from .protocol import (Ack, ContinuousStart, ContinuousStop, DeviceId, DeviceInformation, Distance, DistanceSimple,
+                       FirmwareVersion, GainSetting, GeneralInfo, GeneralRequest, ModeAuto, Nack, PcbTemperature,
+                       Ping1dFramer, Ping1dId, Ping1dMessage, Ping1dParseError, Ping1dPayload, PingEnable, PingInterval,
+                       ProcessorTemperature, Profile, ProtocolVersion, Range, SetDeviceId, SetGainSetting, SetModeAuto,
+                       SetPingEnable, SetPingInterval, SetRange, SetSpeedOfSound, SpeedOfSound, TransmitDuration,
+                       Voltage5, decode_message, encode_message)
 
 __all__ = ["from_config", "Ping1dTruth", "Ping1dSettings", "Ping1dMeasurement", "Ping1dEmulator"]
 
@@ -118,14 +115,12 @@ class Ping1dEmulator:
         protocol_version: (major, minor, patch) reported in protocol_version.
         seed: seed of the fault generator.
     Attributes:
-        settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`),
-        streaming (streamed id -> destination device id), received (counts of accepted host messages
-        by id).
+        settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`), streaming (streamed
+        id -> destination device id), received (counts of accepted host messages by id).
     """
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,
-                 true_speed_of_sound_m_s: float = 1500.0, protocol_version: tuple = (1, 0, 0),
-                 seed: int = 0) -> None:
+                 true_speed_of_sound_m_s: float = 1500.0, protocol_version: tuple = (1, 0, 0), seed: int = 0) -> None:
         if isinstance(truth_source, Ping1dTruth):
             constant = truth_source
             truth_source = lambda _t: constant  # noqa: E731
@@ -329,8 +324,7 @@ _GETTERS: Dict[int, Callable[[Ping1dEmulator], Ping1dPayload]] = {
         *_FIRMWARE_VERSION, 5.0, e.settings.ping_interval_s,
         e.measurement.gain_setting if e.settings.mode_auto else e.settings.gain_setting,
         e.settings.mode_auto),
-    Ping1dId.DISTANCE_SIMPLE: lambda e: DistanceSimple(e.measurement.distance_m,
-                                                       e.measurement.confidence_pct),
+    Ping1dId.DISTANCE_SIMPLE: lambda e: DistanceSimple(e.measurement.distance_m, e.measurement.confidence_pct),
     Ping1dId.DISTANCE: lambda e: Distance(*_distance_fields(e)),
     Ping1dId.PROCESSOR_TEMPERATURE: lambda e: ProcessorTemperature(35.0),
     Ping1dId.PCB_TEMPERATURE: lambda e: PcbTemperature(30.0),
@@ -338,9 +332,8 @@ _GETTERS: Dict[int, Callable[[Ping1dEmulator], Ping1dPayload]] = {
     Ping1dId.PROFILE: lambda e: Profile(*_distance_fields(e), e.measurement.profile_data),
 }
 
-_SETTERS = frozenset({Ping1dId.SET_DEVICE_ID, Ping1dId.SET_RANGE, Ping1dId.SET_SPEED_OF_SOUND,
-                      Ping1dId.SET_MODE_AUTO, Ping1dId.SET_PING_INTERVAL, Ping1dId.SET_GAIN_SETTING,
-                      Ping1dId.SET_PING_ENABLE})
+_SETTERS = frozenset({Ping1dId.SET_DEVICE_ID, Ping1dId.SET_RANGE, Ping1dId.SET_SPEED_OF_SOUND, Ping1dId.SET_MODE_AUTO,
+                      Ping1dId.SET_PING_INTERVAL, Ping1dId.SET_GAIN_SETTING, Ping1dId.SET_PING_ENABLE})
 
 
 def _corrupt_checksum(frame: bytes) -> bytes:

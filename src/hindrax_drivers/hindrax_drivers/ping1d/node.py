@@ -5,15 +5,14 @@ Run alone: ``python -m hindrax_drivers.ping1d.node --ros-args --params-file ros_
 or pyserial URL), ``baud_rate``, ``speed_of_sound_m_s``, ``ping_interval_s``, ``mode_auto``,
 ``field_of_view_rad``, ``min_range_m``, ``max_range_m``. Node parameter ``stuck_limit_samples`` (default 50).
 
-Start-up (docs/devices.md §2.1, §2.3, §2.4), after every (re)connect, 20 ms apart: the auto-baud sync byte
-``U``; ``set_speed_of_sound`` (1002), ``set_ping_interval`` (1004), ``set_mode_auto`` (1003; in manual
-mode the device keeps its configured range and gain), ``set_ping_enable(1)`` (1006),
-``continuous_start(1300)`` (1400: the device streams a ``profile`` at every ping, which carries distance
-and confidence); then ``general_request`` (6) for ``firmware_version`` (1200), ``general_info`` (1210)
-and ``speed_of_sound`` (1203) to verify that the settings took (a mismatch raises the diagnostics warning
-``settings``; a NACK raises ``nack``). ACKs are accepted but not required (whether firmware ACKs sets is
-unverified, §2.3). If no distance arrives for ``max(1 s, 5 * ping_interval_s)`` while connected, the
-sequence is sent again (a device reset stops streaming).
+Start-up (docs/devices.md §2.1, §2.3, §2.4), after every (re)connect, 20 ms apart: the auto-baud sync byte ``U``;
+``set_speed_of_sound`` (1002), ``set_ping_interval`` (1004), ``set_mode_auto`` (1003; in manual mode the device keeps
+its configured range and gain), ``set_ping_enable(1)`` (1006), ``continuous_start(1300)`` (1400: the device streams a
+``profile`` at every ping, which carries distance and confidence); then ``general_request`` (6) for ``firmware_version``
+(1200), ``general_info`` (1210) and ``speed_of_sound`` (1203) to verify that the settings took (a mismatch raises the
+diagnostics warning ``settings``; a NACK raises ``nack``). ACKs are accepted but not required (whether firmware ACKs
+sets is unverified, §2.3). If no distance arrives for ``max(1 s, 5 * ping_interval_s)`` while connected, the sequence is
+sent again (a device reset stops streaming).
 
 Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (1212) or
 ``distance_simple`` (1211) received (a repeated ``ping_number`` is not published twice):
@@ -25,16 +24,14 @@ Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (
   ``+inf``, never as measured (counted as ``errors.out_of_range``); variance 0 (unknown, as Range.msg defines).
 - ``ping/confidence`` (std_msgs/Float32): the device's confidence, percent 0-100 (docs/devices.md §2.4).
 - ``raw/ping1d`` (hindrax_msgs/RawDeviceData): every byte in both directions.
-- ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
-  ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.unknown_message``,
-  ``errors.malformed`` (see :mod:`hindrax_drivers.ping1d.stream`), ``errors.nack``, the ERROR ``stuck``
-  (identical distance, confidence and profile samples for ``stuck_limit_samples`` pings: from then on,
-  until the data change, nothing is published on ``ping/altitude`` and ``ping/confidence``), firmware
-  version and verified settings.
+- ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age, ``errors.garbage_bytes``,
+  ``errors.truncated``, ``errors.bad_checksum``, ``errors.unknown_message``, ``errors.malformed`` (see
+  :mod:`hindrax_drivers.ping1d.stream`), ``errors.nack``, the ERROR ``stuck`` (identical distance, confidence and
+  profile samples for ``stuck_limit_samples`` pings: from then on, until the data change, nothing is published on
+  ``ping/altitude`` and ``ping/confidence``), firmware version and verified settings.
 
 Time stamps: receive time (ROS time, ``use_sim_time`` supported): the Ping1D messages carry no device
-time (docs/devices.md §2.4).
-"""
+time (docs/devices.md §2.4)."""
 from __future__ import annotations
 
 import math
@@ -62,9 +59,7 @@ _INTERVAL_TOLERANCE_S = 0.0015  # wire resolution 1 ms
 def startup_frames(speed_of_sound_m_s: float, ping_interval_s: float, mode_auto: bool) -> List[bytes]:
     """Byte strings the node sends after every (re)connect (see the module docstring), host id 0 -> device 0.
 
-    Raises:
-        ValueError: a value that does not fit its wire field (speed u32 mm/s, interval u16 ms).
-    """
+    Raises ``ValueError``: a value that does not fit its wire field (speed u32 mm/s, interval u16 ms)."""
     return [
         SYNC_BYTE,
         SetSpeedOfSound(float(speed_of_sound_m_s)).encode(),
@@ -81,9 +76,7 @@ def startup_frames(speed_of_sound_m_s: float, ping_interval_s: float, mode_auto:
 class Ping1dNode(SerialDeviceNode):
     """Ping1D serial altimeter node (see the module docstring). ``**kwargs`` go to ``rclpy.node.Node``.
 
-    Raises:
-        ConfigError: invalid configuration (one line logged; ``main`` exits with status 1).
-    """
+    Raises ``ConfigError``: invalid configuration (one line logged; ``main`` exits with status 1)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("ping1d", device_name="ping1d", config_section=SensorsPing1dSection,
@@ -140,8 +133,7 @@ class Ping1dNode(SerialDeviceNode):
                 if not self.firmware_version:
                     self.firmware_version = f"{p.firmware_version_major}.{p.firmware_version_minor}"
             elif isinstance(p, SpeedOfSound):
-                self._check("speed_of_sound_m_s", p.speed_of_sound_m_s, self.speed_of_sound_m_s,
-                            _SPEED_TOLERANCE_M_S)
+                self._check("speed_of_sound_m_s", p.speed_of_sound_m_s, self.speed_of_sound_m_s, _SPEED_TOLERANCE_M_S)
             elif isinstance(p, FirmwareVersion):
                 self.firmware_version = f"{p.firmware_version_major}.{p.firmware_version_minor}"
             elif isinstance(p, Ack):

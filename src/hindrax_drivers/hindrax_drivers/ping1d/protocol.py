@@ -11,8 +11,7 @@ Our own codec, not the PyPI package ``bluerobotics-ping``: its 0.2.x ``Ping1D`` 
 with a declared parse error and a streaming framer that resynchronises on ``BR``.
 
 Units: payload fields are converted to SI on decode (mm -> m, mm/s -> m/s, ms/µs -> s, mV -> V,
-centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution.
-"""
+centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution."""
 
 from __future__ import annotations
 
@@ -22,16 +21,14 @@ from dataclasses import MISSING, dataclass, field, fields as dc_fields, make_dat
 from enum import IntEnum
 from typing import Any, ClassVar, Dict, Optional, Tuple, Type, Union
 
-__all__ = ["Ping1dParseError", "Ping1dId", "Ping1dMessage", "Ping1dFramer", "Ping1dPayload", "Ack",
-           "Nack", "AsciiText", "DeviceInformation", "ProtocolVersion", "GeneralRequest",
-           "SetDeviceId", "SetRange", "SetSpeedOfSound", "SetModeAuto", "SetPingInterval",
-           "SetGainSetting", "SetPingEnable", "GotoBootloader", "FirmwareVersion", "DeviceId",
-           "Voltage5", "SpeedOfSound", "Range", "ModeAuto", "PingInterval", "GainSetting",
-           "TransmitDuration", "GeneralInfo", "DistanceSimple", "Distance", "ProcessorTemperature",
-           "PcbTemperature", "PingEnable", "Profile", "ContinuousStart", "ContinuousStop",
-           "PAYLOAD_TYPES", "GAIN_INDEX_TO_GAIN", "HEADER_BYTES", "CHECKSUM_BYTES", "SYNC_BYTE",
-           "checksum", "encode_frame", "decode_frame", "request_frame", "encode_message",
-           "decode_message"]
+__all__ = ["Ping1dParseError", "Ping1dId", "Ping1dMessage", "Ping1dFramer", "Ping1dPayload", "Ack", "Nack", "AsciiText",
+           "DeviceInformation", "ProtocolVersion", "GeneralRequest", "SetDeviceId", "SetRange", "SetSpeedOfSound",
+           "SetModeAuto", "SetPingInterval", "SetGainSetting", "SetPingEnable", "GotoBootloader", "FirmwareVersion",
+           "DeviceId", "Voltage5", "SpeedOfSound", "Range", "ModeAuto", "PingInterval", "GainSetting",
+           "TransmitDuration", "GeneralInfo", "DistanceSimple", "Distance", "ProcessorTemperature", "PcbTemperature",
+           "PingEnable", "Profile", "ContinuousStart", "ContinuousStop", "PAYLOAD_TYPES", "GAIN_INDEX_TO_GAIN",
+           "HEADER_BYTES", "CHECKSUM_BYTES", "SYNC_BYTE", "checksum", "encode_frame", "decode_frame", "request_frame",
+           "encode_message", "decode_message"]
 
 HEADER_BYTES = 8
 CHECKSUM_BYTES = 2
@@ -113,13 +110,10 @@ class Ping1dMessage:
         return encode_frame(self.message_id, self.payload, self.src_device_id, self.dst_device_id)
 
 
-def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0,
-                 dst_device_id: int = 0) -> bytes:
+def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
     """Build a complete frame: header, payload, checksum (docs/devices.md §2.2).
 
-    Raises:
-        ValueError: message id outside 0..65535, device ids outside 0..255, payload > 65535 bytes.
-    """
+    Raises ``ValueError``: message id outside 0..65535, device ids outside 0..255, payload > 65535 bytes."""
     if not 0 <= int(message_id) <= 0xFFFF:
         raise ValueError(f"message id {message_id} outside 0..65535")
     if not (0 <= int(src_device_id) <= 0xFF and 0 <= int(dst_device_id) <= 0xFF):
@@ -127,18 +121,15 @@ def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0,
     payload = bytes(payload)
     if len(payload) > 0xFFFF:
         raise ValueError(f"payload of {len(payload)} bytes exceeds 65535")
-    body = _HEADER.pack(b"BR", len(payload), int(message_id), int(src_device_id),
-                        int(dst_device_id)) + payload
+    body = _HEADER.pack(b"BR", len(payload), int(message_id), int(src_device_id), int(dst_device_id)) + payload
     return body + _CHECKSUM.pack(checksum(body))
 
 
 def decode_frame(frame: Union[bytes, bytearray]) -> Ping1dMessage:
     """Decode exactly one complete frame.
 
-    Raises:
-        Ping1dParseError: too short, not starting with ``BR``, payload_length inconsistent with the
-            frame length, or checksum mismatch.
-    """
+    Raises ``Ping1dParseError``: too short, not starting with ``BR``, payload_length inconsistent with the frame length,
+    or checksum mismatch."""
     frame = bytes(frame)
     if len(frame) < HEADER_BYTES + CHECKSUM_BYTES:
         raise Ping1dParseError(f"frame too short ({len(frame)} bytes)")
@@ -146,8 +137,7 @@ def decode_frame(frame: Union[bytes, bytearray]) -> Ping1dMessage:
     if start != b"BR":
         raise Ping1dParseError(f"frame does not start with 'BR': {frame[:2]!r}")
     if len(frame) != HEADER_BYTES + length + CHECKSUM_BYTES:
-        raise Ping1dParseError(
-            f"payload_length {length} inconsistent with frame of {len(frame)} bytes")
+        raise Ping1dParseError(f"payload_length {length} inconsistent with frame of {len(frame)} bytes")
     (expected,) = _CHECKSUM.unpack_from(frame, HEADER_BYTES + length)
     computed = checksum(frame[: HEADER_BYTES + length])
     if computed != expected:
@@ -224,8 +214,7 @@ class Ping1dFramer:
                 self.discarded_bytes += 1
                 del buf[:1]
                 continue
-            out.append(Ping1dMessage(buf[4] | (buf[5] << 8), bytes(buf[HEADER_BYTES: total - 2]),
-                                     buf[6], buf[7]))
+            out.append(Ping1dMessage(buf[4] | (buf[5] << 8), bytes(buf[HEADER_BYTES: total - 2]), buf[6], buf[7]))
             del buf[:total]
         self.frames_ok += len(out)
         return out
@@ -249,10 +238,8 @@ class Ping1dPayload:
     def pack(self) -> bytes:
         """Payload bytes (little-endian).
 
-        Raises:
-            ValueError: a value that does not fit its wire type (negative, too large, non-finite,
-                non-integral where an integer is required, non-ASCII text).
-        """
+        Raises ``ValueError``: a value that does not fit its wire type (negative, too large, non-finite, non-integral
+        where an integer is required, non-ASCII text)."""
         names = [f.name for f in dc_fields(self)]  # type: ignore[arg-type]
         raw = [_to_raw(getattr(self, n), conv, n) for n, (_, conv) in zip(names, self.LAYOUT)]
         try:
@@ -272,9 +259,7 @@ class Ping1dPayload:
     def unpack(cls, payload: bytes):
         """Decode payload bytes into this type.
 
-        Raises:
-            Ping1dParseError: wrong length or invalid boolean value.
-        """
+        Raises ``Ping1dParseError``: wrong length or invalid boolean value."""
         fmt = "<" + "".join(code for code, _ in cls.LAYOUT)
         size = struct.calcsize(fmt)
         payload = bytes(payload)
@@ -293,8 +278,7 @@ class Ping1dPayload:
                 raise Ping1dParseError(f"{cls.__name__}: missing profile_data_length")
             (n,) = struct.unpack_from("<H", rest)
             if len(rest) - 2 != n:
-                raise Ping1dParseError(
-                    f"{cls.__name__}: profile_data_length {n} but {len(rest) - 2} samples present")
+                raise Ping1dParseError(f"{cls.__name__}: profile_data_length {n} but {len(rest) - 2} samples present")
             values.append(bytes(rest[2:]))
         return cls(*values)
 
@@ -342,18 +326,15 @@ _WIRE = {"B": "u8", "H": "u16", "I": "u32", "text": "char[]", "profile": "u16 le
 PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {}
 
 
-def _payload(message_id: Ping1dId, note: str, *layout: tuple,
-             tail: Optional[Tuple[str, str]] = None) -> Any:
+def _payload(message_id: Ping1dId, note: str, *layout: tuple, tail: Optional[Tuple[str, str]] = None) -> Any:
     """Declare the frozen payload dataclass of ``message_id``, named after it (``SET_RANGE`` ->
     ``SetRange``), and register it in :data:`PAYLOAD_TYPES`.
 
     ``layout``: one ``(field, struct code, conversion[, default])`` per fixed field, in wire order;
     ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring
     gives the wire layout, then ``note``; its sections are of docs/devices.md, §2.4 (the message
-    table) unless it says otherwise.
-    """
-    fields: list = [(name, _PY_TYPE.get(conv, float),
-                     field(default=default[0] if default else MISSING))
+    table) unless it says otherwise."""
+    fields: list = [(name, _PY_TYPE.get(conv, float), field(default=default[0] if default else MISSING))
                     for name, _, conv, *default in layout]
     if tail is not None:
         tail_type, tail_default = _TAIL_TYPE[tail[1]]
@@ -394,8 +375,7 @@ SetRange = _payload(Ping1dId.SET_RANGE, "mm, length >= 1000 mm; selects manual m
 SetSpeedOfSound = _payload(Ping1dId.SET_SPEED_OF_SOUND, "mm/s, about 1 500 000 in water "
                            "(vector §2.5).", ("speed_of_sound_m_s", "I", _MM))
 SetModeAuto = _payload(Ping1dId.SET_MODE_AUTO, "0 manual / 1 auto.", ("auto", "B", "bool"))
-SetPingInterval = _payload(Ping1dId.SET_PING_INTERVAL, "ms between pings (vector §2.5).",
-                           ("ping_interval_s", "H", _MM))
+SetPingInterval = _payload(Ping1dId.SET_PING_INTERVAL, "ms between pings (vector §2.5).", ("ping_interval_s", "H", _MM))
 SetGainSetting = _payload(Ping1dId.SET_GAIN_SETTING, "index 0..6 of :data:`GAIN_INDEX_TO_GAIN`.",
                           ("gain_setting", "B", "int"))
 SetPingEnable = _payload(Ping1dId.SET_PING_ENABLE, "0 off / 1 on.", ("enabled", "B", "bool"))
@@ -407,15 +387,13 @@ FirmwareVersion = _payload(
 DeviceId = _payload(Ping1dId.DEVICE_ID, "§2.4.", ("device_id", "B", "int"))
 Voltage5 = _payload(Ping1dId.VOLTAGE_5, "mV -> V.", ("voltage_5_v", "H", _MM))
 SpeedOfSound = _payload(Ping1dId.SPEED_OF_SOUND, "mm/s -> m/s.", ("speed_of_sound_m_s", "I", _MM))
-Range = _payload(Ping1dId.RANGE, "mm -> m.", ("scan_start_m", "I", _MM),
-                 ("scan_length_m", "I", _MM))
+Range = _payload(Ping1dId.RANGE, "mm -> m.", ("scan_start_m", "I", _MM), ("scan_length_m", "I", _MM))
 ModeAuto = _payload(Ping1dId.MODE_AUTO, "0 manual / 1 auto.", ("auto", "B", "bool"))
 PingInterval = _payload(Ping1dId.PING_INTERVAL, "ms -> s, a minimum (the actual interval may be "
                         "longer).", ("ping_interval_s", "H", _MM))
 GainSetting = _payload(Ping1dId.GAIN_SETTING, "**u32** gain index (the set message is u8).",
                        ("gain_setting", "I", "int"))
-TransmitDuration = _payload(Ping1dId.TRANSMIT_DURATION, "µs -> s.",
-                            ("transmit_duration_s", "H", _US))
+TransmitDuration = _payload(Ping1dId.TRANSMIT_DURATION, "µs -> s.", ("transmit_duration_s", "H", _US))
 GeneralInfo = _payload(
     Ping1dId.GENERAL_INFO, "10 bytes; voltage_5 in mV, ping_interval in ms.",
     ("firmware_version_major", "H", "int"), ("firmware_version_minor", "H", "int"),
@@ -426,10 +404,8 @@ DistanceSimple = _payload(Ping1dId.DISTANCE_SIMPLE, "5 bytes (vector §2.5).",
 Distance = _payload(
     Ping1dId.DISTANCE, "24 bytes, fields at @0, 4, 6, 8, 12, 16, 20; distance and scan in mm, "
     "confidence in %, transmit_duration in µs.", *_DISTANCE_LAYOUT)
-ProcessorTemperature = _payload(Ping1dId.PROCESSOR_TEMPERATURE, "centi-degC -> degC.",
-                                ("temperature_degc", "H", _CC))
-PcbTemperature = _payload(Ping1dId.PCB_TEMPERATURE, "centi-degC -> degC.",
-                          ("temperature_degc", "H", _CC))
+ProcessorTemperature = _payload(Ping1dId.PROCESSOR_TEMPERATURE, "centi-degC -> degC.", ("temperature_degc", "H", _CC))
+PcbTemperature = _payload(Ping1dId.PCB_TEMPERATURE, "centi-degC -> degC.", ("temperature_degc", "H", _CC))
 PingEnable = _payload(Ping1dId.PING_ENABLE, "0 off / 1 on.", ("enabled", "B", "bool"))
 Profile = _payload(
     Ping1dId.PROFILE, "the 1212 fields (24 B), the length @24, the samples @26 (first nearest the "
@@ -443,18 +419,14 @@ ContinuousStop = _payload(Ping1dId.CONTINUOUS_STOP, "id to stop.", ("requested_i
 def encode_message(payload: Ping1dPayload, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
     """Complete frame for a typed payload.
 
-    Raises:
-        ValueError: a field does not fit its wire type, or ids out of range.
-    """
+    Raises ``ValueError``: a field does not fit its wire type, or ids out of range."""
     return encode_frame(payload.MESSAGE_ID, payload.pack(), src_device_id, dst_device_id)
 
 
 def decode_message(message: Union[Ping1dMessage, bytes, bytearray]) -> Ping1dPayload:
     """Typed payload of a frame (a :class:`Ping1dMessage` or the raw frame bytes).
 
-    Raises:
-        Ping1dParseError: bad frame, unknown message id, or payload of the wrong size / content.
-    """
+    Raises ``Ping1dParseError``: bad frame, unknown message id, or payload of the wrong size / content."""
     if not isinstance(message, Ping1dMessage):
         message = decode_frame(message)
     cls = PAYLOAD_TYPES.get(message.message_id)

@@ -1,10 +1,9 @@
 """Ping1D byte stream -> typed messages, with every rejected byte classified (pure, no I/O).
 
-The one decoding path of the Ping altimeter driver: the ROS node (:mod:`hindrax_drivers.ping1d.node`)
-and ``hindrax decode ping1d`` both use :class:`Ping1dStreamDecoder`. Frames are extracted by the
-protocol layer's :class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer` (docs/devices.md §2.2: ``BR``,
-u16 length, u16 id, src, dst, payload, u16 sum checksum) and decoded with
-:func:`~hindrax_drivers.ping1d.protocol.decode_message`.
+The one decoding path of the Ping altimeter driver: the ROS node (:mod:`hindrax_drivers.ping1d.node`) and
+``hindrax decode ping1d`` both use :class:`Ping1dStreamDecoder`. Frames are extracted by the protocol layer's
+:class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer` (docs/devices.md §2.2: ``BR``, u16 length, u16 id, src, dst,
+payload, u16 sum checksum) and decoded with :func:`~hindrax_drivers.ping1d.protocol.decode_message`.
 
 The binary protocol has no terminator, so a frame cut short is only visible as a checksum failure
 inside the framer. This module tells the cases apart by looking at the bytes *between* two accepted
@@ -13,18 +12,16 @@ frames (the "gap"), which it keeps in a window with their stream offsets:
 - a ``BR`` header whose claimed frame (10 + payload_length bytes) contains no other plausible header and
   ends exactly where the gap ends or where another such complete frame starts is a whole frame that
   failed its checksum: ``bad_checksum`` (so is a whole frame followed only by noise);
-- a ``BR`` header whose claimed frame contains the next plausible header, or runs past the start of the
-  next good frame (or the end of the stream / a reconnect), was cut short: ``truncated`` (the framer
-  found the next frame inside it). A ``BR`` pair inside a corrupted payload that happens to carry a
-  plausible length can make a corrupted frame count as truncated: the counts are diagnostics, the data
-  path does not depend on them;
+- a ``BR`` header whose claimed frame contains the next plausible header, or runs past the start of the next good frame
+  (or the end of the stream / a reconnect), was cut short: ``truncated`` (the framer found the next frame inside it). A
+  ``BR`` pair inside a corrupted payload that happens to carry a plausible length can make a corrupted frame count as
+  truncated: the counts are diagnostics, the data path does not depend on them;
 - a header claiming more than ``max_payload_bytes`` is a false start, and every other byte is
   ``garbage_bytes`` (line noise, auto-baud ``U``...).
 
 Frames that pass the checksum but cannot be decoded are ``unknown_message`` (id not in docs/devices.md §2.4)
 or ``malformed`` (wrong payload size or value). Bytes older than two maximal frames are classified
-without waiting for the next good frame, so a stream of pure garbage is still reported.
-"""
+without waiting for the next good frame, so a stream of pure garbage is still reported."""
 from __future__ import annotations
 
 import bisect
@@ -96,14 +93,12 @@ class Ping1dStreamDecoder:
     def _classify_gap(self, gap: bytes, offset: int, stop: Optional[int] = None) -> int:
         """Classify bytes that are not part of any good frame; return how many were consumed.
 
-        A ``BR`` header with a plausible length is a *complete* frame (so its checksum failed) when no
-        other plausible header starts inside its claimed span and its claimed end is the end of the gap or
-        the start of another complete frame ("chain-consistent"); otherwise it was cut short (truncated)
-        by the next plausible header inside its claimed span, or by the end of the gap (where a good frame
-        starts, or the stream stopped). Without ``stop`` the whole gap is classified; with ``stop`` only
-        headers starting before ``stop`` (each consumed with its claimed frame, which the caller
-        guarantees lies inside ``gap``); the return value is then >= ``stop``.
-        """
+        A ``BR`` header with a plausible length is a *complete* frame (so its checksum failed) when no other plausible
+        header starts inside its claimed span and its claimed end is the end of the gap or the start of another complete
+        frame ("chain-consistent"); otherwise it was cut short (truncated) by the next plausible header inside its
+        claimed span, or by the end of the gap (where a good frame starts, or the stream stopped). Without ``stop`` the
+        whole gap is classified; with ``stop`` only headers starting before ``stop`` (each consumed with its claimed
+        frame, which the caller guarantees lies inside ``gap``); the return value is then >= ``stop``."""
         n = len(gap)
         limit = n if stop is None else min(stop, n)
         starts: List[int] = []  # header candidates with a plausible length (or cut before the length)

@@ -9,8 +9,7 @@ node's clock at start-up (``use_sim_time`` supported; static transforms are vali
 
 Parameters: the geometry keys of the vehicle file (:data:`hindrax_drivers.tf.static_tf.TF_KEYS`, read-only),
 and the frame ids ``base_frame``, ``imu_frame``, ``dvl_frame``, ``ping_frame``, ``pressure_frame``,
-``thruster_frame_prefix`` (read-only; defaults REP-103/105 names ``base_link``, ``imu_link`` ...).
-"""
+``thruster_frame_prefix`` (read-only; defaults REP-103/105 names ``base_link``, ``imu_link`` ...)."""
 from __future__ import annotations
 
 from typing import Any

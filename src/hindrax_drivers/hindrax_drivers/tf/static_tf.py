@@ -80,8 +80,7 @@ def vehicle_transforms(cfg: VehicleConfig, frame_ids: Mapping[str, str] | None =
     """Every static transform of the vehicle (see the module docstring for frames and conventions).
 
     cfg: a configuration holding at least :data:`TF_KEYS`. frame_ids: overrides of :data:`DEFAULT_FRAME_IDS`.
-    Returns sensors first (imu, dvl, ping, pressure), then thrusters in allocation order.
-    """
+    Returns sensors first (imu, dvl, ping, pressure), then thrusters in allocation order."""
     ids = dict(DEFAULT_FRAME_IDS, **(frame_ids or {}))
     sensors = cfg.sensors
     base = ids["base"]

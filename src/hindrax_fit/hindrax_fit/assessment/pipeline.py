@@ -64,8 +64,9 @@ def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
     training bags and the ``holdout`` bags, named in the design)."""
     core = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
                                 persistence_margin=opts.persistence_margin)
-    design = (f"{opts.folds}-fold cross-validation by contiguous blocks of the {opts.validation_s:g} s validation "
-              "segments that move each DOF (training segments overlapping a held-out one left out)")
+    design = (f"{opts.folds}-fold cross-validation: whole bags held out, every {opts.validation_s:g} s validation "
+              "segment of them scored (one bag: contiguous blocks of the segments that move each DOF, training "
+              "segments overlapping a held-out one left out)")
     if holdout:
         design += f"; holdout: {', '.join(str(b) for b in holdout)}"
     return fit_records(records, core, design)

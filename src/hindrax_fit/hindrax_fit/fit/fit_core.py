@@ -885,8 +885,8 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
         tms = [Timing(d, lag, "estimated") for d, lag in batch]
         sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
                for tm in tms]
-        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s,
-                                                   excited_only=not rec.all_segments) for tm in tms]
+        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s, excited_only=False)
+                                    for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
         start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
         smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
@@ -910,7 +910,7 @@ def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
     bound, why = resolvable_delay(rec, opts.max_delay_s, opts.segment_s)
     zero, both = Timing(), Terms("both")
     sd = build_segments(rec, both, zero, opts.segment_s, excited_only=_excited_only(rec, opts))
-    sv = build_segments(rec, both, zero, opts.validation_s, excited_only=not rec.all_segments)
+    sv = build_segments(rec, both, zero, opts.validation_s, excited_only=False)
     fo = make_folds(sd, sv, opts.folds)
     step = max(rec.h, DELAY_STEP_S)
     coarse = [(round(float(d), 6), lag) for lag in LAGS_S for d in np.arange(0.0, bound + 1e-9, step)
@@ -1018,9 +1018,19 @@ class Folds:
 
 
 def make_folds(sd_train: SegmentData, sd_val: SegmentData, k: int) -> Folds:
-    """Contiguous blocks of the excited validation segments (time order); a training segment overlapping a held-out
-    validation segment's time span is left out of that fold's training. Fewer excited validation segments than
-    ``k``: that many folds (at least 2)."""
+    """The folds of the cross-validation, built as the held-out runs are (docs/identification.md §7 step 4).
+
+    Validation segments of two runs or more (``group``): whole runs held out, every segment of them moving or not
+    (the held-out runs of ``hindrax ident fit --holdout`` and ``ident predict`` are new runs, scored on all their
+    segments), the runs in ``k`` contiguous groups (one run per fold when there are at most ``k``); each fold trains
+    on the other runs. One run: contiguous blocks of the excited validation segments (time order), a training
+    segment overlapping a held-out validation segment's time span left out of that fold's training; fewer excited
+    validation segments than ``k``: that many folds (at least 2)."""
+    runs = np.unique(sd_val.group)
+    if runs.size >= 2:
+        held_runs = [a for a in np.array_split(runs, min(k, runs.size)) if a.size]
+        held = [np.flatnonzero(np.isin(sd_val.group, a)) for a in held_runs]
+        return Folds(held, [np.flatnonzero(~np.isin(sd_train.group, a)) for a in held_runs], [])
     exc = np.flatnonzero(sd_val.excited)
     if exc.size < 2:
         return Folds([], [], [f"{exc.size} validation segment(s) move the DOF: no cross-validation possible"])
@@ -1063,6 +1073,8 @@ def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layo
             continue
         th[i] = f.theta
         va = sd_val.subset(hidx)
+        if np.unique(sd_val.group).size >= 2:  # a held-out run is a new run: the mean bias, as ident predict's
+            va.cols[..., [c for c, j in enumerate(_column_params(layout)) if layout[j][1].startswith("runbias")]] = 0.0
         m = validation_measures(va, predict_validation(va, layout, f.theta))
         if m["samples"] < 2:
             notes.append(f"fold {i + 1}: no measurement held out")
@@ -1104,7 +1116,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     free_v0 = rec.measured == "position" if free_v0 is None else free_v0
     sd = build_segments(rec, terms, timing, opts.segment_s, inertia,
                         excited_only=_excited_only(rec, opts) if excited_only is None else excited_only)
-    sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=not rec.all_segments)
+    sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=False)
     layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names,
                               rec.run_count)
     start = _equation_error_start(sd, layout, sd.a_s)

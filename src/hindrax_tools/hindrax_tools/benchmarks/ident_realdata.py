@@ -1,13 +1,15 @@
 """Real-like data to tune ``hindrax ident fit`` on, and the figures it gives: piloted and closed-loop
 virtual-pool bags with what real pool days have and the vehicle file does not.
 
-Three data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_sim.piloted_bag`, the
+Four data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_sim.piloted_bag`, the
 command through the thrust allocation to the simulated thrusters and sensors), all on Hindrax:
 
 * ``realdata_piloted``: the setpoint pilot; ``realdata_closedloop``: the survey autopilot (integral action against
   the tether and the current, little excitation); ``realdata_openloop``: few long open-loop runs (held levels), a
   0.25 s transport delay, per-thruster thrust 0.7-1.3 of the curve and a gyro ten times noisier (issue 72's
-  vehicle B, four bags fitted and four predicted);
+  vehicle B, four bags fitted and four predicted); ``realdata_vehicle_b``: as vehicle B's data show it, 22 runs of
+  60 s (11 fitted) with idle stretches, levels up to the saturation, a DVL at 4 Hz losing a fifth of its reports, a
+  gyro bias and the current changing within a run;
 * tether drift: a tether whose pull changes from run to run (anchor and tension) under a current that drifts over
   four minutes; per-run bias: each bag gets its own tether lay and current offset (``DataSet.runs``), so the force
   that moves a vehicle at rest differs between runs;
@@ -92,6 +94,23 @@ DATASETS: tuple[DataSet, ...] = (
              "jitter": 0.0}, seed=4800, train=4, holdout=4, runs=_RUNS,
             note="open-loop held levels, 60 s runs; delay 0.25 s; per-thruster thrust 0.7-1.3, reverse 0.75; gyro "
                  "noise 0.03 rad/s"),
+    # vehicle B as its data show it (issue 72): 22 open-loop runs of 60 s, 11 fitted; idle stretches; levels up to
+    # the saturation; a DVL at 4 Hz losing a fifth of its reports; a gyro with bias and noise; the current (and so
+    # the tether's drag) changing within a run
+    DataSet("realdata_vehicle_b", {}, {**_TRUTH, "thrusters": {"time_constant_s": 0.05, "deadband_us": 45.0},
+                                       "disturbances": {**_TRUTH["disturbances"], "thrust": {
+                                           "per_thruster": [1.25, 0.8, 1.2, 0.75, 1.3, 0.85, 0.7, 1.15],
+                                           "negative": 0.75},
+                                           "current": {"velocity_ned_m_s": [0.02, 0.01, 0.0],
+                                                       "amplitude_ned_m_s": [0.04, 0.03, 0.0], "period_s": 50.0},
+                                           "imu": {"gyro_bias_walk_rad_s_sqrt_s": 0.002}},
+                                       "simulation": {"sensors": {
+                                           "icm20948_gyro": {"noise_std_rad_s": 0.03, "bias_rad_s": 0.01},
+                                           "dvl75": {"rate_hz": 4.0, "dropout_probability": 0.2}}}},
+            {"actuation": "thrusters", "sensors": "dvl", "pilot": "openloop", "duration_s": 60.0, "delay_s": 0.25,
+             "jitter": 0.0, "level_top": 1.0, "idle_fraction": 0.35}, seed=5000, train=11, holdout=11, runs=_RUNS,
+            note="as realdata_openloop, 22 runs (11 fitted); idle stretches 4-12 s; levels up to the saturation; "
+                 "DVL 4 Hz with 20 % dropouts; gyro bias 0.01 rad/s and its walk; current changing within a run"),
 )
 
 

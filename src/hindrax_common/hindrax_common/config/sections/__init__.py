@@ -9,8 +9,7 @@ mapping lacks: a node validates its own selection of keys with them,
 :func:`hindrax_common.config.node_parameters.validate_selection`). A section without it has every key checked by
 its own range alone. A check belongs to the section of the key it names: ``lights.esc_channel`` against the
 thrusters' channels is the lights'. The section modules import nothing of this package but :mod:`..spec` (and the
-typed-section base) and nothing of a driver (``test_import_structure``).
-"""
+typed-section base) and nothing of a driver (``test_import_structure``)."""
 from __future__ import annotations
 
 from typing import Any, Mapping

@@ -1,6 +1,5 @@
 """``calibration.*``: the known forces of the campaign's reference steps (docs/identification.md §6), the times
-of their holds, and the forces' derived view (:class:`CalibrationConfig`).
-"""
+of their holds, and the forces' derived view (:class:`CalibrationConfig`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,17 +17,13 @@ SCHEMA, OPTIONAL = section("calibration", {
     "inclining_volume_m3": real("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
     "inclining_arm_m": real("horizontal arm of the test mass from the centre line (roll: to starboard, "
                             "pitch: forward), m", 0.01, 2.0),
-    "float_mass_kg": real("mass of the sealed float tied to the vehicle in the float step (optional), kg",
-                          0.0, 50.0),
-    "float_volume_m3": real("displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)",
-                            1e-6, 0.1),
-    "net_buoyancy_std_n": real("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the "
-                               "hover holds of the thrust calibration measure the forward thrust against "
-                               "it; optional)", 1e-4, 10.0),
+    "float_mass_kg": real("mass of the sealed float tied to the vehicle in the float step (optional), kg", 0.0, 50.0),
+    "float_volume_m3": real("displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)", 1e-6, 0.1),
+    "net_buoyancy_std_n": real("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the hover holds of "
+                               "the thrust calibration measure the forward thrust against it; optional)", 1e-4, 10.0),
     "hold_settle_s": real("settling time before each averaging hold of the reference steps, s (optional; "
                           "default 15)", 1.0, 600.0),
-    "hold_window_s": real("averaging time of each hold of the reference steps, s (optional; default 30)",
-                          1.0, 600.0),
+    "hold_window_s": real("averaging time of each hold of the reference steps, s (optional; default 30)", 1.0, 600.0),
 }, optional=("float_", "net_buoyancy_std_n", "hold_"))
 
 
@@ -45,8 +40,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             limit = c[mass] / rho
             ok = c[volume] > limit if side == "above" else c[volume] < limit
             if not ok:
-                issues.append(ConfigIssue(volume, c[volume],
-                                          f"{side} {mass} / water density = {limit:.4g} ({why})"))
+                issues.append(ConfigIssue(volume, c[volume], f"{side} {mass} / water density = {limit:.4g} ({why})"))
     return issues
 
 
@@ -56,8 +50,7 @@ class CalibrationConfig:
 
     Weights in water and buoyancies are (m - rho V) g and (rho V - m) g with the configured water density and g.
     ``float_net_buoyancy_n`` is None without the optional ``calibration.float_*`` keys; ``net_buoyancy_std_n``
-    defaults to 0.05 N (the vehicle weighed in water with a spring scale; ASSUMPTION when not configured).
-    """
+    defaults to 0.05 N (the vehicle weighed in water with a spring scale; ASSUMPTION when not configured)."""
 
     ballast_weight_in_water_n: float
     line_pull_force_n: float

@@ -1,6 +1,5 @@
 """``control.*``: the depth/altitude, heading and velocity holds (hindrax_onboard control, docs/control.md §2-§3;
-all optional).
-"""
+all optional)."""
 from __future__ import annotations
 
 from ..spec import real, section
@@ -9,8 +8,7 @@ SCHEMA, OPTIONAL = section("control", {
     "rate_hz": real("rate of the controller node's wrench, Hz (default 50)", 1.0, 200.0),
     "depth_bandwidth_rad_s": real("target bandwidth of the depth and altitude hold, rad/s (default 2)", 0.05, 20.0),
     "heading_bandwidth_rad_s": real("target bandwidth of the heading hold, rad/s (default 2)", 0.05, 20.0),
-    "attitude_bandwidth_rad_s": real("target bandwidth of the roll and pitch holds, rad/s (default 2)",
-                                     0.05, 20.0),
+    "attitude_bandwidth_rad_s": real("target bandwidth of the roll and pitch holds, rad/s (default 2)", 0.05, 20.0),
     "velocity_bandwidth_rad_s": real("target bandwidth of the surge and sway velocity holds, rad/s (default 3)",
                                      0.05, 20.0),
     "damping_ratio": real("damping ratio of the reference models and the PID, default 1", 0.3, 2.0),

@@ -1,6 +1,5 @@
 """``esc.*``: the PCA9685 ESC output, its safety timeouts, the /OE line and the hardware watchdog's feed
-(docs/devices.md §5.1-5.2, docs/watchdog.md).
-"""
+(docs/devices.md §5.1-5.2, docs/watchdog.md)."""
 from __future__ import annotations
 
 from pathlib import Path

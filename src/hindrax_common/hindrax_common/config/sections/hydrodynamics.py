@@ -1,6 +1,5 @@
 """``hydrodynamics.*``: added mass and damping per DOF (positive numbers; [Hindrax-AM] Table 6,
-[Hindrax-Drag] Table 3), and their typed view per DOF (:class:`DofHydrodynamics`).
-"""
+[Hindrax-Drag] Table 3), and their typed view per DOF (:class:`DofHydrodynamics`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -28,10 +27,8 @@ for _dof in TRANSLATIONAL_DOFS:
         _KEYS[f"{_dof}.quadratic_damping_kg_m"] = real(f"{_dof} quadratic damping, kg/m", 0.0, 1e4)
 for _dof in ROTATIONAL_DOFS:
     _KEYS[f"{_dof}.added_mass_kg_m2"] = real(f"{_dof} added moment of inertia, kg m^2", 0.0, 1e3)
-    _KEYS[f"{_dof}.linear_damping_kg_m2_s"] = real(
-          f"{_dof} linear damping, N m/(rad/s) = kg m^2/s", 0.0, 1e3)
-    _KEYS[f"{_dof}.quadratic_damping_kg_m2"] = real(
-          f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
+    _KEYS[f"{_dof}.linear_damping_kg_m2_s"] = real(f"{_dof} linear damping, N m/(rad/s) = kg m^2/s", 0.0, 1e3)
+    _KEYS[f"{_dof}.quadratic_damping_kg_m2"] = real(f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
 SCHEMA, OPTIONAL = section("hydrodynamics", _KEYS)
 
 
@@ -46,8 +43,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
         elif "hydrodynamics.surge.added_mass_kg" in c:
             ma = added_mass_matrix_from_flat(c)
             if np.min(np.linalg.eigvalsh(0.5 * (ma + ma.T))) <= 0.0:
-                issues.append(ConfigIssue("hydrodynamics.added_mass_coupling",
-                                          c["hydrodynamics.added_mass_coupling"],
+                issues.append(ConfigIssue("hydrodynamics.added_mass_coupling", c["hydrodynamics.added_mass_coupling"],
                                           "couplings keeping the added-mass matrix positive definite"))
     return issues
 
@@ -66,8 +62,7 @@ class DofHydrodynamics:
     quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping ([Hindrax-Drag] Table 3:
     positive heave = moving down, w > 0 in FRD); for the other DOFs the positive and negative values are equal.
     Damping force/moment opposing motion: D(v) = linear v + quadratic |v| v, with the coefficient
-    chosen by the sign of v.
-    """
+    chosen by the sign of v."""
 
     dof: str
     added_mass: float

@@ -15,12 +15,9 @@ SCHEMA, OPTIONAL = section("identification", {
                             "its wrench is sent and held at this rate (a whole fraction of estimate_rate_hz; "
                             "default estimate_rate_hz)", 1.0, 400.0),
     "publish_rate_hz": real("HydroEstimate publication rate, Hz", 0.1, 50.0),
-    "altitude_setpoint_m": real("altitude held during manoeuvres, m ([Hindrax-Drag] §4: 0.8-1.0 m)",
-                                0.1, 50.0),
-    "roll_test_angle_rad": real("roll test turns back at this angle, rad ([Hindrax-Drag] §4.2: 30 deg)",
-                                0.01, 1.5),
-    "pitch_test_angle_rad": real("pitch test turns back at this angle, rad ([Hindrax-Drag] §4.2: 40 deg)",
-                                 0.01, 1.5),
+    "altitude_setpoint_m": real("altitude held during manoeuvres, m ([Hindrax-Drag] §4: 0.8-1.0 m)", 0.1, 50.0),
+    "roll_test_angle_rad": real("roll test turns back at this angle, rad ([Hindrax-Drag] §4.2: 30 deg)", 0.01, 1.5),
+    "pitch_test_angle_rad": real("pitch test turns back at this angle, rad ([Hindrax-Drag] §4.2: 40 deg)", 0.01, 1.5),
     "max_level_duration_s": real("longest time one level is held, s", 1.0, 600.0),
     "converged_relative_std": real("converged when every std/|value| is below this", 0.001, 1.0),
     "prior_std_rel": real("1-sigma of the empirical priors in the batch fit, as a fraction of the prior "
@@ -39,8 +36,7 @@ SCHEMA, OPTIONAL = section("identification", {
     "excitation": text("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
                        "stay in the pool box (hindrax_onboard identification/online/excitation.py)",
                        ("ladder", "multisine", "prbs", "chirp")),
-    "excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s",
-                                  5.0, 1800.0),
+    "excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s", 5.0, 1800.0),
 }, optional=("excitation", "prior_std_rel", "rls_", "command_rate_hz"))
 
 

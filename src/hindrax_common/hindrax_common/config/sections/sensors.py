@@ -1,6 +1,5 @@
 """``sensors.*``: the DVL-75, the Ping1D altimeter, the MS5837 pressure sensor and the ICM-20948 IMU
-([Hindrax-Drag] Table 1; docs/devices.md), with their plausibility gates and declared noise.
-"""
+([Hindrax-Drag] Table 1; docs/devices.md), with their plausibility gates and declared noise."""
 from __future__ import annotations
 
 import math
@@ -42,8 +41,7 @@ _KEYS: dict[str, Spec] = {
                                    choices=(256, 512, 1024, 2048, 4096, 8192)),
     "ms5837.rate_hz": real("pressure publication rate, Hz", 0.1, 50.0),
     "ms5837.position_frd_m": vector("pressure port position relative to the CG, FRD, m", 3, -5.0, 5.0),
-    "ms5837.min_pressure_pa": real("plausibility gate: a lower compensated pressure is not published, Pa",
-                                   0.0, 2e5),
+    "ms5837.min_pressure_pa": real("plausibility gate: a lower compensated pressure is not published, Pa", 0.0, 2e5),
     "ms5837.max_pressure_pa": real("plausibility gate: a higher compensated pressure is not published, Pa "
                                    "(30BA full scale 30 bar)", 1e4, 3.1e6),
     "ms5837.min_depth_m": real("plausibility gate: a shallower depth (negative = above the surface, e.g. on "
@@ -64,12 +62,10 @@ _KEYS: dict[str, Spec] = {
     "icm20948.gyro_full_scale_dps": integer("gyroscope full scale, deg/s", choices=(250, 500, 1000, 2000)),
     "icm20948.dlpf_config": integer("ACCEL/GYRO_DLPFCFG register code (docs/devices.md §4.4)", 0, 7),
     "icm20948.sample_rate_hz": real("output data rate and publication rate, Hz", 1.0, 1125.0),
-    "icm20948.magnetometer_mode": text("how the AK09916 is reached (docs/devices.md §4.6)",
-                                       ("i2c_master", "bypass")),
+    "icm20948.magnetometer_mode": text("how the AK09916 is reached (docs/devices.md §4.6)", ("i2c_master", "bypass")),
     "icm20948.estimate_gyro_bias": flag("estimate gyro bias at start-up while the vehicle is still"),
     "icm20948.gyro_bias_duration_s": real("duration of the start-up gyro-bias estimate, s", 0.1, 60.0),
-    "icm20948.mounting_rpy_rad": vector("rotation of the sensor frame in base_link (FLU), rad",
-                                        3, -math.pi, math.pi),
+    "icm20948.mounting_rpy_rad": vector("rotation of the sensor frame in base_link (FLU), rad", 3, -math.pi, math.pi),
     "icm20948.position_frd_m": vector("IMU chip position relative to the CG, FRD, m (the imu_link origin)",
                                       3, -5.0, 5.0),
     "icm20948.frozen_check_samples": integer("data-ready gate: after this many bit-identical samples in a row "
@@ -86,8 +82,7 @@ _KEYS: dict[str, Spec] = {
 # Declared (datasheet / bench) noise of the sensors: what the vehicle's estimators assume. The virtual pool's own
 # noise lives in the truth file (ros_ws/config/truth/*.yaml, ``simulation.sensors.*``), never read by a node.
 _KEYS["dvl75.noise_std_m_s"] = real("declared DVL velocity white noise 1-sigma per axis, m/s", 0.0, 1.0)
-_KEYS["dvl75.scale_error_fraction"] = real("declared DVL 1-sigma multiplicative velocity error per report",
-                                           0.0, 0.5)
+_KEYS["dvl75.scale_error_fraction"] = real("declared DVL 1-sigma multiplicative velocity error per report", 0.0, 0.5)
 _KEYS["dvl75.attitude_noise_std_rad"] = real("declared DVL attitude white noise 1-sigma, rad", 0.0, 1.0)
 _KEYS["ms5837.noise_std_pa"] = real("declared pressure white noise 1-sigma, Pa", 0.0, 1e4)
 _KEYS["icm20948.accel_noise_std_m_s2"] = real("declared accelerometer white noise 1-sigma, m/s^2", 0.0, 10.0)

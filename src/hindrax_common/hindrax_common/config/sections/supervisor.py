@@ -1,6 +1,5 @@
 """``supervisor.*``: the safety supervisor (:mod:`hindrax_bringup.supervisor`), the last line after the
-identification's own limits.
-"""
+identification's own limits."""
 from __future__ import annotations
 
 import math
@@ -23,10 +22,8 @@ SCHEMA, OPTIONAL = section("supervisor", {
                             "max_identical_s, s",
                             0.1, 10.0),
     "min_rate.dvl_hz": real("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
-    "min_rate.altimeter_hz": real("minimum ping/altitude rate while armed, Hz (0 = not watched)",
-                                  0.0, 1000.0),
-    "min_rate.pressure_hz": real("minimum pressure/depth rate while armed, Hz (0 = not watched)",
-                                 0.0, 1000.0),
+    "min_rate.altimeter_hz": real("minimum ping/altitude rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
+    "min_rate.pressure_hz": real("minimum pressure/depth rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
     "min_rate.imu_hz": real("minimum imu/data_raw rate while armed, Hz (0 = not watched)", 0.0, 2000.0),
     "max_invalid_dvl_s": real("armed with no valid DVL velocity for this long -> trip (the cage's dead "
                               "reckoning is frozen meanwhile), s", 0.1, 60.0),
@@ -57,8 +54,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
       pool's depth and the depth sensor's plausibility gate (a deeper limit never trips).
     * ``rate_window_s``, ``max_invalid_dvl_s``, ``max_sample_age_s`` and ``max_identical_s`` at most
       ``reaction_time_s``: a dead sensor is found at the latest one rate window after it stops.
-    * A rate check is off (``min_rate.<sensor>_hz: 0``) only with a reason (``rate_check_disabled.<sensor>``).
-    """
+    * A rate check is off (``min_rate.<sensor>_hz: 0``) only with a reason (``rate_check_disabled.<sensor>``)."""
     issues: list[ConfigIssue] = []
     # the supervisor is the last line: its limits at least as wide as the identification's (which abort first)
     for key, other, wider in (("supervisor.max_depth_m", "limits.max_depth_m", "at least"),

@@ -1,7 +1,6 @@
 """``thrusters.*``: names, pulse-width range, thrust curves, allocation settings and the per-thruster keys
 (``thrusters.<name>.esc_channel``; [Hindrax-Drag] §2.2, eq. 1, Table 2, §4 eq. 9), and their hand-written typed view
-(:class:`ThrustersConfig`: its keys are per thruster name, so it is not generated).
-"""
+(:class:`ThrustersConfig`: its keys are per thruster name, so it is not generated)."""
 from __future__ import annotations
 
 import re
@@ -62,8 +61,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     * ``thrusters.curve_negative`` / ``curve_positive``: each side increasing with the right sign at its range end
       (negative thrust at ``pulse_width_min_us``, positive at ``pulse_width_max_us``) with a usable monotone branch
       toward the deadband, the condition :class:`~hindrax_common.base.thrust_curve.ThrustCurve` needs to
-      start ([Hindrax-Drag] eq. 1); a negated curve is refused here rather than by the allocation at start-up.
-    """
+      start ([Hindrax-Drag] eq. 1); a negated curve is refused here rather than by the allocation at start-up."""
     issues: list[ConfigIssue] = []
     if "thrusters.names" in c:
         names = c["thrusters.names"]
@@ -134,8 +132,7 @@ class ThrusterConfig(Section):
 class ThrustersConfig(Section):
     """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] eq. 1, Table 2).
 
-    curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us.
-    """
+    curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us."""
 
     PREFIX: ClassVar[str] = "thrusters"
 
@@ -184,15 +181,13 @@ def thrusters_config(f: Mapping[str, Any]) -> ThrustersConfig:
         return np.asarray(v, dtype=float) / np.linalg.norm(v)
 
     def build(cls: Any, prefix: str, convert: Mapping[str, Any], **given: Any) -> Any:
-        values = {k.name: get(f"{prefix}.{k.name}", convert.get(k.name))
-                  for k in fields(cls) if k.name not in given}
+        values = {k.name: get(f"{prefix}.{k.name}", convert.get(k.name)) for k in fields(cls) if k.name not in given}
         return cls.build({**values, **given}, prefix=prefix)
 
     per_thruster = {"position_frd_m": lambda v: np.asarray(v, dtype=float), "direction_frd": unit}
     shared = {"curve_negative": tuple, "curve_positive": tuple, "priority_dofs": tuple,
               "thrust_uncertainty_rel": _float_tuple, "thrust_fit_uncertainty_rel": _float_tuple}
-    ts = tuple(build(ThrusterConfig, f"thrusters.{n}", per_thruster, name=n)
-               for n in f["thrusters.names"])
+    ts = tuple(build(ThrusterConfig, f"thrusters.{n}", per_thruster, name=n) for n in f["thrusters.names"])
     return build(ThrustersConfig, "thrusters", shared, thrusters=ts)
 
 
