@@ -50,9 +50,12 @@ _domain_ctx = None
 #: first pool-day test), and the test's ``file::function``; tests of 6 s and more. Tests not listed follow in
 #: collection order; refresh the list from ``--durations``. An xdist group (a module with a module-scoped fixture, or
 #: the readers of a shared run) runs as one unit where its listed test stands (its tests run there, in file order),
-#: with the seconds of the whole group (its parts of 5 s and more).
+#: with the seconds of the whole group (its parts of 5 s and more). The colcon build goes to the second line's worker
+#: (test_ros_install.py's module: its first test builds it), beside the vehicle_launch group's tests that need no
+#: build (:func:`_group_order`); on the group's worker it was the group's longest wait (182 s of 871 s, loaded).
 LONGEST_FIRST = """
 348 test_pool_day.py::test_pool_day_as_the_readme_writes_it
+100 test_ros_install.py::test_every_node_and_hindrax_are_installed
  64 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
  54 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
  32 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
@@ -198,9 +201,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         for m in it.iter_markers("xdist_group"):
             name = str(m.args[0] if m.args else m.kwargs.get("name", "default"))
             group[name] = min(group.get(name, len(rank)), own[it])
-    items.sort(key=lambda it: min([own[it], *(group[str(m.args[0] if m.args else m.kwargs.get("name", "default"))]
-                                              for m in it.iter_markers("xdist_group"))]))
+    items.sort(key=lambda it: (min([own[it], *(group[str(m.args[0] if m.args else m.kwargs.get("name", "default"))]
+                                               for m in it.iter_markers("xdist_group"))]), _group_order(it)))
     return result
+
+
+def _group_order(item: pytest.Item) -> int:
+    """Within the :data:`VEHICLE_LAUNCH_GROUP`: 0 for a test that needs no colcon install (test/conftest.py), 1 for
+    one that does; they run in that order, and meanwhile another worker builds the install (:data:`LONGEST_FIRST`).
+    0 for every other test (the sort is stable: collection order stays)."""
+    return int(item.get_closest_marker("vehicle_launch") is not None and "colcon_install" in item.fixturenames)
 
 
 # ---------------------------------------------------------------------------------- synthetic identification runs

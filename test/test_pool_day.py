@@ -288,7 +288,7 @@ def test_the_readme_pool_day_names_the_machine_and_the_domain_of_each_line():
 CAMPAIGN_S = 900.0  # wall-time deadline of the campaign (about 190 s of pool time, on a loaded two-core machine)
 
 
-def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
+def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_model):
     """Every line of the README's pool day, on the machine it names, against the installed pool_test launch on the
     live virtual pool (hindrax_sim/live_pool.py: the simulator behind the five emulated devices, in a process
     of its own, on the wall clock): the vehicle on this worker's domain, the topside on another (LOCALHOST here,
@@ -308,7 +308,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     ``HINDRAX_RIG_CORES=F`` (``make rig-pool-day``): the launch's processes run in a Pi-sized CPU rig of F cores here
     (hindrax_tools/benchmarks/rig.py), with ``HINDRAX_RIG_BUSY_LOOPS`` busy loops beside them; the pool and this test
     outside.
-    What the rig took is printed at the end, and in the message of a failure."""
+    What the rig took is printed at the end, and in the message of a failure. The identified model is the
+    rehearsal's second day's (``pool_day_model``, test/conftest.py)."""
     import contextlib
     import os
     import queue
@@ -486,11 +487,22 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
                     ident = yaml.safe_load((made[0] / "identification.yaml").read_text())
                     assert "heave" in str(ident), r.stdout
                     check_heave(ident, truth, r.stdout)
+                    pool_day_model["model"] = made[0] / "identification.yaml"  # the rehearsal's second day
                 elif line.startswith("hindrax control hold"):
-                    r = hindrax(env, line)
-                    assert r.returncode == 0 and r.stdout.startswith(f"{name}: "), r.stdout + r.stderr
-                    altitude_m = float(line.split("--altitude-m")[1].split()[0])
-                    check_hold(pool, day, altitude_m)
+                    # the true altitude is checked while the command watches the hold (its 10 s), once it is set
+                    proc = subprocess.Popen(line.split(), env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                            text=True)
+                    try:
+                        first = proc.stdout.readline()
+                        assert first.startswith(f"{name}: ") and "watching the hold" in first, \
+                            first + proc.stdout.read()
+                        check_hold(pool, day, float(line.split("--altitude-m")[1].split()[0]))
+                        rest = proc.communicate(timeout=180)[0]
+                    finally:
+                        if proc.poll() is None:
+                            proc.kill()
+                            proc.wait()
+                    assert proc.returncode == 0, first + rest
                 elif line.startswith("hindrax"):
                     r = hindrax(env, line)
                     assert r.returncode == 0, (line, r.stdout + r.stderr)

@@ -7,7 +7,10 @@ shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell 
 a second ``ident start`` is refused while it runs, ``hindrax disarm`` ends it and ``hindrax reset`` + ``hindrax arm``
 bring the vehicle back from the topside, ``control hold`` prints the altitude held, the pool's operator attaches
 and removes the ballast through the command's input, and ``quit`` stops everything cleanly. Before, a newcomer had to
-piece this together from the live pool module, a hand-edited vehicle file and a test.
+piece this together from the live pool module, a hand-edited vehicle file and a test. The block's second launch
+(``model_file:=``) takes the model of the session's README walk (test_pool_day.py, ``pool_day_model``: the same
+launch's campaign, bag and fit, its heave checked against the pool's truth); run alone, a heave campaign and its
+``ident bag`` here make one.
 """
 from __future__ import annotations
 
@@ -66,7 +69,7 @@ class _Lines:
                 return line
 
 
-def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_path):
+def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_path, pool_day_model):
     install = colcon_install
     with domain_id() as topside:
         proc = subprocess.Popen(["hindrax", "pool", "rehearse", "--topside-domain", str(topside), "--dir",
@@ -136,14 +139,16 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
                 "altitude 0.900 m held: measured " in hold.stdout, hold
             assert hindrax("control", "release").returncode == 0
             assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
-            # a whole heave campaign for the README's offline steps below
-            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm for the campaign")
-            t0 = time.monotonic()
-            full = subprocess.run(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"], env=topside_env,
-                                  capture_output=True, text=True, timeout=CAMPAIGN_S)
-            print(f"heave campaign: {time.monotonic() - t0:.0f} s; {full.stdout.strip().splitlines()[-1]}")
-            assert full.returncode == 0 and "result: complete" in full.stdout, full.stdout[-3000:] + full.stderr
-            assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
+            # a whole heave campaign for the README's offline steps below, unless the session's README walk has
+            # identified one already (test/conftest.py pool_day_model: the same launch, campaign, bag and fit)
+            if "model" not in pool_day_model:
+                wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm for the campaign")
+                t0 = time.monotonic()
+                full = subprocess.run(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"],
+                                      env=topside_env, capture_output=True, text=True, timeout=CAMPAIGN_S)
+                print(f"heave campaign: {time.monotonic() - t0:.0f} s; {full.stdout.strip().splitlines()[-1]}")
+                assert full.returncode == 0 and "result: complete" in full.stdout, full.stdout[-3000:] + full.stderr
+                assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
             # issue 74.5: the README's read-out of the supervisor's status, without the ros2 CLI
             status_topic = f"/{shells['topside']['HINDRAX_VEHICLE']}/supervisor/status"
             echo = subprocess.run(["hindrax", "topic", "echo", status_topic, "--count", "1", "--timeout", str(WAIT_S)],
@@ -175,13 +180,15 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
                     proc.wait()
         # the README's day goes on: ident bag, control model, the second launch with the model, the hold
         (bag,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]
-        t0 = time.monotonic()
-        fit = subprocess.run(["hindrax", "ident", "bag", str(bag)], env=vehicle_env, capture_output=True, text=True,
-                             timeout=CAMPAIGN_S)
-        print(f"ident bag: {time.monotonic() - t0:.0f} s")
-        assert fit.returncode == 0, fit.stdout[-3000:] + fit.stderr
-        (made,) = [p for p in (tmp_path / "runs").iterdir() if p.name.startswith(bag.name + "_ident_")]
-        model = made / "identification.yaml"
+        model = pool_day_model.get("model")
+        if model is None:
+            t0 = time.monotonic()
+            fit = subprocess.run(["hindrax", "ident", "bag", str(bag)], env=vehicle_env, capture_output=True,
+                                 text=True, timeout=CAMPAIGN_S)
+            print(f"ident bag: {time.monotonic() - t0:.0f} s")
+            assert fit.returncode == 0, fit.stdout[-3000:] + fit.stderr
+            (made,) = [p for p in (tmp_path / "runs").iterdir() if p.name.startswith(bag.name + "_ident_")]
+            model = made / "identification.yaml"
         shown = subprocess.run(["hindrax", "control", "model", "--model", str(model)], env=vehicle_env,
                                capture_output=True, text=True, timeout=WAIT_S)
         assert shown.returncode == 0 and "heave" in shown.stdout, shown

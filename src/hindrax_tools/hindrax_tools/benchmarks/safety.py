@@ -358,7 +358,7 @@ def vehicle_scheduling() -> dict[str, tuple[tuple[str, ...], dict[str, str]]]:
     :mod:`hindrax_common.process.scheduling`), read from the launch file, so a benchmark schedules the safety processes
     as the vehicle does. Read once per process (the launch file and the installed console scripts)."""
     read = {lp.process.executable: lp.process for lp in
-            launch_processes(package_share("hindrax_drivers") / "launch" / "vehicle.launch.xml")}
+            launch_processes(package_share("hindrax_bringup") / "launch" / "vehicle.launch.xml")}
     return {name: (tuple(read[exe].launch_prefix),
                    {k: v for k, v in read[exe].env if k == PRIORITY_ENV}) for name, exe in VEHICLE_EXECUTABLES.items()}
 
