@@ -9,9 +9,9 @@ import pytest
 
 from hindrax_bringup.allocation.core import AllocationCore
 from hindrax_common.config import default_config_path, load_config
-from hindrax_onboard.identification.online.core import (ARMED_GRACE_S, DISARMED, NEEDED_SENSORS, NOT_ARMED,
-                                                      STARVED_WARN_TICKS, STATUS_PERIOD_S, IdentificationCore,
-                                                      goal_problem)
+from hindrax_onboard.identification.online.core import (ARMED_GRACE_S, ARMED_REPORTS, DISARMED, NEEDED_SENSORS,
+                                                      NOT_ARMED, STARVED_WARN_TICKS, STATUS_PERIOD_S,
+                                                      IdentificationCore, goal_problem)
 from hindrax_onboard.identification.online.executive import ExecutiveStatus
 
 CFG = load_config(default_config_path())
@@ -120,22 +120,33 @@ def test_a_goal_is_set_up_from_its_fields_and_refused_while_one_runs():
     assert c2.run.executive.kwargs["inclining_load_n_m"] == (0.0, 0.0)  # only with an inclining step
 
 
-@pytest.mark.parametrize("armed_at, ends, message", [
-    (None, True, NOT_ARMED),                       # never armed: ends after the grace, nothing commanded
-    (0.5 * ARMED_GRACE_S, False, "waiting for the sensors"),  # armed within the grace: goes on
+@pytest.mark.parametrize("armed_at, reports, ends, message", [
+    (None, ARMED_REPORTS, True, NOT_ARMED),        # reported disarmed: ends after the grace, nothing commanded
+    (None, ARMED_REPORTS - 1, False, "waiting for the ESC output to report armed"),  # too few reports read yet
+    (None, 0, False, "waiting for the ESC output to report armed"),  # a starved tick before the reports it waits on
+    (0.5 * ARMED_GRACE_S, 1, False, "waiting for the sensors"),  # armed within the grace: goes on
 ])
-def test_the_goal_waits_for_the_armed_flag_within_its_grace(armed_at, ends, message):
+def test_the_goal_waits_for_the_armed_flag_within_its_grace(armed_at, reports, ends, message):
     c = core()
     c.accept("h", goal(), 10.0)
     out = c.tick(10.0, False)
     assert statuses(out) == [("positioning", "waiting for the ESC output to report armed")]
-    if armed_at is not None:
-        c.on_pwm([NEUTRAL] * N, True)
+    for _ in range(reports):
+        c.on_pwm([NEUTRAL] * N, armed_at is not None)
     out = c.tick(10.0 + ARMED_GRACE_S + TICK, False)
     assert ("wrench" not in kinds(out)) and (kinds(out)[-1:] == ["end"]) == ends
     assert statuses(out)[-1] == ("aborted" if ends else "positioning", message)
     if ends:
         assert c.run is None and c.finish(out[-1].data[0]) == (False, NOT_ARMED)
+
+
+def test_a_silent_esc_output_ends_the_goal_as_not_armed_after_the_sensor_timeout():
+    c = core()
+    c.accept("h", goal(), 10.0)
+    assert kinds(c.tick(10.0 + c.sensor_timeout_s - TICK, False))[-1:] != ["end"]  # no report yet: still waiting
+    out = c.tick(10.0 + c.sensor_timeout_s + TICK, False)
+    assert kinds(out)[-1:] == ["end"] and "wrench" not in kinds(out)
+    assert c.finish(out[-1].data[0]) == (False, NOT_ARMED)
 
 
 @pytest.mark.parametrize("cancel, t, reason, to_supervisor", [

@@ -13,8 +13,10 @@ Rules (one test row each in ``test/test_identification_core.py``):
 
 * **Goals** (:func:`goal_problem`): an unknown DOF or calibration step, a level fraction outside (0, 1] or
   ``calibration_only`` without a step is refused; so is any goal while one runs.
-* **Armed** (:data:`ARMED_GRACE_S`): an accepted goal waits for the ESC output's armed flag; not armed within the
-  grace, it ends with :data:`NOT_ARMED`, having commanded nothing and without a neutral hold.
+* **Armed** (:data:`ARMED_GRACE_S`, :data:`ARMED_REPORTS`): an accepted goal waits for the ESC output's armed flag;
+  past the grace, with that many ``thrusters/pulse_width`` reports since the goal's acceptance, all disarmed (or no
+  report within ``sensor_timeout_s``), it ends with :data:`NOT_ARMED`, having commanded nothing and without a neutral
+  hold. The ESC's reports decide, not the timer alone: a starved process ticks before it reads the reports waiting.
 * **Sensors**: armed, the goal starts once every sensor of :data:`NEEDED_SENSORS` has published; none for
   ``sensor_timeout_s`` after acceptance, or a cancel before the start, stops it.
 * **Samples**: those stamped more than :data:`FUTURE_STAMP_TOLERANCE_S` after the tick or
@@ -60,9 +62,9 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 from .steps import undo_line
 
-__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem",
-           "NEEDED_SENSORS",
-           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
+__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "NEEDED_SENSORS",
+           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "ARMED_REPORTS",
+           "NOT_ARMED",
            "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED", "STARVED_WARN_TICKS"]
 
 #: sensors that must have published before a goal starts moving the vehicle
@@ -82,6 +84,9 @@ IDLE_STATUS_PERIOD_S = 1.0
 #: ``thrusters/pulse_width``: published on every write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``)
 #: before it fails, s (ROS time)
 ARMED_GRACE_S = 0.5
+#: how many ``thrusters/pulse_width`` reports (at least one every 0.1 s) since the goal's acceptance must say disarmed
+#: before the goal ends as not armed: the ESC has answered since, so its disarmed state is not a report still queued
+ARMED_REPORTS = 3
 #: the result message of a goal whose ESC output did not report armed
 NOT_ARMED = "ESC output not armed: call esc/set_armed first"
 #: a sensor sample stamped further than this after the node's clock is impossible and left out (s): the drivers stamp
@@ -138,6 +143,7 @@ class GoalRun:
     stop_since_s: float | None = None
     ended: bool = False
     pwm_count_at_stop: int = 0
+    pwm_count_at_accept: int = 0
     error: str = ""
     record: CampaignRecord | None = None
     last_feedback: tuple = field(default_factory=lambda: (None, -1))
@@ -244,7 +250,8 @@ class IdentificationCore:
                                     ballast_weight_in_water_n=w_ballast, line_pull_n=f_line,
                                     inclining_load_n_m=incl, confirm=list(self.pending_undo))
         self.samples = []
-        self.run = GoalRun(handle, executive, t, np.full(self.n_thrusters, self.neutral_us))
+        self.run = GoalRun(handle, executive, t, np.full(self.n_thrusters, self.neutral_us),
+                           pwm_count_at_accept=self.pwm_count)
         return (f"run_identification: {', '.join(dofs) or 'no ladders'}"
                 + (f"; calibration {', '.join(calibrate)}" if calibrate else ""))
 
@@ -325,7 +332,8 @@ class IdentificationCore:
         ex = run.executive
         if not ex.started:
             if not self.armed and not cancel:  # nothing commanded yet: the goal ends without a neutral hold
-                if t - run.accepted_s > ARMED_GRACE_S:
+                waited_s, heard = t - run.accepted_s, self.pwm_count - run.pwm_count_at_accept
+                if (waited_s > ARMED_GRACE_S and heard >= ARMED_REPORTS) or waited_s > self.sensor_timeout_s:
                     run.error = NOT_ARMED
                     out.append(Event("status", ("aborted", None, NOT_ARMED)))
                     out.append(self.end(run))
