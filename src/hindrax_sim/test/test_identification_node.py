@@ -192,9 +192,10 @@ def _stand_in_handle(k: int) -> SimpleNamespace:
 
 def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_commanding_after_it():
     """An operator who arms and starts at once: the goal is accepted while the ESC's armed flag is on its way and
-    goes on once it arrives; without it the goal ends after ARMED_GRACE_S with the "not armed" result, having
-    commanded nothing. The node's own callbacks are driven directly (no graph), with a stand-in goal handle."""
-    from hindrax_onboard.identification.online.core import ARMED_GRACE_S, NOT_ARMED
+    goes on once it arrives; without it (ARMED_REPORTS disarmed reports since the acceptance) the goal ends after
+    ARMED_GRACE_S with the "not armed" result, having commanded nothing. The node's own callbacks are driven directly
+    (no graph), with a stand-in goal handle."""
+    from hindrax_onboard.identification.online.core import ARMED_GRACE_S, ARMED_REPORTS, NOT_ARMED
     from hindrax_onboard.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
@@ -220,6 +221,8 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
             never = handle(2)
             t0 = node._now_s()  # before the acceptance, which starts the grace
             node._on_accepted(never)
+            for _ in range(ARMED_REPORTS):  # the ESC's reports since the acceptance say disarmed
+                node._on_pwm(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=False))
             wait_until(lambda: node._on_tick() or never.results, 10 * ARMED_GRACE_S, None, "the goal's end")
             assert node._now_s() - t0 >= ARMED_GRACE_S
             assert never.states == ["aborted"] and never.results[0].message == NOT_ARMED
@@ -331,7 +334,8 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
     from hindrax_common.node_support.esc_state import ESC_STATE_TOPIC, esc_state_qos
-    from hindrax_onboard.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
+    from hindrax_onboard.identification.online.core import (ARMED_GRACE_S, ARMED_REPORTS, IDLE_STATUS_PERIOD_S,
+                                                            NOT_ARMED)
 
     cfg = load_config(default_config_path())
     inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude", "/thrusters/pulse_width"}
@@ -349,6 +353,8 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
             goal = _stand_in_handle(1)
             node._on_accepted(goal)
             assert state() == (inputs, pytest.approx(1.0 / cfg.identification.estimate_rate_hz))
+            for _ in range(ARMED_REPORTS):  # the ESC's reports since the acceptance say disarmed
+                node._on_pwm(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=False))
             wait_until(lambda: node._on_tick() or goal.results, 10 * ARMED_GRACE_S, None, "the goal's end")
             assert goal.results[0].message == NOT_ARMED
             assert state() == (set(), pytest.approx(IDLE_STATUS_PERIOD_S))
