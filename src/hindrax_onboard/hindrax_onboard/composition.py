@@ -10,8 +10,7 @@ not declare).
 Why composed: docs/architecture.md §10.1. None of them has a safety role (§8): a failure of one ends all, and the
 allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source. The recorder's bag writer
 keeps its own thread, and its keep-last depth (``queue_depth``, 1000) holds what arrives while an identification
-callback runs.
-"""
+callback runs."""
 from __future__ import annotations
 
 from typing import Sequence

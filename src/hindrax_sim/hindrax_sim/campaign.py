@@ -12,8 +12,7 @@ simulator's truth (position, attitude) goes into the record for tests and plots 
 Calibration steps (``calibrate``): the virtual pool plays the operator (:class:`PoolOperator`,
 shared with the graph's :class:`~..graph_campaign.VirtualOperator`): each known force a step
 prompts for acts on the vehicle until the executive asks for its removal; ``continue`` is given at
-once.
-"""
+once."""
 from __future__ import annotations
 
 import math
@@ -43,8 +42,7 @@ class PoolOperator:
     inclining test mass. :meth:`act` does what a step's operator code asks (``attach_ballast``, ``remove_ballast``,
     ``attach_float``, ``remove_float``, ``apply_line_pull_<surge|sway>[_negative]``, ``release_line_<...>``,
     ``attach_inclining_mass_<dof>``, ``remove_inclining_mass_<dof>``); :meth:`external_wrench_frd` is the wrench the
-    applied forces exert on the vehicle at its current attitude.
-    """
+    applied forces exert on the vehicle at its current attitude."""
 
     def __init__(self, ballast_weight_n: float = 0.0, line_pull_n: float = 0.0, inclining_load_n_m=(0.0, 0.0),
                  float_buoyancy_n: float = 0.0) -> None:
@@ -127,8 +125,7 @@ class Campaign:
     simulation against the wall clock (0: as fast as possible). sim: an existing simulator (else built).
     Other keywords go to the :class:`~..identification.online.executive.Executive`
     (``max_level_duration_s``, ``excitation``, the calibration steps and their known forces,
-    ``steps``, ``confirm``). Raises ``ValueError`` for an unknown DOF.
-    """
+    ``steps``, ``confirm``). Raises ``ValueError`` for an unknown DOF."""
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
                  seed: int | None = None, progress: Callable[[str], None] | None = None,

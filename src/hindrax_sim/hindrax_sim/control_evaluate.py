@@ -19,8 +19,7 @@ altitude hold: the setpoint).
 or the surge start): ``rmse`` (against the specified response; m, or rad for heading; altitude: the
 noise-free Ping1D range), ``rmse_setpoint``, ``overshoot`` (beyond the final setpoint in the step's
 direction; altitude: the largest |error|), ``settling_time_s`` (within ``settling_fraction`` of the
-step, altitude ``altitude_band_m``) and ``effort_n_rms`` (RMS thrust per thruster, N).
-"""
+step, altitude ``altitude_band_m``) and ``effort_n_rms`` (RMS thrust per thruster, N)."""
 from __future__ import annotations
 
 import html

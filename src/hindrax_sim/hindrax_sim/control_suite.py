@@ -6,8 +6,7 @@ Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process
 read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then
 :data:`SUITE_MANEUVERS` of :mod:`.control_evaluate` on the same truth. Writes
 ``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the summary
-``<out>/control_scenarios.json`` / ``control_scenarios.md``.
-"""
+``<out>/control_scenarios.json`` / ``control_scenarios.md``."""
 from __future__ import annotations
 
 import json

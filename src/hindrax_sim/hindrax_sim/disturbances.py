@@ -11,8 +11,7 @@
   stable for dM below M_RB + M_A).
 
 Frames: body FRD about the body origin CO (= CG for Hindrax); pool NED (:mod:`.pool`). The physical source of
-each term is in :mod:`.truth`.
-"""
+each term is in :mod:`.truth`."""
 from __future__ import annotations
 
 import math
@@ -32,8 +31,7 @@ class DisturbanceModel:
 
     config: the truth configuration; dist: the disturbances; model: the :class:`~.model.VehicleModel` (its
     damping coefficients and added-mass matrix); pool: the :class:`~.pool.Pool` or None.
-    Attributes: ``thrust_active`` / ``wrench_active`` (anything to do), ``esc_latency_s``.
-    """
+    Attributes: ``thrust_active`` / ``wrench_active`` (anything to do), ``esc_latency_s``."""
 
     def __init__(self, config: VehicleConfig, dist: Disturbances, model, pool) -> None:
         self.model = model

@@ -41,8 +41,7 @@ wall-clock deadlines end a run that stalls).
 
 Python API for in-process device emulators: ``node.simulator`` (its sensor listeners and latest
 samples), :meth:`SimulatorNode.add_step_listener`, :meth:`SimulatorNode.add_clock_listener` and the
-``pulse_width_source`` argument (:class:`SimulatorNode`).
-"""
+``pulse_width_source`` argument (:class:`SimulatorNode`)."""
 from __future__ import annotations
 
 import math
@@ -95,8 +94,7 @@ class SimulatorNode(VehicleNode):
     every step: the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685 emulator; None
     keeps the previous ones).
     simulator: optional prebuilt Simulator (must use ``config``). Other keyword arguments go to ``Node``.
-    Raises :class:`ConfigError` for an invalid configuration (logged as one line first).
-    """
+    Raises :class:`ConfigError` for an invalid configuration (logged as one line first)."""
 
     def __init__(self, *, config: VehicleConfig | None = None, pulse_width_source: PulseWidthSource | None = None,
                  simulator: Simulator | None = None, node_name: str = "hindrax_simulator", **kwargs: Any) -> None:

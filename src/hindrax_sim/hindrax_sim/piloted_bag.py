@@ -251,8 +251,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     """Fly one run (module docstring) and write it to the bag directory ``bag_dir``; returns the path.
 
     cfg: the vehicle file; truth: the simulator's truth (path, :class:`~hindrax_sim.truth.Truth` or None for
-    the shipped default). Raises ``FileExistsError`` when ``bag_dir`` already holds a bag.
-    """
+    the shipped default). Raises ``FileExistsError`` when ``bag_dir`` already holds a bag."""
     s = settings
     rng = np.random.default_rng(seed)
     dvl = s.sensors == "dvl"

@@ -40,8 +40,7 @@ dropout, the device's configured or default rate):
 Sampling: a model is due at ``k / rate_hz`` (k = 0, 1, ...); the simulator calls it at the first step at or
 after that time and stamps the sample with the step time (jitter below one integration step).
 Determinism: one ``numpy.random.Generator`` per device, seeded from ``(seed, device index)``
-(:data:`DEVICE_INDEX`), so a device's noise does not depend on which other devices are enabled.
-"""
+(:data:`DEVICE_INDEX`), so a device's noise does not depend on which other devices are enabled."""
 from __future__ import annotations
 
 import math
@@ -88,8 +87,7 @@ class VehicleTruth:
     position_ned_m (3,): body origin CO in the pool frame (NED, origin at a pool corner on the surface).
     quaternion_xyzw (4,): body FRD in NED. rotation (3, 3): R, body FRD -> NED. euler_rad (3,): Fossen ZYX
     [roll, pitch, yaw]. nu (6,): [u v w (m/s) p q r (rad/s)], FRD. nu_dot (6,): its time derivative.
-    wrench_frd (6,): thruster wrench about CO [X Y Z K M N] (N, N m). buoyancy_fraction: submerged fraction.
-    """
+    wrench_frd (6,): thruster wrench about CO [X Y Z K M N] (N, N m). buoyancy_fraction: submerged fraction."""
 
     t_s: float
     position_ned_m: np.ndarray
@@ -188,8 +186,7 @@ def specific_force_frd(nu, nu_dot, rotation, gravity_m_s2: float, r_frd_m=(0.0, 
     """Specific force f = a - g (3,) in m/s^2, FRD, at the body point ``r_frd_m`` (relative to CO).
 
     a = v_dot + w x v + w_dot x r + w x (w x r) (inertial acceleration of the point in body axes, nu and
-    nu_dot (6,) in FRD); g = R^T [0, 0, gravity] with R (3, 3) body -> NED. At rest f = [0, 0, -g] (level).
-    """
+    nu_dot (6,) in FRD); g = R^T [0, 0, gravity] with R (3, 3) body -> NED. At rest f = [0, 0, -g] (level)."""
     nu, nu_dot = np.asarray(nu, dtype=float), np.asarray(nu_dot, dtype=float)
     w, w_dot = nu[3:], nu_dot[3:]
     r = np.asarray(r_frd_m, dtype=float)
@@ -227,8 +224,7 @@ class SensorModel:
     """Base of the device models: rate bookkeeping, a private Generator, noise and dropout helpers.
 
     name: device key (one of :data:`DEVICE_INDEX`). spec: :class:`NoiseSpec`. seed: simulation seed.
-    Subclasses implement ``measure(truth) -> sample``; :meth:`sample` adds the rate and dropout logic.
-    """
+    Subclasses implement ``measure(truth) -> sample``; :meth:`sample` adds the rate and dropout logic."""
 
     def __init__(self, name: str, spec: NoiseSpec, seed: int) -> None:
         if spec.rate_hz <= 0.0:
@@ -483,8 +479,7 @@ class SensorSuite:
     :data:`DEVICE_INDEX`).
 
     ``latest``: device name -> its newest sample. ``next_due_s``: the earliest time any device is due.
-    Raises ``ValueError`` for an unknown device name.
-    """
+    Raises ``ValueError`` for an unknown device name."""
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int | None = None,
                  devices: Sequence[str] | None = None) -> None:
@@ -551,8 +546,7 @@ class SensorSuite:
     def update(self, t_s: float, truth: Callable[[], VehicleTruth]) -> list[tuple[str, Any]]:
         """Sample every device due at ``t_s``; ``truth`` is called (at most once) only if one is due.
 
-        Returns the new ``(device name, sample)`` pairs (dropped samples are absent).
-        """
+        Returns the new ``(device name, sample)`` pairs (dropped samples are absent)."""
         if t_s + 1e-9 < self.next_due_s:
             return []
         snapshot = truth()

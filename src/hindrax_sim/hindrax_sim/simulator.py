@@ -17,8 +17,7 @@ Truth (:mod:`.truth`): the simulator runs on the truth configuration and applies
 (:mod:`.disturbances`): the thrust factor per thruster on the curve thrust, the ESC latency
 ``esc.output_latency_s`` as a queue of written widths, the extra wrench held over each step, and the
 sensor disturbances (:meth:`.sensors.SensorSuite.apply_disturbances`; the DVL latency reads a
-history of states kept for that long).
-"""
+history of states kept for that long)."""
 from __future__ import annotations
 
 import math
@@ -89,8 +88,7 @@ class Simulator:
         runs on ``truth.config``; ``config`` is kept as ``vehicle_config`` (what the nodes believe).
 
     Raises ``ValueError`` for a non-positive step or an unknown sensor device, :class:`~.truth.TruthError` for a
-    bad truth file.
-    """
+    bad truth file."""
 
     def __init__(self, config: VehicleConfig, *, seed: int | None = None, step_s: float | None = None,
                  sensors: bool | Sequence[str] | None = True, pool: bool = True,
@@ -134,8 +132,7 @@ class Simulator:
         position_ned_m (3,): body origin in the pool frame (default ``pool.start_position_ned_m``).
         Orientation: ``quaternion_xyzw`` (4,) or ``rpy_rad`` (3,) Fossen ZYX (default level, heading
         ``pool.start_heading_rad``). nu (6,): initial body velocity (default 0). Raises ``ValueError`` for
-        wrong shapes or non-finite values.
-        """
+        wrong shapes or non-finite values."""
         pool = self.config.pool
         pos = np.asarray(pool.start_position_ned_m if position_ned_m is None else position_ned_m, dtype=float)
         if quaternion_xyzw is not None:
@@ -187,8 +184,7 @@ class Simulator:
         step (None: keep the previous one, initially zero), e.g. a pure force at the CG for tests.
         armed: False means the ESC outputs are neutral whatever the widths.
         Returns the new ``(device, sample)`` pairs of this step. Raises :class:`PulseWidthError` (state
-        unchanged) for bad widths and ``ValueError`` for a bad wrench.
-        """
+        unchanged) for bad widths and ``ValueError`` for a bad wrench."""
         new_external = None if external_wrench_frd is None else _wrench6(external_wrench_frd)
         thr = self.thrusters
         dist = self.disturbances

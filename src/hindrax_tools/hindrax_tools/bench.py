@@ -5,8 +5,7 @@ list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally ``
 measure; tests never time anything (README, "Tests").
 
 Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline GIT_REF]``
-(``--baseline``: the stack section measures that commit's launch layout too, in the same run).
-"""
+(``--baseline``: the stack section measures that commit's launch layout too, in the same run)."""
 from __future__ import annotations
 
 import argparse

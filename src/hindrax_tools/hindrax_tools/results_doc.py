@@ -15,8 +15,7 @@ without it nothing is written. The write is atomic (a temporary file, then ``os.
 
 Section ``durations`` (:func:`record_duration`): one row per long command (``make setup``, ``make ros-install``),
 written by the command itself with its seconds and the machine's load; the README quotes them. From a shell: ``python
--m hindrax_tools.results_doc duration --results-doc docs/results.md "make setup (new .venv)" 211``.
-"""
+-m hindrax_tools.results_doc duration --results-doc docs/results.md "make setup (new .venv)" 211``."""
 from __future__ import annotations
 
 import argparse
@@ -82,8 +81,7 @@ def write_section(path: str | Path, name: str, title: str, body: str, command: s
 
     Raises :class:`ResultsDocError` for a bad name, or a document holding only one of the section's
     two markers or the end marker before the begin marker (nothing is written then);
-    ``FileNotFoundError`` when the document's folder does not exist.
-    """
+    ``FileNotFoundError`` when the document's folder does not exist."""
     if not _NAME.match(name):
         raise ResultsDocError(f"results section name {name!r}: allowed [a-z][a-z0-9_-]*")
     path = Path(path)

@@ -13,8 +13,7 @@ udev's ``/dev/hindrax-dvl``), :meth:`stop_i2c` / :meth:`start_i2c` the bus (abse
 The truth is a vehicle holding station in the pool, moving a little so that no driver's stuck-value detection
 trips on bit-identical readings: depth 1.0 m +/- 2 cm, altitude 1.5 m +/- 2 cm (DVL and Ping agree), surge
 velocity +/- 1 cm/s, level attitude, gravity and the Earth's field on the IMU, with periods of a few seconds.
-It is not a simulation (no thrust, no dynamics): the virtual pool is ``hindrax bringup --sim``.
-"""
+It is not a simulation (no thrust, no dynamics): the virtual pool is ``hindrax bringup --sim``."""
 from __future__ import annotations
 
 import abc

@@ -35,8 +35,7 @@ Launch prefix
     it (:attr:`NodeProcess.exec_name`) and labels processes by node name or executable.
 Respawn
     ``respawn="true"`` restarts the process whenever it ends while the launch runs, after ``respawn_delay`` s
-    (``launch.actions.ExecuteLocal``: on any exit, not only a failure).
-"""
+    (``launch.actions.ExecuteLocal``: on any exit, not only a failure)."""
 from __future__ import annotations
 
 import contextlib
@@ -77,8 +76,7 @@ class NodeProcess:
     arguments: the ``args`` attribute, split on white space. launch_prefix: the ``launch-prefix`` command, split
     (module docstring). exec_name: the ``exec_name`` attribute (Jazzy's process label) or None.
     respawn / respawn_delay_s: see the module docstring (s). env: (name, value) pairs added to the inherited
-    environment (``<set_env>``, then the node's ``<env>``). source: the launch file that declares the node.
-    """
+    environment (``<set_env>``, then the node's ``<env>``). source: the launch file that declares the node."""
 
     package: str
     executable: str
@@ -141,8 +139,7 @@ def read_launch(path: str | os.PathLike, arguments: Mapping[str, str] | None = N
     (``name:=value`` of the command line, as a mapping), includes followed, conditions applied, in file order.
 
     Raises :class:`LaunchFileError` for an unreadable file, an unsupported element, attribute or substitution, an
-    argument that is not declared or has no value, or a condition that is not a boolean.
-    """
+    argument that is not declared or has no value, or a condition that is not a boolean."""
     return _Reader(find_share).read(Path(path), dict(arguments or {}), top=True)
 
 

@@ -15,8 +15,7 @@ the vehicle runs ``ros2 launch``.
 
 Executables are found as ``ros2 run`` finds them (:func:`installed_command`): ``<prefix>/lib/<package>/<exec>``
 for the package's prefix in the ament index; in a development venv where the package is an editable pip install
-(no ``lib/<package>``), the console script of that name next to the interpreter, if it belongs to the package.
-"""
+(no ``lib/<package>``), the console script of that name next to the interpreter, if it belongs to the package."""
 from __future__ import annotations
 
 import contextlib
@@ -94,8 +93,7 @@ class ProcessRunner:
     :attr:`log_dir`). extra_ros_args: per-label arguments appended after the launch file's (``-p key:=value``
     overrides, e.g. an emulated port). Use as a context manager or call :meth:`start` / :meth:`stop`.
     Raises ``LookupError`` from :meth:`start` when an executable cannot be found (nothing is started then), and
-    ``ValueError`` for two processes with the same label.
-    """
+    ``ValueError`` for two processes with the same label."""
 
     def __init__(self, processes: Sequence[NodeProcess], *,
                  command: Callable[[NodeProcess], list[str]] = installed_command,

@@ -6,8 +6,7 @@ sequentially and reported as truncated. Rates are ``(count - 1) / (last - first 
 (Hz), i.e. the mean message rate over the topic's own span; a topic with fewer than 2 messages has
 rate 0.
 
-Pure (no ROS runtime). Errors: as :class:`hindrax_bringup.recording.reader.BagReader`.
-"""
+Pure (no ROS runtime). Errors: as :class:`hindrax_bringup.recording.reader.BagReader`."""
 from __future__ import annotations
 
 import datetime as _dt

@@ -22,8 +22,7 @@ durations are ``{sec, nsec}`` with infinity = 2^63-1 ns = {9223372036, 854775807
   all publishers agree on the compatibility-relevant policies (history reset to keep_last 10), else
   the default (reliable, volatile, keep_last 10).
 
-Pure (no rclpy import); :func:`profile_from_rclpy` duck-types an ``rclpy.qos.QoSProfile``.
-"""
+Pure (no rclpy import); :func:`profile_from_rclpy` duck-types an ``rclpy.qos.QoSProfile``."""
 from __future__ import annotations
 
 from typing import Any, Iterable, Mapping
@@ -110,8 +109,7 @@ def _upgrade_profile(p: Mapping[str, Any]) -> dict:
 def subscription_policies(offered: Iterable[Mapping[str, Any]]) -> tuple[str, str]:
     """(reliability, durability) a recorder must request to match every publisher (rosbag2 rule).
 
-    No publishers -> ("reliable", "volatile") (rosbag2's default request).
-    """
+    No publishers -> ("reliable", "volatile") (rosbag2's default request)."""
     offered = list(offered)
     if not offered:
         return "reliable", "volatile"

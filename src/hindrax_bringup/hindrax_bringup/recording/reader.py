@@ -14,8 +14,7 @@ A file without a summary (recorder killed, not yet recovered) is read sequential
 complete record (:func:`hindrax_bringup.recording.recover.iter_file_records`) and flagged in
 :attr:`BagReader.truncated_files`; run ``hindrax bag recover BAG`` to repair it.
 
-Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a readable bag).
-"""
+Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a readable bag)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -179,8 +178,7 @@ class BagReader:
         (:meth:`decoded`) and copied into the installed class field by field (:func:`.msgtypes.from_decoded`:
         a field the bag lacks keeps the installed default). One rule for every reader of old bags.
         Raises :class:`.msgtypes.TypeNotInstalledError` for a type that is not installed, KeyError for a topic
-        not in the bag, :class:`BagError` for a stored definition that does not parse.
-        """
+        not in the bag, :class:`BagError` for a stored definition that does not parse."""
         from rclpy.serialization import deserialize_message
 
         from hindrax_common.cdr.lean_cdr import cdr_decoder
@@ -224,8 +222,7 @@ class BagReader:
         """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas
         (``mcap_ros2.decoder.DecoderFactory``, the decoder an ``mcap`` reader uses).
 
-        Raises :class:`BagError` naming the topic when its schema is missing or cannot be parsed.
-        """
+        Raises :class:`BagError` naming the topic when its schema is missing or cannot be parsed."""
         from mcap_ros2.decoder import DecoderFactory
 
         factory = DecoderFactory()
@@ -284,8 +281,7 @@ def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tup
     ``device_name`` equals ``device_name`` are yielded. ``t_ns`` is the message's ``header.stamp`` (the
     time the driver received or sent the bytes, ROS time) in ns, or the bag log time when the stamp is
     zero. Both directions (DIRECTION_DEVICE_TO_HOST / HOST_TO_DEVICE) are yielded; filter on
-    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path.
-    """
+    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path."""
     from rclpy.serialization import deserialize_message
 
     from hindrax_msgs.msg import RawDeviceData

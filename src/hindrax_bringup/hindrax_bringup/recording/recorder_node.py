@@ -50,8 +50,7 @@ timestamped directory under ``recording.output_root`` at every start, never an e
 what a crash loses grows by at most this much).
 
 Run alone: ``python -m hindrax_bringup.recording.recorder_node --ros-args --params-file
-ros_ws/config/hindrax.yaml -p autostart:=true``.
-"""
+ros_ws/config/hindrax.yaml -p autostart:=true``."""
 from __future__ import annotations
 
 import functools
@@ -89,8 +88,7 @@ class RecorderNode(VehicleNode):
     """Records selected topics to MCAP bags; see the module docstring for parameters and interfaces.
 
     Raises :class:`hindrax_common.config.ConfigError` when the vehicle configuration is invalid and
-    ValueError for an invalid topic regex given at start-up.
-    """
+    ValueError for an invalid topic regex given at start-up."""
 
     def __init__(self, node_name: str = "recorder", *, statvfs: Any = None, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
@@ -202,8 +200,7 @@ class RecorderNode(VehicleNode):
         """Open a new bag and subscribe to the selected topics. Returns the bag directory.
 
         Raises RuntimeError when already recording, FileExistsError when a named directory holds a bag,
-        OSError when it cannot be created.
-        """
+        OSError when it cannot be created."""
         if self._writer is not None:
             raise RuntimeError(f"already recording to {self._writer.bag_dir}")
         named = output_dir or self._output_dir_param  # else a new directory under the root (bag_dir)
@@ -389,8 +386,7 @@ def main(args: list[str] | None = None) -> int:
     """Entry point: ``python -m hindrax_bringup.recording.recorder_node --ros-args ...``.
 
     Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
-    The process spins the EventsExecutor (:mod:`hindrax_common.process.ros_process`).
-    """
+    The process spins the EventsExecutor (:mod:`hindrax_common.process.ros_process`)."""
     with RosProcess(args) as proc:
         try:
             node = RecorderNode()

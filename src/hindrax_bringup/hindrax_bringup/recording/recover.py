@@ -13,8 +13,7 @@ channels with their metadata, messages, metadata records; new chunk indexes, sta
 temporary file and an atomic rename; :func:`recover_bag` does it for every file of a bag and rebuilds
 metadata.yaml from the files themselves (topics, types, QoS, hashes, counts, times).
 
-Errors: ``FileNotFoundError``; :class:`RecoverError` (a ``ValueError``) when a file is not MCAP at all.
-"""
+Errors: ``FileNotFoundError``; :class:`RecoverError` (a ``ValueError``) when a file is not MCAP at all."""
 from __future__ import annotations
 
 import io
@@ -110,8 +109,7 @@ def iter_file_records(path: str | Path, stats: FileRecovery | None = None) -> It
     """Complete records of the data section of an MCAP file, tolerant of truncation (see module doc).
 
     Chunks are expanded into their Schema/Channel/Message records. Summary records are not yielded.
-    ``stats`` (optional) receives chunk counts and the number of trailing bytes not read.
-    """
+    ``stats`` (optional) receives chunk counts and the number of trailing bytes not read."""
     path = Path(path)
     size = path.stat().st_size
     with open(path, "rb") as f:
@@ -167,8 +165,7 @@ def recover_file(path: str | Path, keep_original: bool = False) -> FileRecovery:
     """Rewrite a truncated MCAP file as a complete one in place (atomic rename).
 
     keep_original: keep the damaged file as ``<name>.truncated``; a complete file is left as it is.
-    Returns a :class:`FileRecovery`. Raises FileNotFoundError, :class:`RecoverError`.
-    """
+    Returns a :class:`FileRecovery`. Raises FileNotFoundError, :class:`RecoverError`."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
@@ -279,8 +276,7 @@ def recover_bag(bag_path: str | Path, keep_original: bool = False) -> tuple[BagM
     """Recover every ``*.mcap`` of a bag directory (or one file) and rewrite metadata.yaml.
 
     Files are taken from the directory itself (metadata.yaml may be stale or missing), in ``_<n>``
-    order. Returns (new metadata, per-file results). Raises FileNotFoundError, :class:`RecoverError`.
-    """
+    order. Returns (new metadata, per-file results). Raises FileNotFoundError, :class:`RecoverError`."""
     bag_path = Path(bag_path)
     if not bag_path.exists():
         raise FileNotFoundError(f"{bag_path}: no such bag")

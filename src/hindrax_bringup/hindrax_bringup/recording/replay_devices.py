@@ -31,8 +31,7 @@ uses, so the real parsing code runs on the recorded stream:
   DVL node's "no ``$DVPDL`` for 1 s", sees the recorded gaps).
 
 What "the same" means after a replay: :func:`compare_parsed` (checked by
-``test/test_bag_replay_drivers.py``).
-"""
+``test/test_bag_replay_drivers.py``)."""
 from __future__ import annotations
 
 import collections
@@ -104,8 +103,7 @@ def i2c_transactions(items: Iterable[tuple[int, Any]]) -> dict[int, I2CTransacti
     """Group ``iter_raw_device_data`` output of an I2C device by 7-bit address (see :class:`I2CTransactions`).
 
     The driver tap records a write as (register, payload) and ``write_byte(value)`` as (value, b"")
-    (:class:`~hindrax_common.transport.i2c.I2CDevice`), so the wire bytes are ``[register] + payload``.
-    """
+    (:class:`~hindrax_common.transport.i2c.I2CDevice`), so the wire bytes are ``[register] + payload``."""
     out: dict[int, I2CTransactions] = {}
     for _t, m in items:
         if m.transport != RawDeviceData.TRANSPORT_I2C:
@@ -126,8 +124,7 @@ class SerialReplayDevice:
         chunks: ``(t_ns, data)`` device->host chunks in recorded order (ROS time of receipt, ns).
         paced: emit a chunk only once ``poll(t_s)`` reaches its time; False: emit everything at the first poll.
     Attributes:
-        total_bytes: device->host bytes recorded in all.
-    """
+        total_bytes: device->host bytes recorded in all."""
 
     def __init__(self, chunks: Iterable[tuple[int, bytes]], paced: bool = True) -> None:
         self._chunks = collections.deque((int(t), bytes(d)) for t, d in chunks)
@@ -161,8 +158,7 @@ class I2CReplayDevice:
     Args:
         transactions: the recorded traffic of this address (:func:`i2c_transactions`).
     Attributes:
-        write_mismatches: list of (index, recorded, replayed); writes past the recording: ignored.
-    """
+        write_mismatches: list of (index, recorded, replayed); writes past the recording: ignored."""
 
     def __init__(self, transactions: I2CTransactions) -> None:
         self._lock = threading.RLock()
@@ -233,8 +229,7 @@ class ReplayHardware:
         :class:`DriverReplay`), ports (name -> pty path), i2c (address -> I2CReplayDevice),
         i2c_device_of (address -> device name), i2c_bus.
     Raises:
-        FileNotFoundError / BagError: bad bag path.
-    """
+        FileNotFoundError / BagError: bad bag path."""
 
     def __init__(self, bag_path: str | Path, devices: Iterable[str] | None = None, paced: bool = True) -> None:
         self.serial: dict[str, SerialReplayDevice] = {}
@@ -322,8 +317,7 @@ def compare_parsed(recorded: dict[str, list[Any]], replayed: dict[str, list[Any]
     ``header.stamp`` included on the serial devices' topics: their bytes are served in lock-step
     with the replay clock (module docstring), so each chunk is received at its recorded time and
     the DVL's device-time stamps (``tu - dtu/2`` plus the offset estimate min(receive time - tu))
-    are the recorded ones too. Excluded on :data:`I2C_STAMPED` topics.
-    """
+    are the recorded ones too. Excluded on :data:`I2C_STAMPED` topics."""
     problems: list[str] = []
     for topic in sorted(set(recorded) & set(PARSED_TOPICS)):
         a, b = recorded[topic], replayed.get(topic, [])
@@ -348,8 +342,7 @@ class DriverReplay:
         clock_period_s: step of the replay clock where the bag has no ``/clock``, s.
     Attributes:
         hardware, nodes (name -> node), probe, received (topic -> list of messages), published (topic ->
-        count, every publisher of the driver nodes), timeline_ns (the /clock values replayed).
-    """
+        count, every publisher of the driver nodes), timeline_ns (the /clock values replayed)."""
 
     def __init__(self, bag_path: str | Path, config_path: str | Path, context: Any, overrides: dict | None = None,
                  clock_period_s: float = 0.01) -> None:
@@ -439,8 +432,7 @@ class DriverReplay:
         serial drivers read every byte due), continue ``extra_s`` of ROS time at the last step's period until
         everything recorded is consumed, then wait until the probe has every published parsed message.
 
-        Raises TimeoutError (naming what was not reached) after ``timeout_s`` of wall time per wait.
-        """
+        Raises TimeoutError (naming what was not reached) after ``timeout_s`` of wall time per wait."""
         serial_nodes = [self.nodes[n] for n in self.hardware.serial if n in self.nodes]
         _spin_until(self.executor, lambda: all(n.transport.connected for n in serial_nodes), timeout_s,
                     "serial drivers connected to the replay ptys")

@@ -1,8 +1,7 @@
 """Which topics a recording takes: an explicit list, a regular expression, or everything.
 
 Pure. :class:`TopicSelection` is what the recorder node evaluates against the ROS graph on every poll,
-so topics that appear after the recording started are picked up (docs/architecture.md §7).
-"""
+so topics that appear after the recording started are picked up (docs/architecture.md §7)."""
 from __future__ import annotations
 
 import re
@@ -28,8 +27,7 @@ class TopicSelection:
     non-hidden topic. exclude_regex: topics never recorded.
     Empty topics + empty regex + all_topics False selects nothing.
 
-    Raises ValueError (one line) for an invalid regular expression.
-    """
+    Raises ValueError (one line) for an invalid regular expression."""
 
     topics: tuple[str, ...] = ()
     regex: str = ""

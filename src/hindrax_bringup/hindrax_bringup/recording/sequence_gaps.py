@@ -5,8 +5,7 @@ A DDS writer numbers its samples 1, 2, 3, ... (DDS 1.4 §8.3.5.4 ``SequenceNumbe
 callback ``MessageInfo`` dict) and a reader gets each writer's samples in that order, each at most
 once. A sample that never reaches the reader (a best-effort reader's full socket buffer, a keep-last
 history overwritten before the take) leaves a gap: the next sample's number exceeds the last one's
-by more than 1. Pure: no ROS.
-"""
+by more than 1. Pure: no ROS."""
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable
@@ -27,8 +26,7 @@ class SequenceGaps:
     what came before it); a number 1 above the last is in order; more than 1 above, the difference
     less 1 is lost; the same number again is a duplicate (not counted); a smaller number is a new
     incarnation of the writer (a restarted process numbers from 1 again; one writer's samples never
-    arrive out of order), a new baseline, no loss.
-    """
+    arrive out of order), a new baseline, no loss."""
 
     __slots__ = ("_last", "_lost", "_writer_count")
 

@@ -16,8 +16,7 @@ counted in :attr:`ThreadedBagWriter.dropped` instead of growing memory without b
 error in the thread (disk full) is kept in :attr:`ThreadedBagWriter.error`; later messages are
 counted as dropped and :meth:`close` re-raises it.
 
-Pure (threads and a deque only; no ROS).
-"""
+Pure (threads and a deque only; no ROS)."""
 from __future__ import annotations
 
 import collections
@@ -36,8 +35,7 @@ class ThreadedBagWriter:
 
     bag_dir, options: as :class:`BagWriter` (the directory is created here, in the caller's thread, so
     a bad path fails at once). max_queue: bound of the message queue (messages). drain_period_s: how often the
-    writer thread takes what was queued, s (module docstring).
-    """
+    writer thread takes what was queued, s (module docstring)."""
 
     def __init__(self, bag_dir: str | Path, options: WriterOptions | None = None, max_queue: int = 100_000,
                  drain_period_s: float = 0.05) -> None:
@@ -88,8 +86,7 @@ class ThreadedBagWriter:
     def close(self, timeout_s: float = 30.0) -> BagMetadata:
         """Write everything queued, finish the bag and stop the thread; returns the final metadata.
 
-        Raises the writer thread's error if it failed, TimeoutError if it did not finish in time.
-        """
+        Raises the writer thread's error if it failed, TimeoutError if it did not finish in time."""
         if not self._closed:
             self._closed = True
             self._queue.append((_STOP,))

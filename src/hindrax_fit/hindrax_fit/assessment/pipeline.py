@@ -4,8 +4,7 @@
 The commands parse their arguments and call these: ``hindrax ident fit`` (:func:`fit_bags` or, for a campaign bag,
 :func:`identify_bag`), ``hindrax ident bag`` (:func:`identify_bag`, :func:`write_campaign_outputs`), ``hindrax run``
 (:func:`identify_bag` with the identification node's calibration, :func:`.report.write_outputs`).
-Reads and fits run with the collector off (:func:`without_collector`); docs/identification.md §7.
-"""
+Reads and fits run with the collector off (:func:`without_collector`); docs/identification.md §7."""
 from __future__ import annotations
 
 import contextlib

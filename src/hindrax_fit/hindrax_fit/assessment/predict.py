@@ -27,8 +27,7 @@ prediction, ``nrmse_zero`` with 0.
 
 CSV per bag and DOF (:func:`write_csv`): a first line ``# ...`` stating the DOF, the velocity, its unit, the body
 frame (FRD about base_link) and the time origin; then ``t_s,segment,measured,predicted``; one row per velocity
-measurement of the DOF in the continuous data; ``segment`` -1 and ``predicted`` empty where nothing is predicted.
-"""
+measurement of the DOF in the continuous data; ``segment`` -1 and ``predicted`` empty where nothing is predicted."""
 from __future__ import annotations
 
 import math

@@ -15,8 +15,7 @@ segments laid end to end (the holdout bags when given, else the cross-validation
 model's open-loop prediction from each segment's measured initial velocity, and the held initial value (what
 ``nrmse_hold`` measures); the same measured against predicted over the record time; the autocorrelation of the
 validation residuals (pairs within a segment, :func:`residual_acf`) with the 95 % band of white residuals; and, with a
-vehicle file, every parameter with its 95 % interval against the vehicle file's value.
-"""
+vehicle file, every parameter with its 95 % interval against the vehicle file's value."""
 from __future__ import annotations
 
 import html

@@ -37,8 +37,7 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
 Values are positive Fossen/SNAME coefficients in SI (as the configuration, ros_ws/config/hindrax.yaml).
 
 :func:`to_config_overrides` maps the file onto ``hydrodynamics.*`` configuration keys, so
-``load_config(path, overrides=...)`` (and hence the simulator) can use the identified model.
-"""
+``load_config(path, overrides=...)`` (and hence the simulator) can use the identified model."""
 from __future__ import annotations
 
 import dataclasses
@@ -158,8 +157,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     :func:`~..fit.calibration.apply_thrust_calibration`), the thrust scales are estimated jointly with the fits
     (:func:`~..fit.calibration.joint_estimate`, in place, skipped for DOFs already assessed); each parameter that had a
     prior shows it as ``prior: [mean, std]`` beside its value, the document gains ``joint`` (the scales' posterior)
-    and, with a calibration, ``calibration`` (:func:`~..fit.calibration.calibration_section`).
-    """
+    and, with a calibration, ``calibration`` (:func:`~..fit.calibration.calibration_section`)."""
     joint = joint_estimate(identifications, cfg, calibration)
     assessments = apply_verdicts(identifications, cfg)
     priors = prior_entries(cfg)
@@ -369,8 +367,7 @@ def to_config_overrides(document: Mapping) -> dict[str, float]:
     geometry). Negative damping estimates (unphysical; the schema requires >= 0) are clipped to 0.
     Raises :class:`IdentificationFileError` (a ValueError, one line) for a file that is not config-ready: one of
     ``hindrax ident fit`` without ``--config`` (``config_ready: false``, or an ``inertia`` without ``added_mass``:
-    without the vehicle file only the rigid + added inertia is known), or one that fails :func:`validate`.
-    """
+    without the vehicle file only the rigid + added inertia is known), or one that fails :func:`validate`."""
     if isinstance(document, Mapping) and isinstance(document.get("dofs"), Mapping):
         bare = [d for d, e in document["dofs"].items() if isinstance(e, Mapping) and "inertia" in e
                 and "added_mass" not in e]

@@ -57,8 +57,7 @@ and
      test, independent of the thrust curve) differs from the self-propelled inertia by more than
      :data:`REFERENCE_Z_MAX` combined standard deviations (docs/identification.md §6.4).
 
-All quantities SI, the parameters and units of :func:`~..fit.dof_model.parameter_names`.
-"""
+All quantities SI, the parameters and units of :func:`~..fit.dof_model.parameter_names`."""
 from __future__ import annotations
 
 import math
@@ -116,8 +115,7 @@ class FitEvidence:
     buoyancy, N) or None when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when
     ``thrust_in_covariance``; cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as
     ``cv_nrmse`` or None (no comparison); persistence_margin: the relative margin the model must beat it by
-    (:func:`~..fit.fit_core.persistence`).
-    """
+    (:func:`~..fit.fit_core.persistence`)."""
 
     dof: str
     names: list
@@ -167,8 +165,7 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     more than 3 fit std. A suspect parameter (a reason of its own or of the DOF) gets ``advice`` (:func:`data_advice`).
 
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
-    (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
-    """
+    (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}."""
     names = list(ev.names)
     theta = np.asarray(ev.theta, dtype=float)
     cov_fit = np.asarray(ev.cov, dtype=float)

@@ -31,8 +31,7 @@ velocity samples kept at their own times, interpolated onto the grid only for th
 
 A DOF whose force or velocity standard deviation is below :data:`EXCITATION_MIN` is "not excited" (reported with
 both numbers). Errors: :class:`FitInputError` (one line: the topic, the type found, the types accepted;
-disagreeing frame ids; how much data is needed).
-"""
+disagreeing frame ids; how much data is needed)."""
 from __future__ import annotations
 
 import math

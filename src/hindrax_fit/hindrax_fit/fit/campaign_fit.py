@@ -12,8 +12,7 @@ the thrust-model force of the widths the ESC wrote), the sensors conditioned by 
 the roll/pitch restoring regressor s(eta) ([NTNU-Thesis] eq. 2.23) from the DVL attitude fused with
 the gyro (:func:`_smoothed_roll_pitch`).
 
-All quantities SI, body FRD; times in s of the record's clock.
-"""
+All quantities SI, body FRD; times in s of the record's clock."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -58,8 +57,7 @@ def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord
     """The fit core's record of ``dof`` from a campaign record (module docstring) and its conditioned signals.
 
     Raises :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the DOF has no window of at least
-    50 ticks or fewer than 20 sensor samples in it.
-    """
+    50 ticks or fewer than 20 sensor samples in it."""
     k = DOFS.index(dof)
     sl = record.dof_slice(dof)
     t = record.t_s[sl]

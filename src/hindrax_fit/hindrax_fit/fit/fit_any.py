@@ -5,8 +5,7 @@ shared with the campaign (:mod:`.fit_core`, docs/identification.md §7). Several
 jointly (their segments pooled; clusters never span two bags). The verdicts and identification.yaml
 are :mod:`..assessment.results`' (:func:`..assessment.results.build_document`). Validation: the
 core's cross-validation and ``holdout`` bags, both measured by :func:`.fit_core.validation_measures`
-(``nrmse``, ``nrmse_hold``, ``nrmse_zero``).
-"""
+(``nrmse``, ``nrmse_hold``, ``nrmse_zero``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -8,8 +8,7 @@ output-error fit (:func:`fit_terms`), model terms by cross-validation (:func:`se
 :func:`persistence`, :func:`coupling_consistent`) and intervals (:func:`cluster_covariance`).
 
 All quantities SI; forces N (N m for rotations), velocities m/s (rad/s); body FRD. Raises
-:class:`~hindrax_onboard.estimation.least_squares.EstimationError` when a DOF has too little usable data.
-"""
+:class:`~hindrax_onboard.estimation.least_squares.EstimationError` when a DOF has too little usable data."""
 from __future__ import annotations
 
 import math

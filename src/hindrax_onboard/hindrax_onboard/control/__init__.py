@@ -12,5 +12,4 @@ Below identification (which flies its campaign with these holds); imports only t
 * :mod:`.maneuvers` - the holds behind the campaign's interface, the axis authority, the pool box, level ladders.
 * :mod:`.node` - ``controller_node``: the law as one more ``wrench`` source on the ROS graph.
 
-The closed-loop evaluation in the virtual pool is the simulator's (:mod:`hindrax_sim.control_evaluate`).
-"""
+The closed-loop evaluation in the virtual pool is the simulator's (:mod:`hindrax_sim.control_evaluate`)."""

@@ -28,8 +28,7 @@ maintained Python library implements marine model-based PID with reference feedf
 :class:`~hindrax_onboard.estimation.kalman.LinearKalman`, filterpy's predict/update equations without scipy (that
 module's docstring).
 
-Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north.
-"""
+Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north."""
 from __future__ import annotations
 
 import math
@@ -85,8 +84,7 @@ class ControlSettings:
     rate_hz: control rate (the node's timer). *_bandwidth_rad_s: target bandwidth w of the depth (and altitude),
     heading, roll/pitch and surge/sway velocity holds. damping_ratio: zeta of the reference models and the PID.
     hold_fraction: fraction of each axis' authority the holds may use. max_depth_rate_m_s, max_yaw_rate_rad_s: rate
-    limits of the reference models. sensor_timeout_s: the node stops when the depth or attitude is older than this.
-    """
+    limits of the reference models. sensor_timeout_s: the node stops when the depth or attitude is older than this."""
 
     rate_hz: float = 50.0
     depth_bandwidth_rad_s: float = 2.0
@@ -408,8 +406,7 @@ class Controller:
 
     Setpoints (attributes; NaN = not held): ``depth_m``; ``altitude_m`` (finite: altitude mode, when ranges arrive);
     ``heading_rad``; ``velocity_frd_m_s`` (2,) surge, sway; ``attitude_rad`` (2,) roll, pitch. :meth:`wrench` returns
-    the body FRD wrench (6,) for one tick. Raises ``ValueError`` for an authority of the wrong shape or not > 0.
-    """
+    the body FRD wrench (6,) for one tick. Raises ``ValueError`` for an authority of the wrong shape or not > 0."""
 
     def __init__(self, model: ControlModel, authority, settings: ControlSettings | None = None,
                  ping_position_frd_m: Sequence[float] = (0.0, 0.0, 0.0),

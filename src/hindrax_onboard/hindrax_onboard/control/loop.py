@@ -11,8 +11,7 @@ the samples of the driver topics (:mod:`hindrax_onboard.vehicle.signals`), the e
 
 Memory: the controller runs for hours, so the state's sample logs (``SensorState.log``, which the
 identification executive keeps whole for its campaign record) are cut here to the last
-:data:`LOG_HORIZON_S` seconds after every batch: the holds read only recent samples.
-"""
+:data:`LOG_HORIZON_S` seconds after every batch: the holds read only recent samples."""
 from __future__ import annotations
 
 import bisect

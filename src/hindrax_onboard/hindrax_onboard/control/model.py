@@ -24,8 +24,7 @@ the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforw
 or an identification of another vehicle (matched by :mod:`hindrax_onboard.vehicle.vehicle_match`) raise
 :class:`ModelFileError` (one line).
 
-Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards.
-"""
+Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards."""
 from __future__ import annotations
 
 import math
@@ -67,8 +66,7 @@ class AxisModel:
     linear_damping_positive / _negative (kg/s or kg m^2/s), quadratic_damping_positive / _negative (kg/m or kg m^2),
     chosen by the sign of the velocity (heave: positive = down). bias: the constant force or moment holding the
     vehicle still (heave: B - W, N, FRD; others 0 from the vehicle file). restoring: z_g W - z_b B (N m; roll and pitch,
-    0 otherwise). sources: parameter name -> where the value came from.
-    """
+    0 otherwise). sources: parameter name -> where the value came from."""
 
     dof: str
     inertia: float
@@ -210,8 +208,7 @@ def load_model(path: str | Path, cfg: VehicleConfig) -> ControlModel:
     Raises :class:`ModelFileError` (one line) for a file that cannot be read, is not an identification or belongs
     to another vehicle. DOFs the file does not hold, and parameters that are missing, unusable or suspect (for
     control), keep the vehicle file's value, each with its reason in :attr:`AxisModel.sources` (and the DOFs in
-    :attr:`ControlModel.notes`).
-    """
+    :attr:`ControlModel.notes`)."""
     base = model_from_config(cfg)
     p = Path(path)
 

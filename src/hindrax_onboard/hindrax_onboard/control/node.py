@@ -23,8 +23,7 @@ CPU (docs/control.md §3 items 6-7): the tick runs at ``control.rate_hz`` only w
 
 Parameters: the vehicle configuration (``control.*``) and ``model_file`` (string, read-only, default
 "": identification.yaml to take the model from, "" = the vehicle file); a file that cannot be used
-stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place.
-"""
+stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place."""
 from __future__ import annotations
 
 import math

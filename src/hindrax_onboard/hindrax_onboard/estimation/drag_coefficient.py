@@ -14,8 +14,7 @@ implement (and what we cannot verify against the paper):
   nu = 1.01e-6 m^2/s). Default characteristic length: L = V^(1/3) ([Hindrax-AM] eq. 10 choice;
   0.2483 m for the Hindrax prototype). [Hindrax-Drag] does not state its L;
   with L = 0.2483 m its surge range 0.5e5-1.1e5 corresponds to 0.20-0.45 m/s, plausible for
-  the tests ("0.5 m/s needs about 25 N") but not verifiable.
-"""
+  the tests ("0.5 m/s needs about 25 N") but not verifiable."""
 
 from __future__ import annotations
 
@@ -36,8 +35,7 @@ def characteristic_length_from_volume(volume_m3: float) -> float:
     """L = V^(1/3) in m ([Hindrax-AM] eq. 10: 0.0824 m for the 1:3 model, 0.2483 m prototype).
 
     Raises:
-        EstimationError: volume not > 0.
-    """
+        EstimationError: volume not > 0."""
     return positive(volume_m3, "volume_m3") ** (1.0 / 3.0)
 
 
@@ -51,8 +49,7 @@ def reynolds_number(speed, characteristic_length_m: float,
         kinematic_viscosity_m2_s: nu in m^2/s (> 0), default 1.01e-6 ([Hindrax-AM]).
 
     Raises:
-        EstimationError: non-positive L or nu.
-    """
+        EstimationError: non-positive L or nu."""
     L = positive(characteristic_length_m, "characteristic_length_m")
     nu = positive(kinematic_viscosity_m2_s, "kinematic_viscosity_m2_s")
     re = np.abs(np.asarray(speed, dtype=float)) * L / nu
@@ -71,8 +68,7 @@ def reynolds_range(speed, characteristic_length_m: float,
         min_speed: ignore samples at or below this speed (e.g. the zero-thrust level).
 
     Raises:
-        EstimationError: no sample above ``min_speed`` or bad input.
-    """
+        EstimationError: no sample above ``min_speed`` or bad input."""
     u = np.abs(as_float_array(speed, "speed", 1))
     u = u[u > min_speed]
     if u.size == 0:
@@ -96,8 +92,7 @@ def drag_coefficient(quadratic_damping: float, projected_area_m2: float,
         (c_d, c_d_std), dimensionless.
 
     Raises:
-        EstimationError: non-positive area/density or negative std.
-    """
+        EstimationError: non-positive area/density or negative std."""
     A = positive(projected_area_m2, "projected_area_m2")
     rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
     if not quadratic_damping_std >= 0:

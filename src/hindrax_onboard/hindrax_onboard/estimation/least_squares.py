@@ -22,8 +22,7 @@ by the other estimation modules (one place, no copy-paste).
 
 Conventions: SI units; forces in N (moments in N m), velocities in m/s (rad/s), accelerations
 in m/s^2 (rad/s^2). Damping and inertia are reported as positive numbers (Fossen/SNAME,
-docs/architecture.md §3).
-"""
+docs/architecture.md §3)."""
 
 from __future__ import annotations
 
@@ -39,8 +38,7 @@ class EstimationError(ValueError):
     """Bad input to an estimation routine (shape, NaN, too few samples, rank deficiency).
 
     Subclass of ``ValueError`` so callers can catch either. Raised by every module of
-    ``hindrax_onboard.estimation`` for bad data; the message names the offending argument.
-    """
+    ``hindrax_onboard.estimation`` for bad data; the message names the offending argument."""
 
 
 # Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
@@ -102,8 +100,7 @@ class LsResult:
         residuals: (n,) y - X theta.
         n: number of samples.
         p: number of parameters.
-        names: optional parameter names (length p), used by :meth:`index`.
-    """
+        names: optional parameter names (length p), used by :meth:`index`."""
 
     theta: np.ndarray
     std: np.ndarray
@@ -154,8 +151,7 @@ class DragFit:
     """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
 
     Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
-    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m).
-    """
+    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m)."""
 
     ls: LsResult
 
@@ -190,8 +186,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
 
     Raises:
         EstimationError (a ValueError): wrong shapes, NaN/inf, n <= p (eq. 8 needs n - p > 0),
-            an all-zero column, or a rank-deficient X (the message gives the rank).
-    """
+            an all-zero column, or a rank-deficient X (the message gives the rank)."""
     X = as_float_array(X, "X", 2)
     y = as_float_array(y, "y", 1)
     n, p = X.shape
@@ -249,8 +244,7 @@ def fit_drag(velocity, force) -> DragFit:
         :class:`DragFit` (values and standard deviations of k_q, k_l, b).
 
     Raises:
-        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. one velocity).
-    """
+        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. one velocity)."""
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)
     check_same_length(velocity=v, force=f)

@@ -67,8 +67,7 @@ docs/identification.md §1.D):
   enough samples, excitation above ``min_excitation``), NaN ("not converged") elsewhere.
 
 Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for
-50-100 Hz per DOF.
-"""
+50-100 Hz per DOF."""
 
 from __future__ import annotations
 
@@ -104,8 +103,7 @@ class RecursiveLeastSquares:
         change_samples: window of the change detector (samples).
 
     Raises:
-        EstimationError: invalid sizes or values.
-    """
+        EstimationError: invalid sizes or values."""
 
     def __init__(self, n_params: int, forgetting: float = 0.995,
                  initial_covariance=1e3, initial_theta=None,
@@ -196,8 +194,7 @@ class RecursiveLeastSquares:
             y: observation (finite), e.g. force in N.
 
         Raises:
-            EstimationError: wrong size or non-finite input (the state is left unchanged).
-        """
+            EstimationError: wrong size or non-finite input (the state is left unchanged)."""
         phi = np.asarray(phi, dtype=float)
         if phi.shape != (self._p,):
             raise EstimationError(f"phi must have shape ({self._p},), got {phi.shape}")
@@ -354,8 +351,7 @@ class RecursiveLeastSquares:
     def covariance(self) -> np.ndarray:
         """(p, p) calibrated parameter covariance sigma2_hat * P Q P (module docstring).
 
-        NaN-filled until enough samples for a noise estimate (dof > 0.5).
-        """
+        NaN-filled until enough samples for a noise estimate (dof > 0.5)."""
         s2 = self.sigma2
         if not np.isfinite(s2):
             return np.full((self._p, self._p), np.nan)
@@ -373,8 +369,7 @@ class RecursiveLeastSquares:
     def excitation(self) -> float:
         """Smallest eigenvalue of R / N_eff (units of phi^2); 0 before any sample.
 
-        R = sum lambda^(k-j) phi phi^T: near zero when a parameter direction is not excited.
-        """
+        R = sum lambda^(k-j) phi phi^T: near zero when a parameter direction is not excited."""
         if self._wr == 0.0:
             return 0.0
         return float(np.linalg.eigvalsh(self._R / self._wr)[0])
@@ -384,8 +379,7 @@ class RecursiveLeastSquares:
         """Smallest eigenvalue of D^-1/2 R D^-1/2 (D = diag R), dimensionless in [0, 1].
 
         0 when a regressor is identically zero or regressors are collinear (e.g. constant
-        phi); approaches 1 for orthogonal, equally weighted regressors.
-        """
+        phi); approaches 1 for orthogonal, equally weighted regressors."""
         d = np.diag(self._R)
         if self._wr == 0.0 or np.any(d <= 0.0):
             return 0.0

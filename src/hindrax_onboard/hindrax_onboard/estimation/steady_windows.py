@@ -27,8 +27,7 @@ Algorithm (all thresholds are arguments; defaults in brackets):
 Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise (DVL ~ 0.01 m/s,
 filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient accelerations (force / inertia).
 [Hindrax-Drag]'s heave runs never became steady for lack of depth (section 5); expect no windows there and use the
-transient fit (the fit core, :mod:`..identification.fit.fit_core`).
-"""
+transient fit (the fit core, :mod:`..identification.fit.fit_core`)."""
 
 from __future__ import annotations
 
@@ -55,8 +54,7 @@ class SteadyWindow:
         velocity_mean, velocity_std: mean and std of the velocity (m/s or rad/s).
         velocity_slope: LS slope of the velocity over the window (m/s^2 or rad/s^2).
         force_mean, force_std: mean and std of the force (N or N m).
-        n: number of samples.
-    """
+        n: number of samples."""
 
     start: int
     stop: int
@@ -81,8 +79,7 @@ def constant_force_segments(force, force_tolerance: float = 0.05) -> List[Tuple[
         List of (start, stop) index pairs covering the record.
 
     Raises:
-        EstimationError: bad input or negative tolerance.
-    """
+        EstimationError: bad input or negative tolerance."""
     f = as_float_array(force, "force", 1)
     if not force_tolerance >= 0:
         raise EstimationError(f"force_tolerance must be >= 0, got {force_tolerance}")
@@ -146,8 +143,7 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
         List of :class:`SteadyWindow` in time order (empty when nothing is steady).
 
     Raises:
-        EstimationError: bad shapes, NaN, non-increasing time, non-positive thresholds.
-    """
+        EstimationError: bad shapes, NaN, non-increasing time, non-positive thresholds."""
     t = check_time_vector(t_s, "t_s")
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)

@@ -23,8 +23,7 @@ simulated instant no longer depends on wall-clock timing, so the same seed gives
 
 Isolation: without ``ROS_DOMAIN_ID`` in the environment the graph runs on a ROS domain that no other process on
 the machine holds (:func:`run_domain`), and says which; another graph on the same domain (a second ``hindrax
-run``, a launch on the system clock) would feed its messages into the identification and the bag.
-"""
+run``, a launch on the system clock) would feed its messages into the identification and the bag."""
 from __future__ import annotations
 
 import contextlib
@@ -82,8 +81,7 @@ class VirtualOperator:
     from the wait loop: a request with no answer within ``resend_after_s`` of wall time is sent
     again (after a continue every step holds at least
     :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat
-    finds nothing awaited and is answered False).
-    """
+    finds nothing awaited and is answered False)."""
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
                  request_continue: Callable[[], object], say: Callable[[str], None] = lambda _m: None,
@@ -157,8 +155,7 @@ class GraphCampaignOutcome:
 
     success / message: the action result; identifications / errors: offline results per DOF
     (:func:`~.identification.fit.campaign_fit.identify_all_with_errors`) from the bag; bag_dir;
-    sim_time_s / wall_time_s of the whole run.
-    """
+    sim_time_s / wall_time_s of the whole run."""
 
     success: bool = False
     message: str = ""
@@ -206,8 +203,7 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration,
     ``TimeoutError`` when a step does not finish within its wall-clock deadline (the graph is shut
     down, thrusters neutral) and :class:`~hindrax_common.node_support.vehicle_graph.ForeignVehicleError` when
-    another ESC or supervisor is on the domain.
-    """
+    another ESC or supervisor is on the domain."""
     say = progress or (lambda _m: None)
     wall0 = time.monotonic()
     out = Path(out)

@@ -26,8 +26,7 @@ QoS event handlers (most waitables) enter their event handle into the wait set d
 their Python wrappers. A wait over a subset of the nodes is rclpy's.
 
 Handlers: a ready timer or subscription whose callback is a plain function gets a :class:`_Call`;
-the other entities get rclpy's.
-"""
+the other entities get rclpy's."""
 from __future__ import annotations
 
 import inspect

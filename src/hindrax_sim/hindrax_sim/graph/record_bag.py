@@ -21,8 +21,7 @@ are the ESC node's constructor writes (PCA9685 configuration and first neutral),
 Simulated content is deterministic for a seed, but the exact message count is not (how the executor
 interleaves the driver timers with /clock steps varies with machine load), so tests check
 properties, not counts fixed in advance. It lives here, not in hindrax_bringup, so that the drivers
-do not import the simulator.
-"""
+do not import the simulator."""
 from __future__ import annotations
 
 import argparse
@@ -63,8 +62,7 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     it exists), in the initialised rclpy ``context``. Returns topic -> number of messages the
     graph's nodes published while recording (every one is in the bag). Raises
     :class:`~hindrax_common.process.conditions.ConditionTimeout` naming the condition not reached (each
-    wait: 60 s of wall time), ConfigError for bad overrides.
-    """
+    wait: 60 s of wall time), ConfigError for bad overrides."""
     timeout_s = 60.0
     bag_dir = Path(bag_dir)
     if bag_dir.exists():

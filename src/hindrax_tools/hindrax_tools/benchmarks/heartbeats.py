@@ -15,8 +15,7 @@ each beat is read by two receivers (docs/architecture.md §8), so a beat's cost 
   rclpy objects; after: the raw subscription the receivers use (:class:`~.liveness.HeartbeatWatch`).
 * ``heartbeat_graph_queries_per_s``: graph queries of one :class:`~.liveness.HeartbeatWatch` checked
   at 25 Hz with its peer publishing (before: one query per check, 25 a second; the ESC and the guard check four
-  watches and the command topic, 115 queries a second), and ``heartbeat_graph_query_cpu_us`` what one costs.
-"""
+  watches and the command topic, 115 queries a second), and ``heartbeat_graph_query_cpu_us`` what one costs."""
 from __future__ import annotations
 
 import statistics

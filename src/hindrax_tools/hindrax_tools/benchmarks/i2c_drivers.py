@@ -15,8 +15,7 @@ subscribing to the main topic, all in one EventsExecutor (the executor of every 
   emulator inverts the compensation by bisection at every conversion start, which costs more than the
   driver), divided by the messages published on the main topic; and the load in % of one core. The
   ``_marginal`` rows also subtract the CPU an idle process with one DDS participant uses over the same
-  time (measured first), which dominates the per-message figure of a 10 Hz driver.
-"""
+  time (measured first), which dominates the per-message figure of a 10 Hz driver."""
 from __future__ import annotations
 
 import bisect

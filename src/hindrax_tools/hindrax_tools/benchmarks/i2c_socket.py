@@ -10,8 +10,7 @@ other emulators) delay every transaction by up to the interpreter's switch inter
 Rows (milliseconds, p50 and p99 of one 32-byte block write to the PCA9685, what the ESC writes per command, timed in
 a client process): the server in a quiet process; with two busy Python threads beside it; the same with the switch
 interval at 0.5 ms; and the server in a process of its own while the two busy threads run in the process that
-started it.
-"""
+started it."""
 from __future__ import annotations
 
 import contextlib

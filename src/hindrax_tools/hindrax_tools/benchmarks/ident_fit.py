@@ -21,8 +21,7 @@ noise over the measured std, what a perfect model would still score).
 Acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
 ``hold``. Tune on this benchmark, never on the tests. Usage: ``python -m
 hindrax_tools.benchmarks.ident_fit
-[--only NAME,...] [--quick] [--keep DIR]`` (``make bench BENCH_ARGS=--only=ident_fit`` runs it in the suite).
-"""
+[--only NAME,...] [--quick] [--keep DIR]`` (``make bench BENCH_ARGS=--only=ident_fit`` runs it in the suite)."""
 from __future__ import annotations
 
 import argparse

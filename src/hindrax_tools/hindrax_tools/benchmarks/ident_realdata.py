@@ -26,8 +26,7 @@ and whether the delay sat at its bound.
 
 Usage: ``python -m hindrax_tools.benchmarks.ident_realdata [--keep DIR] [--only NAME,...]
 [--results-doc docs/results.md]``: prints the table; with ``--results-doc`` writes section ``ident-realdata`` of that
-document and the figure ``figures/ident_realdata.png`` next to it. Tune on this, never on the tests.
-"""
+document and the figure ``figures/ident_realdata.png`` next to it. Tune on this, never on the tests."""
 from __future__ import annotations
 
 import argparse

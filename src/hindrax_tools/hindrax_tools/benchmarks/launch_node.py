@@ -16,8 +16,7 @@ benchmark's figures by thread.
 endpoints to ``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of
 such a topology without logic: the same nodes and endpoints, one pre-serialised message per
 publisher from a timer at its rate (publishers of one rate share a timer), callbacks that do
-nothing; SIGUSR2 switches it to its next phase's rates.
-"""
+nothing; SIGUSR2 switches it to its next phase's rates."""
 from __future__ import annotations
 
 import cProfile

@@ -29,8 +29,7 @@ heartbeat gaps as received, with a target, and between send stamps; tick gaps) u
   internal domain with Fast DDS's default transports (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``,
   no profile: shared memory + UDP), one to the gateway's topside topics on the topside domain, and
   ``hindrax health --quiet`` on the internal domain (the Pi's shell); gap target
-  :data:`POOL_DAY_GAP_TARGET_MS`.
-"""
+  :data:`POOL_DAY_GAP_TARGET_MS`."""
 from __future__ import annotations
 
 import os

@@ -39,8 +39,7 @@ I2C devices on the emulated bus, each node in its own rclpy context, polled ever
   ``imu/data_raw`` after the re-initialisation.
 - magnetometer NACK (AK09916 behind the ICM's I2C master): detect = NACK onset -> ERROR ``magnetometer``;
   recover = the AK09916 answers again (right after the failed re-initialisation) -> first ``imu/mag`` (the
-  node retries every ``sensors.icm20948.mag_retry_interval_s``).
-"""
+  node retries every ``sensors.icm20948.mag_retry_interval_s``)."""
 from __future__ import annotations
 
 import math

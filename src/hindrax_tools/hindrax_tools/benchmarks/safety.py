@@ -64,8 +64,7 @@ for the bare-metal unit: ``WatchdogSec`` :data:`UNIT_WATCHDOG_S`, SIGKILL; witho
   goes high). The Docker unit has no watchdog (no ``$NOTIFY_SOCKET`` in the container): there only the feed stops it.
 
 Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :data:`REPEATS` in-process and
-:data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms.
-"""
+:data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms."""
 from __future__ import annotations
 
 import functools

@@ -18,8 +18,7 @@ subscribed to the output topics, in one SingleThreadedExecutor:
   dvl/altitude + raw/dvl75; Ping: ping/altitude + ping/confidence + raw/ping1d); (b) process CPU time minus
   the emulator thread's, i.e. node + probe + executor + DDS. Both divided by the reports published.
   Rates: DVL 20 Hz (its maximum, docs/devices.md §1.1); Ping 40 Hz (25 ms interval: a 236-byte profile per
-  ping is about the most a 115200-baud link carries).
-"""
+  ping is about the most a 115200-baud link carries)."""
 from __future__ import annotations
 
 import time

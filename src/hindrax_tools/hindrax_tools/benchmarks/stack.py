@@ -28,8 +28,7 @@ with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and chec
 launch-prefix and environment, each topic at the launch's rate with a recorded message, callbacks
 doing nothing: the floor of moving the vehicle's messages (``launch_skeleton_*``,
 ``launch_*_vs_skeleton_ratio_*``). ``cpu_bare_rclpy_same_topics`` is one publisher process for the
-one-process idle phase's topics.
-"""
+one-process idle phase's topics."""
 from __future__ import annotations
 
 import argparse

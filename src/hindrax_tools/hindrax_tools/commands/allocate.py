@@ -8,8 +8,7 @@ invalid wrench or configuration.
 
 ``achieved_wrench`` is what the thrusters give at the printed widths, so it shows every component nobody asked
 for: a thruster runs at 0 N or at least its smallest thrust outside the ESC deadband, and the allocator chooses
-which thrusters run (docs/architecture.md §9).
-"""
+which thrusters run (docs/architecture.md §9)."""
 from __future__ import annotations
 
 import argparse

@@ -37,8 +37,7 @@ tools (the references of priors, inclining and tilt-decay do not depend on the t
 * ``hindrax ident campaign``: the identification campaign on the simulator, same as ``hindrax run``
   (:mod:`hindrax_tools.commands.run`).
 
-Exit status 0 on success, 1 on bad input (one-line message on stderr).
-"""
+Exit status 0 on success, 1 on bad input (one-line message on stderr)."""
 from __future__ import annotations
 
 import argparse

@@ -14,8 +14,7 @@ with a ``latest`` link beside it moved once the run has completed (:mod:`hindrax
 which must be new or empty. It holds ``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
 ``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF and parameter the
 identified value with its std, the configured value ("truth" in simulation) and the relative error. Exit 0, or 1 when
-the campaign aborted or produced no estimate.
-"""
+the campaign aborted or produced no estimate."""
 from __future__ import annotations
 
 import argparse

@@ -114,8 +114,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
-    covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file.
-    """
+    covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file."""
     from hindrax_common.config import or_default
 
     from hindrax_sim.campaign import Campaign

@@ -30,8 +30,7 @@ one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the f
     header stamps' time base); the gyro gives the inertia offline (:func:`~hindrax_fit.fit.calibration.decay_inertia`).
 
 Pure apart from the message import in :func:`calibration_array`; :func:`results_from_array` duck-types the
-message (rclpy or bag-decoded objects).
-"""
+message (rclpy or bag-decoded objects)."""
 from __future__ import annotations
 
 from typing import Any, Iterable, Mapping

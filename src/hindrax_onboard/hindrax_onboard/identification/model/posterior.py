@@ -9,8 +9,7 @@ for a linear problem) is
     P = C^-1 + D,   theta = P^-1 (C^-1 theta_fit + D mu),   cov = P^-1,
 
 D = diag(1 / sd_i^2) on the parameters with a prior (0 elsewhere): the no-calibration case of
-:func:`~.calibration.joint_estimate`, which calls it then. Units: those of the parameters.
-"""
+:func:`~.calibration.joint_estimate`, which calls it then. Units: those of the parameters."""
 from __future__ import annotations
 
 import math

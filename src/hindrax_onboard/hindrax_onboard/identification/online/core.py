@@ -40,8 +40,7 @@ Rules (one test row each in ``test/test_identification_core.py``):
   is not what the executive commanded) stops the goal with that reason, which trips the supervisor (its
   ``disarm_cause`` then names the starvation).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
-  past the next control tick while a goal runs.
-"""
+  past the next control tick while a goal runs."""
 from __future__ import annotations
 
 import math
@@ -152,8 +151,7 @@ class IdentificationCore:
 
     config: the vehicle configuration; tick_s: control tick period (s); publish_period_s: period of the online
     estimates (s); dvl_lock_timeout_s, sensor_timeout_s, stop_timeout_s: the node parameters (s, > 0);
-    executive: factory ``(config, dofs, levels, **kwargs) -> Executive`` (tests pass a stand-in).
-    """
+    executive: factory ``(config, dofs, levels, **kwargs) -> Executive`` (tests pass a stand-in)."""
 
     def __init__(self, config: VehicleConfig, *, tick_s: float, publish_period_s: float, dvl_lock_timeout_s: float,
                  sensor_timeout_s: float, stop_timeout_s: float, executive: Callable[..., Any] = Executive) -> None:

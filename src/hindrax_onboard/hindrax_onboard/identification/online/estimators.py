@@ -7,8 +7,7 @@ physical-sign bounds, the change detector and the start at the empirical priors 
 from ``identification.rls_*``. The causal filter lags the fast transients and the forgetting window
 (1 / (1 - lambda) = 500 ticks, 20 s at the 25 Hz tick) is short, so the online values are a live indicator (a few
 per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly conditioned online), not the
-reported estimate (that is the fit core's, :mod:`hindrax_fit.fit.fit_core`).
-"""
+reported estimate (that is the fit core's, :mod:`hindrax_fit.fit.fit_core`)."""
 from __future__ import annotations
 
 import math
@@ -111,8 +110,7 @@ class OnlineDofEstimator:
     :class:`~..vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
     one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
     (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
-    first time :meth:`_converged` holds.
-    """
+    first time :meth:`_converged` holds."""
 
     _DEVICE = {"dvl": "dvl75", "depth": "ms5837", "gyro": "icm20948_gyro"}
 

@@ -39,8 +39,7 @@ Pool-box shaping (:meth:`BoxShaping.force`), with e the displacement from the bo
    reaches the room left, the whole command is a full brake -sign(v) ``brake_fraction`` x authority.
 
 The total is clipped to the authority. Because the fit uses the recorded force, the shaping does not bias the
-identification; it only removes some low-frequency power.
-"""
+identification; it only removes some low-frequency power."""
 from __future__ import annotations
 
 import math

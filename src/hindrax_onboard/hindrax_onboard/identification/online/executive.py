@@ -48,8 +48,7 @@ pool box grown by half ``pool.margin_m``), no valid DVL velocity for ``dvl_lock_
 the ESC output disarmed, a cancel request. The caller then commands neutral thrust. A calibration step stopped after
 it asked for a load (ballast, float, line, test mass) leaves it in :attr:`Executive.undo`: the aborted status asks
 to remove it (:func:`~.steps.undo_line`), and a campaign given it as ``confirm`` first waits, thrusters stopped, for
-the operator to confirm each removal (:class:`~.steps.Confirm`).
-"""
+the operator to confirm each removal (:class:`~.steps.Confirm`)."""
 from __future__ import annotations
 
 import math
@@ -130,8 +129,7 @@ class TickInput:
     t_s: time of the tick (s, the plant's clock). elapsed_s: time the last command was held (s; the lag of the
     recorded force runs over it). samples: new sensor samples ``(device, sample)`` in the simulator's form
     (:mod:`hindrax_sim.sensors`, or :mod:`...vehicle.signals` from ROS messages), in the order to condition them.
-    armed: the ESC output is armed. cancel: the operator asked to stop.
-    """
+    armed: the ESC output is armed. cancel: the operator asked to stop."""
 
     t_s: float
     elapsed_s: float
@@ -216,8 +214,7 @@ class Executive:
     held for :func:`command_ticks` ticks. confirm: (remove code, instruction) pairs an aborted campaign left
     (its :attr:`undo`): the operator confirms each first, thrusters stopped (module docstring, "Stops").
     Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
-    calibration step or a missing known force, an unknown excitation or a non-positive duration or command rate.
-    """
+    calibration step or a missing known force, an unknown excitation or a non-positive duration or command rate."""
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None, *,
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,

@@ -128,8 +128,7 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`
     (:func:`~..model.dof_model.rls_published_std`), -1 where that is NaN ("not converged or
     not trusted": the message's float64 std has no NaN convention). ``covariance`` stays the raw
-    RLS one.
-    """
+    RLS one."""
     rls = estimator.rls
     units = parameter_units(dof)
     msg = HydroEstimate(dof=dof, method=method)
@@ -153,8 +152,7 @@ class IdentificationNode(VehicleNode):
 
     config: a VehicleConfig (default: from the node's parameters,
     :func:`~hindrax_common.node_support.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
-    :class:`ConfigError` for an invalid configuration.
-    """
+    :class:`ConfigError` for an invalid configuration."""
 
     def __init__(self, *, config: VehicleConfig | None = None, node_name: str = "identification",
                  **kwargs: Any) -> None:

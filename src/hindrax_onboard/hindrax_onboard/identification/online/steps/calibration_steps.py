@@ -22,8 +22,7 @@ Attitude steps: :class:`Inclining` (restoring stiffness C of roll or pitch from 
 :class:`TiltDecay` (roll or pitch free decay after a thruster-made tilt).
 
 Durations: :data:`CALIBRATION_SETTLE_S` before and :data:`CALIBRATION_WINDOW_S` of each averaging hold (the
-constructors' defaults; a calibration-only test passes shorter ones).
-"""
+constructors' defaults; a calibration-only test passes shorter ones)."""
 from __future__ import annotations
 
 import math
@@ -65,8 +64,7 @@ class KnownForceStep(Step):
     (the single-scale estimate, from the two means' batch-mean std), ``known_force_n`` (magnitude), ``direction``
     (body FRD axis and sense of E), ``group``, ``holding_force_n`` [X1, X2] and ``holding_force_std_n``,
     ``forward_force_n`` [P1, P2] and ``reverse_force_n`` [N1, N2], ``method``. Raises :class:`CampaignAbort` when
-    the holding force did not change against the known force.
-    """
+    the holding force did not change against the known force."""
 
     key = ""
     method = ""

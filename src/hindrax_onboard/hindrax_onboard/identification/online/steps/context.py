@@ -17,8 +17,7 @@ conditioned that tick's sensor samples. Between yields the step reads the campai
 * the motion primitives every step shares (:meth:`hold`, :meth:`station`, :meth:`move_to_centre`,
   :meth:`wait_still`), which are generators too (``yield from ctx.hold(2.0)``).
 
-Frames: body FRD, world NED (docs/architecture.md §3); forces N, moments N m, times s (the plant's clock).
-"""
+Frames: body FRD, world NED (docs/architecture.md §3); forces N, moments N m, times s (the plant's clock)."""
 from __future__ import annotations
 
 import math
@@ -48,8 +47,7 @@ class CampaignAbort(RuntimeError):
 class StepContext:
     """The campaign state shared by the sequencer and its steps (module docstring).
 
-    cfg: vehicle configuration; tick_s: control period (s); progress: callable receiving one-line messages.
-    """
+    cfg: vehicle configuration; tick_s: control period (s); progress: callable receiving one-line messages."""
 
     def __init__(self, cfg: VehicleConfig, tick_s: float, progress: Callable[[str], None] | None = None) -> None:
         self.cfg = cfg
