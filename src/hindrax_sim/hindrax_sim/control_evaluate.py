@@ -357,9 +357,8 @@ def jsonable(x: Any) -> Any:
 
 
 def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) -> Path:
-    """``control.json`` (``cases``, ``runs``, ``ratios``, ``info``) and ``report/index.html`` in
-    ``out_dir``, as docs/control.md §6 lists them; a settling time that never came is null. Returns
-    the control.json path."""
+    """``control.json`` (``cases``, ``runs``, ``ratios``, ``info``) and ``report/index.html`` in ``out_dir``, as
+    docs/control.md §6 lists them; a settling time that never came is null. Returns the control.json path."""
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
     summary = summarise(cases)

@@ -2,11 +2,10 @@
 altitude than the vehicle file (``hindrax control scenarios``, docs/control.md §7).
 
 Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification
-(:class:`~hindrax_sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml``
-read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then
-:data:`SUITE_MANEUVERS` of :mod:`.control_evaluate` on the same truth. Writes
-``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the summary
-``<out>/control_scenarios.json`` / ``control_scenarios.md``."""
+(:class:`~hindrax_sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml`` read back through
+:func:`~..control.model.load_model` (so the verdict fallbacks apply), then :data:`SUITE_MANEUVERS` of
+:mod:`.control_evaluate` on the same truth. Writes ``<out>/<scenario>/identification.yaml``,
+``<out>/<scenario>/control.json`` and the summary ``<out>/control_scenarios.json`` / ``control_scenarios.md``."""
 from __future__ import annotations
 
 import json

@@ -187,11 +187,10 @@ def main(argv: list[str] | None = None) -> int:
 class LivePool(DriverEndpoints):
     """Client of a live pool process (module docstring): start it, reach its devices, act as the operator.
 
-    config_path: the vehicle file; directory: a folder for the socket (default: a new temporary
-    one); env: the child's environment (default: this one); truth: as :class:`LivePoolServer`. Use
-    as a context manager. The driver-facing methods are those of
-    :class:`~hindrax_bringup.layout.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`,
-    :meth:`env`). Raises RuntimeError when the process does not come up within 60 s or does not
+    config_path: the vehicle file; directory: a folder for the socket (default: a new temporary one); env: the child's
+    environment (default: this one); truth: as :class:`LivePoolServer`. Use as a context manager. The driver-facing
+    methods are those of :class:`~hindrax_bringup.layout.emulated_devices.DriverEndpoints` (``ports``,
+    :meth:`ros_arguments`, :meth:`env`). Raises RuntimeError when the process does not come up within 60 s or does not
     answer within 10 s."""
 
     def __init__(self, config_path: str | os.PathLike, directory: str | os.PathLike | None = None,

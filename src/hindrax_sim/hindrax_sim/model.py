@@ -158,9 +158,8 @@ class VehicleModel:
     def derivative_list(self, s: Sequence[float], tau: Sequence[float]) -> list[float]:
         """Fast state derivative on plain floats: ``s`` (13 floats), ``tau`` (6 floats) -> 13 floats.
 
-        The equations of the module docstring (checked by the tests against their matrix form),
-        written with scalar 3-vector algebra. The quaternion need not be exactly unit (the
-        integrator renormalises after each step)."""
+        The equations of the module docstring (checked by the tests against their matrix form), written with scalar
+        3-vector algebra. The quaternion need not be exactly unit (the integrator renormalises after each step)."""
         _, _, z, qx, qy, qz, qw, u, v, w, p, q, r = s
         # rotation body FRD -> NED
         xx, yy, zz = qx * qx, qy * qy, qz * qz

@@ -60,9 +60,8 @@ class ContactState:
 class FreeSurface:
     """Submerged fraction of a box hull at the free surface (module docstring).
 
-    hull_half_extents_m (3,): half length, width and height of the hull box, m (> 0).
-    hull_centre_frd_m (3,): box centre relative to the body origin CO, FRD, m.
-    Raises ``ValueError`` for non-positive extents."""
+    hull_half_extents_m (3,): half length, width and height of the hull box, m (> 0). hull_centre_frd_m (3,): box centre
+    relative to the body origin CO, FRD, m. Raises ``ValueError`` for non-positive extents."""
 
     def __init__(self, hull_half_extents_m: Sequence[float], hull_centre_frd_m: Sequence[float]) -> None:
         a, b, c = (float(x) for x in hull_half_extents_m)

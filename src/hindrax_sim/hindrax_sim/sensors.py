@@ -102,10 +102,9 @@ class VehicleTruth:
 
 @dataclass(frozen=True)
 class DvlVelocitySample:
-    """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
-    altitude_m: true vertical distance DVL -> floor (NaN out of the water); beam_range_m: range
-    along each beam A-D (port, stern, starboard, bow) to the floor with the DVL's range noise (NaN
-    for a beam without lock)."""
+    """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock; altitude_m: true
+    vertical distance DVL -> floor (NaN out of the water); beam_range_m: range along each beam A-D (port, stern,
+    starboard, bow) to the floor with the DVL's range noise (NaN for a beam without lock)."""
 
     stamp_s: float
     velocity_frd_m_s: tuple[float, float, float]
@@ -162,8 +161,7 @@ class PressureSample:
 
 @dataclass(frozen=True)
 class AltitudeSample:
-    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when
-    invalid), valid flag."""
+    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid), valid flag."""
 
     stamp_s: float
     distance_m: float
@@ -474,9 +472,8 @@ class AltitudeModel(SensorModel):
 class SensorSuite:
     """All device models of a configuration, sampled by the simulator (module docstring).
 
-    config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and
-    sonar). seed: noise seed (default ``simulation.seed``). devices: names to enable (default all of
-    :data:`DEVICE_INDEX`).
+    config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and sonar). seed:
+    noise seed (default ``simulation.seed``). devices: names to enable (default all of :data:`DEVICE_INDEX`).
 
     ``latest``: device name -> its newest sample. ``next_due_s``: the earliest time any device is due.
     Raises ``ValueError`` for an unknown device name."""

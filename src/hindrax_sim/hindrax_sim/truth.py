@@ -131,9 +131,8 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 class Disturbances:
     """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
 
-    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``,
-    ``inflow``, ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``,
-    ``pressure``."""
+    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``, ``inflow``,
+    ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``, ``pressure``."""
 
     values: Mapping[str, Any] = field(default_factory=dict)
 

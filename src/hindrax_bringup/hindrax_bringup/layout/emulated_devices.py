@@ -47,10 +47,9 @@ _EARTH_FIELD_T = (2.0e-5, 0.0, 4.0e-5)
 
 
 class DriverEndpoints(abc.ABC):
-    """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch
-    node name -> serial port path) and :attr:`socket_path` (the emulated I2C bus's socket). A
-    context manager that calls :meth:`close`. Shared by :class:`EmulatedDevices` and the live
-    pool's client (:class:`hindrax_sim.live_pool.LivePool`)."""
+    """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch node name -> serial
+    port path) and :attr:`socket_path` (the emulated I2C bus's socket). A context manager that calls :meth:`close`.
+    Shared by :class:`EmulatedDevices` and the live pool's client (:class:`hindrax_sim.live_pool.LivePool`)."""
 
     ports: dict[str, str]
     socket_path: str
@@ -63,9 +62,8 @@ class DriverEndpoints(abc.ABC):
         return []
 
     def env(self, name: str) -> dict[str, str]:
-        """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's
-        socket (:data:`~hindrax_common.transport.socket_i2c.SOCKET_ENV`) for a node on the bus,
-        else {}."""
+        """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's socket
+        (:data:`~hindrax_common.transport.socket_i2c.SOCKET_ENV`) for a node on the bus, else {}."""
         return {SOCKET_ENV: self.socket_path} if name in I2C_DEVICES else {}
 
     @abc.abstractmethod

@@ -87,13 +87,12 @@ class ProcessRunner:
     """Starts, respawns and stops the processes of a launch file (module docstring).
 
     processes: from :func:`~hindrax_bringup.layout.launch_xml.read_launch`. command: process -> executable argv (default
-    :func:`installed_command`). env: environment of every process (default: this one's), updated by the launch
-    file's (``<set_env>``, ``<env>``: :attr:`NodeProcess.env`), then by ``extra_env``: per-label additions (e.g.
-    an emulated device for one driver). log_dir: output files (default: a temporary directory,
-    :attr:`log_dir`). extra_ros_args: per-label arguments appended after the launch file's (``-p key:=value``
-    overrides, e.g. an emulated port). Use as a context manager or call :meth:`start` / :meth:`stop`.
-    Raises ``LookupError`` from :meth:`start` when an executable cannot be found (nothing is started then), and
-    ``ValueError`` for two processes with the same label."""
+    :func:`installed_command`). env: environment of every process (default: this one's), updated by the launch file's
+    (``<set_env>``, ``<env>``: :attr:`NodeProcess.env`), then by ``extra_env``: per-label additions (e.g. an emulated
+    device for one driver). log_dir: output files (default: a temporary directory, :attr:`log_dir`). extra_ros_args:
+    per-label arguments appended after the launch file's (``-p key:=value`` overrides, e.g. an emulated port). Use as a
+    context manager or call :meth:`start` / :meth:`stop`. Raises ``LookupError`` from :meth:`start` when an executable
+    cannot be found (nothing is started then), and ``ValueError`` for two processes with the same label."""
 
     def __init__(self, processes: Sequence[NodeProcess], *,
                  command: Callable[[NodeProcess], list[str]] = installed_command,
@@ -179,9 +178,8 @@ class ProcessRunner:
                 + self._extra_args.get(p.label, []))
 
     def environment(self, p: NodeProcess) -> dict[str, str]:
-        """The environment ``p`` is started with: this runner's, then the launch file's for it
-        (``<set_env>``, ``<env>``: its real-time priority), then this runner's ``extra_env`` for
-        it."""
+        """The environment ``p`` is started with: this runner's, then the launch file's for it (``<set_env>``,
+        ``<env>``: its real-time priority), then this runner's ``extra_env`` for it."""
         return dict(self._env, **dict(p.env), **self._extra_env.get(p.label, {}))
 
     def log(self, label: str) -> str:

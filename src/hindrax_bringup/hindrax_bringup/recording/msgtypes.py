@@ -1,9 +1,8 @@
 """Python message classes from ``pkg/msg/Type`` names (for raw subscriptions and raw publishers).
 
-rclpy needs the generated Python class (its type support) to create a subscription or publisher even
-when only CDR bytes pass through. Types whose package is not installed cannot be subscribed to or
-published; they can still be decoded from a bag's stored ``ros2msg`` schema
-(:meth:`hindrax_bringup.recording.reader.BagReader.decoded`)."""
+rclpy needs the generated Python class (its type support) to create a subscription or publisher even when only CDR bytes
+pass through. Types whose package is not installed cannot be subscribed to or published; they can still be decoded from
+a bag's stored ``ros2msg`` schema (:meth:`hindrax_bringup.recording.reader.BagReader.decoded`)."""
 from __future__ import annotations
 
 import importlib

@@ -236,8 +236,7 @@ class RecorderNode(VehicleNode):
         return meta
 
     def _publisher_count(self, topic: str) -> int:
-        """Publishers of ``topic`` matched with the recorder's subscription (0 when not
-        subscribed)."""
+        """Publishers of ``topic`` matched with the recorder's subscription (0 when not subscribed)."""
         sub = self._subs.get(topic)
         return sub.get_publisher_count() if sub is not None else 0
 

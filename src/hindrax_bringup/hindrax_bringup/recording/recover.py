@@ -1,17 +1,15 @@
 """Recovering bags whose recorder died (SIGKILL, power loss): rebuild summaries and metadata.yaml.
 
-A killed recorder leaves ``<bag>_<n>.mcap`` without its summary/footer, possibly ending in a partial
-record (or, after a power loss on some file systems, in zero-filled blocks), and a metadata.yaml with
-stale counts. Because the writer fsyncs every finished chunk (:mod:`.writer`), everything but the chunk
-being filled is on disk.
+A killed recorder leaves ``<bag>_<n>.mcap`` without its summary/footer, possibly ending in a partial record (or, after a
+power loss on some file systems, in zero-filled blocks), and a metadata.yaml with stale counts. Because the writer
+fsyncs every finished chunk (:mod:`.writer`), everything but the chunk being filled is on disk.
 
-:func:`iter_file_records` reads a file sequentially with the mcap library's stream reader, one complete
-record at a time: it stops at the first record that runs past the end of the file, has an invalid
-opcode (0x00: zero fill) or is a Footer/DataEnd; chunks are decompressed with CRC validation and a
-corrupt chunk is skipped. :func:`recover_file` rewrites such a file as a complete MCAP (same schemas,
-channels with their metadata, messages, metadata records; new chunk indexes, statistics, summary) via a
-temporary file and an atomic rename; :func:`recover_bag` does it for every file of a bag and rebuilds
-metadata.yaml from the files themselves (topics, types, QoS, hashes, counts, times).
+:func:`iter_file_records` reads a file sequentially with the mcap library's stream reader, one complete record at a
+time: it stops at the first record that runs past the end of the file, has an invalid opcode (0x00: zero fill) or is a
+Footer/DataEnd; chunks are decompressed with CRC validation and a corrupt chunk is skipped. :func:`recover_file`
+rewrites such a file as a complete MCAP (same schemas, channels with their metadata, messages, metadata records; new
+chunk indexes, statistics, summary) via a temporary file and an atomic rename; :func:`recover_bag` does it for every
+file of a bag and rebuilds metadata.yaml from the files themselves (topics, types, QoS, hashes, counts, times).
 
 Errors: ``FileNotFoundError``; :class:`RecoverError` (a ``ValueError``) when a file is not MCAP at all."""
 from __future__ import annotations
@@ -82,9 +80,8 @@ def is_complete(path: str | Path) -> bool:
 
 
 def _raw_records(f, size: int) -> Iterator[tuple[int, int, bytes]]:
-    """(opcode, end offset, header + body) of each complete record of the data section of open file
-    ``f`` (``size`` bytes), stopping at the first invalid opcode (zero fill), Footer/DataEnd or
-    truncated record."""
+    """(opcode, end offset, header + body) of each complete record of the data section of open file ``f`` (``size``
+    bytes), stopping at the first invalid opcode (zero fill), Footer/DataEnd or truncated record."""
     pos = len(MAGIC)
     while pos + 9 <= size:
         f.seek(pos)

@@ -30,8 +30,7 @@ uses, so the real parsing code runs on the recorded stream:
   chunk is received at its recorded time whatever the load (a rule on receive times, such as the
   DVL node's "no ``$DVPDL`` for 1 s", sees the recorded gaps).
 
-What "the same" means after a replay: :func:`compare_parsed` (checked by
-``test/test_bag_replay_drivers.py``)."""
+What "the same" means after a replay: :func:`compare_parsed` (checked by ``test/test_bag_replay_drivers.py``)."""
 from __future__ import annotations
 
 import collections
@@ -311,13 +310,12 @@ def _equal(a: Any, b: Any) -> bool:
 def compare_parsed(recorded: dict[str, list[Any]], replayed: dict[str, list[Any]]) -> list[str]:
     """Differences between recorded and replayed parsed messages, one line each ([] = the same).
 
-    Rule: for every topic of :data:`PARSED_TOPICS` present in ``recorded``, the same number of messages, and
-    message k of the replay equals message k of the recording field by field (NaN == NaN, exact
-    float equality otherwise: the same bytes go through the same code),
-    ``header.stamp`` included on the serial devices' topics: their bytes are served in lock-step
-    with the replay clock (module docstring), so each chunk is received at its recorded time and
-    the DVL's device-time stamps (``tu - dtu/2`` plus the offset estimate min(receive time - tu))
-    are the recorded ones too. Excluded on :data:`I2C_STAMPED` topics."""
+    Rule: for every topic of :data:`PARSED_TOPICS` present in ``recorded``, the same number of messages, and message k
+    of the replay equals message k of the recording field by field (NaN == NaN, exact float equality otherwise: the same
+    bytes go through the same code), ``header.stamp`` included on the serial devices' topics: their bytes are served in
+    lock-step with the replay clock (module docstring), so each chunk is received at its recorded time and the DVL's
+    device-time stamps (``tu - dtu/2`` plus the offset estimate min(receive time - tu)) are the recorded ones too.
+    Excluded on :data:`I2C_STAMPED` topics."""
     problems: list[str] = []
     for topic in sorted(set(recorded) & set(PARSED_TOPICS)):
         a, b = recorded[topic], replayed.get(topic, [])

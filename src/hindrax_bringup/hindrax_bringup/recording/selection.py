@@ -22,10 +22,9 @@ def is_hidden(topic: str) -> bool:
 class TopicSelection:
     """Topics to record.
 
-    topics: explicit names (a leading "/" is added when missing). regex: Python regular expression
-    matched with ``re.search`` against full topic names (in addition to ``topics``). all_topics: every
-    non-hidden topic. exclude_regex: topics never recorded.
-    Empty topics + empty regex + all_topics False selects nothing.
+    topics: explicit names (a leading "/" is added when missing). regex: Python regular expression matched with
+    ``re.search`` against full topic names (in addition to ``topics``). all_topics: every non-hidden topic.
+    exclude_regex: topics never recorded. Empty topics + empty regex + all_topics False selects nothing.
 
     Raises ValueError (one line) for an invalid regular expression."""
 

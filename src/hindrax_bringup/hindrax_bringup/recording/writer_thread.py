@@ -1,20 +1,18 @@
 """One writer thread in front of a :class:`~hindrax_bringup.recording.writer.BagWriter`.
 
-``mcap.writer.Writer`` is not thread-safe and a chunk close (compression + fsync) can take milliseconds
-to tens of milliseconds on an SD card, so the recorder node's subscription callbacks only enqueue
-``(topic, log_time_ns, data)`` and this thread owns the BagWriter: it writes in arrival
-order, closes the open chunk when ``flush_interval_s`` has passed (crash safety, see :mod:`.writer`)
-and finishes the bag on :meth:`ThreadedBagWriter.close`.
+``mcap.writer.Writer`` is not thread-safe and a chunk close (compression + fsync) can take milliseconds to tens of
+milliseconds on an SD card, so the recorder node's subscription callbacks only enqueue ``(topic, log_time_ns, data)``
+and this thread owns the BagWriter: it writes in arrival order, closes the open chunk when ``flush_interval_s`` has
+passed (crash safety, see :mod:`.writer`) and finishes the bag on :meth:`ThreadedBagWriter.close`.
 
 Hand-off: the producers append to a ``collections.deque`` (an atomic append, no lock, no wake-up) and the
 writer thread drains it every ``drain_period_s`` (and at once on :meth:`~ThreadedBagWriter.close`):
 no wake-up per message, as a ``queue.Queue`` would cost. What a crash loses grows by at most
 ``drain_period_s`` of messages.
 
-Back-pressure: the queue holds at most ``max_queue`` messages; beyond that (disk stalled) messages are
-counted in :attr:`ThreadedBagWriter.dropped` instead of growing memory without bound. A file-system
-error in the thread (disk full) is kept in :attr:`ThreadedBagWriter.error`; later messages are
-counted as dropped and :meth:`close` re-raises it.
+Back-pressure: the queue holds at most ``max_queue`` messages; beyond that (disk stalled) messages are counted in
+:attr:`ThreadedBagWriter.dropped` instead of growing memory without bound. A file-system error in the thread (disk full)
+is kept in :attr:`ThreadedBagWriter.error`; later messages are counted as dropped and :meth:`close` re-raises it.
 
 Pure (threads and a deque only; no ROS)."""
 from __future__ import annotations

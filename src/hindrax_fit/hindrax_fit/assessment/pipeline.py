@@ -134,10 +134,9 @@ def _overlap_worker(conn, bag_dir: Path, cfg: VehicleConfig) -> None:
 class OverlappedFits:
     """Fits of a campaign bag's DOFs made while the campaign writes it.
 
-    A spawned process (started with the campaign, so its imports cost no wall time; forking an
-    rclpy process is unsafe) fits each DOF (:func:`..fit.campaign_fit.fit_dofs`) on the bag as
-    written once :meth:`done` names it; :meth:`result` returns those fits for
-    ``identify_bag(..., fitted=)``, which then gives what it gives alone (a ready DOF's fit on a
+    A spawned process (started with the campaign, so its imports cost no wall time; forking an rclpy process is unsafe)
+    fits each DOF (:func:`..fit.campaign_fit.fit_dofs`) on the bag as written once :meth:`done` names it; :meth:`result`
+    returns those fits for ``identify_bag(..., fitted=)``, which then gives what it gives alone (a ready DOF's fit on a
     prefix is the whole bag's). Without a calibration. :meth:`close` ends the process."""
 
     def __init__(self, bag_dir: str | Path, cfg: VehicleConfig) -> None:

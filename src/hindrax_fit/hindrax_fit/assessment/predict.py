@@ -1,14 +1,13 @@
 """Open-loop predictions of an identified model on bags, written so that anyone can score them (``hindrax ident
 predict``).
 
-The model is an identification.yaml of ``hindrax ident fit`` (:func:`.results.build_document`): per DOF its
-chosen ``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the
-Coriolis term, the other fitted DOFs' inertias. The bags are read as ``hindrax ident fit`` reads them
+The model is an identification.yaml of ``hindrax ident fit`` (:func:`.results.build_document`): per DOF its chosen
+``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the Coriolis
+term, the other fitted DOFs' inertias. The bags are read as ``hindrax ident fit`` reads them
 (:func:`..bag_input.any_topics.preprocess_bag`, :func:`..bag_input.any_topics.dof_records`: force held on the 0.05 s
-grid, velocity samples at their own times, body FRD) and every DOF of the model is simulated open loop from the
-recorded force (:func:`..fit.fit_core.simulate`), re-initialised at the start of each segment from the measured
-velocity there (the Savitzky-Golay-smoothed measurement, 0.5 s window, the same initial state as the tool's
-validation).
+grid, velocity samples at their own times, body FRD) and every DOF of the model is simulated open loop from the recorded
+force (:func:`..fit.fit_core.simulate`), re-initialised at the start of each segment from the measured velocity there
+(the Savitzky-Golay-smoothed measurement, 0.5 s window, the same initial state as the tool's validation).
 
 Segments:
 

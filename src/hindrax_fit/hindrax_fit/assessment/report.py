@@ -169,8 +169,7 @@ def _table(headers: Sequence[str], rows: Iterable[Iterable[Any]]) -> str:
 
 
 def _advice_table(advice: Iterable[tuple[str, Mapping]]) -> str:
-    """What data would fix the suspect parameters (:func:`.verdicts.data_advice`), a row per (label,
-    advice)."""
+    """What data would fix the suspect parameters (:func:`.verdicts.data_advice`), a row per (label, advice)."""
     heads = ("parameter", "runs", "manoeuvre", "speeds", "pool time, min", "in the data, s", "why")
     return _table(heads, ((label, f"{a.get('runs', '-')} {a.get('run_kind', '')}", a["manoeuvre"],
                            "{:g}-{:g} {}".format(*a["speed_range"]), a.get("minutes", "-"),

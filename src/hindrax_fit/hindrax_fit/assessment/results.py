@@ -657,10 +657,9 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
 def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restoring_std: float,
                        progress) -> dict:
     """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
-    (:func:`~..fit.calibration.decay_inertia`; :func:`~.verdicts.apply_reference_verdicts`
-    compares it with the self-propelled one). The restoring stiffness: the record's inclining
-    step, else ``restoring_n_m_per_rad`` (``restoring_std``), else the vehicle file's m g BG;
-    ``progress(text)`` says why a DOF has no estimate."""
+    (:func:`~..fit.calibration.decay_inertia`; :func:`~.verdicts.apply_reference_verdicts` compares it with the
+    self-propelled one). The restoring stiffness: the record's inclining step, else ``restoring_n_m_per_rad``
+    (``restoring_std``), else the vehicle file's m g BG; ``progress(text)`` says why a DOF has no estimate."""
     # strictly increasing gyro stamps (the identification node moves samples that arrive after their tick to the tick
     # time, executive.ordered_samples, so its log can repeat a stamp); the in-process log is unchanged by this
     gyro, last = [], -math.inf

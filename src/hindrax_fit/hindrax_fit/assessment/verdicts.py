@@ -102,19 +102,18 @@ class FitEvidence:
     dof; names (p,) the fit's parameters (:func:`~..fit.dof_model.parameter_names`, or the fit core's chosen terms);
     theta (p,) their values (after the empirical priors, :mod:`..fit.posterior`); cov (p, p) their covariance without
     the thrust-curve term (the fit core's cluster-robust covariance after the priors; with ``thrust_in_covariance`` the
-    calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom
-    (the fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
-    acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`);
-    lower_bounds, upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None;
-    fold_theta (K, p) the cross-validation folds' estimates or None; cv_nrmse: the chosen model's cross-validated
-    prediction nrmse or None;
+    calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom (the
+    fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
+    acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`); lower_bounds,
+    upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None; fold_theta (K, p) the
+    cross-validation folds' estimates or None; cv_nrmse: the chosen model's cross-validated prediction nrmse or None;
     residual_rho: lag-1 autocorrelation of consecutive output-error residuals or None; input_corr: the residuals'
-    correlation with the input (:func:`~..fit.fit_core.input_correlation`, a measured position) or None; steady
-    {name: (value, std)} of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity,
-    mean force)] of the steady windows; expected_bias: the constant force expected (0; heave the configured net
-    buoyancy, N) or None when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when
-    ``thrust_in_covariance``; cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as
-    ``cv_nrmse`` or None (no comparison); persistence_margin: the relative margin the model must beat it by
+    correlation with the input (:func:`~..fit.fit_core.input_correlation`, a measured position) or None; steady {name:
+    (value, std)} of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity, mean force)] of
+    the steady windows; expected_bias: the constant force expected (0; heave the configured net buoyancy, N) or None
+    when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when ``thrust_in_covariance``;
+    cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as ``cv_nrmse`` or None (no
+    comparison); persistence_margin: the relative margin the model must beat it by
     (:func:`~..fit.fit_core.persistence`)."""
 
     dof: str
@@ -156,13 +155,12 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
 
     The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit``
     (:func:`.results.assessment`). ``rel`` = [negative, positive] 1-sigma relative thrust uncertainty
-    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``.
-    The checks of the module docstring run when their evidence is there (the campaign reader gives
-    the steady windows), and also: cross-validated nrmse at or above :data:`NRMSE_MAX` (DOF-wide);
-    with ``cv_nrmse_hold`` the model must beat holding the velocity
-    (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
-    :data:`~..fit.fit_core.NO_MODEL_VERDICT`; per parameter, on a bound or fold estimates spread by
-    more than 3 fit std. A suspect parameter (a reason of its own or of the DOF) gets ``advice`` (:func:`data_advice`).
+    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``. The checks of the
+    module docstring run when their evidence is there (the campaign reader gives the steady windows), and also:
+    cross-validated nrmse at or above :data:`NRMSE_MAX` (DOF-wide); with ``cv_nrmse_hold`` the model must beat holding
+    the velocity (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
+    :data:`~..fit.fit_core.NO_MODEL_VERDICT`; per parameter, on a bound or fold estimates spread by more than 3 fit std.
+    A suspect parameter (a reason of its own or of the DOF) gets ``advice`` (:func:`data_advice`).
 
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
     (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}."""
@@ -336,13 +334,12 @@ def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 
 
 def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
-    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives,
-    for :func:`assess_dof` and :func:`~.results.assessment`: the optimiser's bounds and fold
-    estimates of ``names`` (default the core's own; heave's ``*_positive``/``*_negative`` map onto
-    the one pair, absent ones get no bound and no fold estimates), the cross-validated nrmse,
-    holding the velocity's and the margin (:func:`~..fit.fit_core.persistence`), and
-    :func:`core_signals`. Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse,
-    cv_nrmse_hold, persistence_margin, velocity, acceleration, force, h}."""
+    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives, for
+    :func:`assess_dof` and :func:`~.results.assessment`: the optimiser's bounds and fold estimates of ``names`` (default
+    the core's own; heave's ``*_positive``/``*_negative`` map onto the one pair, absent ones get no bound and no fold
+    estimates), the cross-validated nrmse, holding the velocity's and the margin (:func:`~..fit.fit_core.persistence`),
+    and :func:`core_signals`. Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold,
+    persistence_margin, velocity, acceleration, force, h}."""
     core_names = list(core.names)
     idx = core_index(core_names if names is None else list(names), core_names)
     lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
@@ -582,20 +579,17 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     """What data would make the 95 % half-width of one parameter ``ADVICE_TARGET`` of its value, in the units a
     pool engineer plans in: runs of a named kind (:data:`RUN_KINDS`), a speed range, minutes.
 
-    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the
-    ticks (``h`` s) of the fitted segments. The variance of an estimate falls as 1 / (seconds of the
-    manoeuvre that informs it), so ``seconds_more = T (w / w_target)^2 - T`` with T the seconds of
-    that manoeuvre in the data (at least :data:`ADVICE_MIN_S`); the manoeuvre per parameter
-    (docs/identification.md §4, R1, R2, R15) is the branch's ``used`` mask below. The time is
-    rounded up to whole runs, at least one, never above :data:`POOL_DAY_S`: when more of the same
-    would take longer (or the data hold none of it while the interval is wide), the advice names
-    the kind of run that would fix it (``feasible`` False, the branch's ``alt``),
-    :data:`ALTERNATIVE_RUNS` runs of it. A parameter at a bound gets as much again of its manoeuvre;
-    one whose interval is already narrow (another reason) gets a repetition, which tells a real
-    effect from chance. ``scale``: the magnitude the half-width is judged against when not the value
-    (a bias and a linear damping: the damping force at the typical speed, :func:`assess`). Returns
-    {dof, manoeuvre, run_kind, runs, run_s, minutes, speed_range (low, high, unit),
-    seconds_in_data, seconds_more, feasible, why}."""
+    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the ticks (``h`` s) of
+    the fitted segments. The variance of an estimate falls as 1 / (seconds of the manoeuvre that informs it), so
+    ``seconds_more = T (w / w_target)^2 - T`` with T the seconds of that manoeuvre in the data (at least
+    :data:`ADVICE_MIN_S`); the manoeuvre per parameter (docs/identification.md §4, R1, R2, R15) is the branch's ``used``
+    mask below. The time is rounded up to whole runs, at least one, never above :data:`POOL_DAY_S`: when more of the
+    same would take longer (or the data hold none of it while the interval is wide), the advice names the kind of run
+    that would fix it (``feasible`` False, the branch's ``alt``), :data:`ALTERNATIVE_RUNS` runs of it. A parameter at a
+    bound gets as much again of its manoeuvre; one whose interval is already narrow (another reason) gets a repetition,
+    which tells a real effect from chance. ``scale``: the magnitude the half-width is judged against when not the value
+    (a bias and a linear damping: the damping force at the typical speed, :func:`assess`). Returns {dof, manoeuvre,
+    run_kind, runs, run_s, minutes, speed_range (low, high, unit), seconds_in_data, seconds_more, feasible, why}."""
     v = np.asarray(velocity, dtype=float)
     a = np.asarray(acceleration, dtype=float)
     f = np.asarray(force, dtype=float)

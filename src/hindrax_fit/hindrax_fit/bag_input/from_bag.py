@@ -1,10 +1,9 @@
 """The campaign bag reader: rebuild the campaign record (:class:`~.campaign_record.CampaignRecord`) from a bag.
 
-``hindrax ident bag BAG [--out DIR] [--config FILE]``
-(:mod:`hindrax_tools.commands.ident_bag`), and ``hindrax ident fit`` on a bag with the
-campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
-:func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and
-``hindrax run`` (docs/identification.md §7).
+``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_tools.commands.ident_bag`), and ``hindrax ident
+fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
+:func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and ``hindrax run``
+(docs/identification.md §7).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
@@ -15,14 +14,13 @@ accelerometer biases), ``identification/estimates`` (the online RLS history, for
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
 the record's ``calibration``, ``inclining`` and ``decays``).
 
-Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10
-ms, the simulator's /clock period): the status is held from its stamps and the ESC widths from their
-stamps plus ``esc.output_latency_s`` (zero-order hold, as the ESC output; a force 10 ms ahead of the
-true thrust puts the heave bias 2 N and the downward quadratic damping 90 % off), and every sensor
-stamp is rounded to the grid (<= grid_s / 2 moved), because the output-error fit compares the model
-with samples at grid instants. Sensor stamps are the drivers' times of validity (the DVL's device
-time, the MS5837's conversion midpoint), which is what the fit needs. Raises
-:class:`BagContentError` (one line) when the bag lacks what is needed."""
+Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms, the simulator's
+/clock period): the status is held from its stamps and the ESC widths from their stamps plus ``esc.output_latency_s``
+(zero-order hold, as the ESC output; a force 10 ms ahead of the true thrust puts the heave bias 2 N and the downward
+quadratic damping 90 % off), and every sensor stamp is rounded to the grid (<= grid_s / 2 moved), because the
+output-error fit compares the model with samples at grid instants. Sensor stamps are the drivers' times of validity (the
+DVL's device time, the MS5837's conversion midpoint), which is what the fit needs. Raises :class:`BagContentError` (one
+line) when the bag lacks what is needed."""
 from __future__ import annotations
 
 import math

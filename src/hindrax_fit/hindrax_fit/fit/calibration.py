@@ -70,8 +70,7 @@ def scale_prior_stds(cfg) -> dict[str, float]:
 
 @dataclasses.dataclass
 class ScaleModel:
-    """The calibration steps as linear Gaussian measurements of the thrust scales
-    (docs/identification.md §6.2).
+    """The calibration steps as linear Gaussian measurements of the thrust scales (docs/identification.md §6.2).
 
     names: scale parameters (``<group>_<direction>`` or ``common_<direction>``); nuisance: the constants R (the
     vertical group's ``net_buoyancy_n``, a free one per horizontal step); rows: (coefficients (n_names,), nuisance
@@ -125,12 +124,11 @@ def _entry(calibration: Mapping[str, Any], key: str) -> Mapping | None:
 def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel | None:
     """The :class:`ScaleModel` of the calibration steps' results (``record.calibration``: keys of
     :data:`KNOWN_FORCE_AXES`), None without any. A result with its holds' forward and reverse parts
-    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2);
-    an older result with only its single scale (``value``, ``std``) measures the mean of the group's
-    two directions. Priors from ``cfg`` (:func:`scale_prior_stds`; the weighed net buoyancy
-    (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without ``cfg`` the default thrust
-    uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a zero
-    std."""
+    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2); an older result
+    with only its single scale (``value``, ``std``) measures the mean of the group's two directions. Priors from ``cfg``
+    (:func:`scale_prior_stds`; the weighed net buoyancy (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without
+    ``cfg`` the default thrust uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a
+    zero std."""
     cal = calibration or {}
     entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
     if not entries:

@@ -143,15 +143,14 @@ class DofRecord:
 
 @dataclass(frozen=True)
 class Terms:
-    """The model's terms (their physics: docs/identification.md §7 steps 4 and 8): damping
-    ``"linear"``, ``"quadratic"`` or ``"both"``; by_direction: heave's damping per sign of w;
-    coriolis: the Coriolis and centripetal force of the other DOFs' inertias subtracted from the
-    input; cross: free coefficients on the other moving DOFs' velocities; reverse_gain: the force of
-    negative commands times a free gain; cross_force: the other DOFs' commanded forces times free
-    coefficients, with this DOF's delay and lag; run_bias: a constant force per run (bag), effects
-    coding around the mean ``bias`` (``bias_run_<k>`` for runs 1..R-1, run R the negative of their
-    sum, a run not fitted gets the mean); saturation: the commanded force plus a free gain times
-    :attr:`Chunk.shortfall`, with this DOF's delay and lag (1: the vehicle file's thrust limits)."""
+    """The model's terms (their physics: docs/identification.md §7 steps 4 and 8): damping ``"linear"``, ``"quadratic"``
+    or ``"both"``; by_direction: heave's damping per sign of w; coriolis: the Coriolis and centripetal force of the
+    other DOFs' inertias subtracted from the input; cross: free coefficients on the other moving DOFs' velocities;
+    reverse_gain: the force of negative commands times a free gain; cross_force: the other DOFs' commanded forces times
+    free coefficients, with this DOF's delay and lag; run_bias: a constant force per run (bag), effects coding around
+    the mean ``bias`` (``bias_run_<k>`` for runs 1..R-1, run R the negative of their sum, a run not fitted gets the
+    mean); saturation: the commanded force plus a free gain times :attr:`Chunk.shortfall`, with this DOF's delay and lag
+    (1: the vehicle file's thrust limits)."""
 
     damping: str = "both"
     by_direction: bool = False
@@ -816,12 +815,11 @@ BANDWIDTH_POWER = 0.9
 
 
 def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S) -> tuple[float, str]:
-    """The largest input delay + lag (s) the record can resolve, and what set it
-    (docs/identification.md §7 step 7): the smallest of ``max_delay_s`` (the option),
-    :data:`DELAY_SEGMENT_FRACTION` of the training segment and a quarter period of the excitation
-    bandwidth, below which :data:`BANDWIDTH_POWER` of the detrended velocity's power lies (Welch
-    periodogram of each chunk, pooled): there a delay trades against the dynamics' own phase lag
-    (at most 90 degrees). Never below two grid steps (the sample rate's resolution)."""
+    """The largest input delay + lag (s) the record can resolve, and what set it (docs/identification.md §7 step 7): the
+    smallest of ``max_delay_s`` (the option), :data:`DELAY_SEGMENT_FRACTION` of the training segment and a quarter
+    period of the excitation bandwidth, below which :data:`BANDWIDTH_POWER` of the detrended velocity's power lies
+    (Welch periodogram of each chunk, pooled): there a delay trades against the dynamics' own phase lag (at most
+    90 degrees). Never below two grid steps (the sample rate's resolution)."""
     h = rec.h
     limits = [(float(max_delay_s), f"option max_delay_s {max_delay_s:g} s"),
               (DELAY_SEGMENT_FRACTION * segment_s,
@@ -897,13 +895,12 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
 
 
 def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
-    """The input delay and first-order thrust lag of a commanded wrench with the smallest
-    cross-validated simulation error of the 1-DOF model (docs/identification.md §7 step 1;
-    :func:`_timing_scores`): a coarse grid (delay every :data:`DELAY_STEP_S`, lags :data:`LAGS_S`,
-    delay + lag within :func:`resolvable_delay`), then :data:`FINE_DELAYS_S` around its best delay
-    with the best lag and the lags halfway to its neighbours. ``curve``: [(delay, lag, cv mse)] of
-    every point. A thrust-model force keeps its known timing (``rec.lag_s``, no delay). Raises
-    :class:`EstimationError` when no segment moves the DOF."""
+    """The input delay and first-order thrust lag of a commanded wrench with the smallest cross-validated simulation
+    error of the 1-DOF model (docs/identification.md §7 step 1; :func:`_timing_scores`): a coarse grid (delay every
+    :data:`DELAY_STEP_S`, lags :data:`LAGS_S`, delay + lag within :func:`resolvable_delay`), then :data:`FINE_DELAYS_S`
+    around its best delay with the best lag and the lags halfway to its neighbours. ``curve``: [(delay, lag, cv mse)] of
+    every point. A thrust-model force keeps its known timing (``rec.lag_s``, no delay). Raises :class:`EstimationError`
+    when no segment moves the DOF."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
     bound, why = resolvable_delay(rec, opts.max_delay_s, opts.segment_s)
@@ -1356,9 +1353,8 @@ def inertia_vector(results: dict) -> np.ndarray:
 
 
 def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dict, dict]:
-    """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the
-    others' inertias (from a first fit of every DOF; :func:`coupling_consistent`).
-    Returns ({dof: DofResult}, {dof: error message})."""
+    """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the others' inertias (from
+    a first fit of every DOF; :func:`coupling_consistent`). Returns ({dof: DofResult}, {dof: error message})."""
     timings, errors, first = {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
@@ -1426,10 +1422,9 @@ def _inertia_moved(used: np.ndarray, stated: np.ndarray, dof: str) -> bool:
 
 def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing,
                    opts: CoreOptions, inertia: np.ndarray) -> tuple[Candidate, list]:
-    """``chosen`` (with the Coriolis force) fitted and cross-validated again with the other DOFs'
-    inertias ``inertia`` (6,), replacing it among ``tried``; then :func:`not_below_nested` against
-    the nested 1-DOF model (no Coriolis force). A refit that fails: the nested model (or ``chosen``
-    without one). Returns (the model, the candidates)."""
+    """``chosen`` (with the Coriolis force) fitted and cross-validated again with the other DOFs' inertias ``inertia``
+    (6,), replacing it among ``tried``; then :func:`not_below_nested` against the nested 1-DOF model (no Coriolis
+    force). A refit that fails: the nested model (or ``chosen`` without one). Returns (the model, the candidates)."""
     rest = [t for t in tried if t is not chosen]
     try:
         c = _candidate(rec, chosen.terms, timing, opts, inertia, {}, chosen.fit.theta)

@@ -86,10 +86,9 @@ def update_vehicle_file(path: str | Path, values: Mapping[str, Any],
     keeping every comment, the key order and every other value; then validate the file and restore the
     original text if it no longer validates.
 
-    values: {dotted key below ``ros__parameters`` (e.g. ``"esc.oscillator_hz"``): its new value (bool, int,
-    float, str or a list of them; a list is written in flow style, ``[1.0, 2.0]``)}.
-    new_keys: {dotted key of ``values`` that may be absent: (sibling key it is inserted after, end-of-line
-    comment)}; any other key must already be in the file.
+    values: {dotted key below ``ros__parameters`` (e.g. ``"esc.oscillator_hz"``): its new value (bool, int, float, str
+    or a list of them; a list is written in flow style, ``[1.0, 2.0]``)}. new_keys: {dotted key of ``values`` that may
+    be absent: (sibling key it is inserted after, end-of-line comment)}; any other key must already be in the file.
     Raises ValueError when a key (or its section) is missing (the file is not written),
     :class:`~hindrax_common.config.ConfigError` when the result does not validate (the file is restored)."""
     from ruamel.yaml.comments import CommentedMap, CommentedSeq

@@ -314,11 +314,10 @@ class FloorEstimator:
     horizontal position (NED z, m) and its gradient (g_n, g_e) (depth change per metre north and east); a linear
     Kalman filter (:class:`~hindrax_onboard.estimation.kalman.LinearKalman`).
 
-    Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement
-    z_f + g_n dN + g_e dE (:meth:`update_point`); between points the state advances as
-    z_f += g . v dt (:meth:`predict_to`). The slope walks in time and per metre travelled
-    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`). Without any range for :data:`FLOOR_TIMEOUT_S` the
-    floor is held (``stale``)."""
+    Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement z_f + g_n dN + g_e
+    dE (:meth:`update_point`); between points the state advances as z_f += g . v dt (:meth:`predict_to`). The slope
+    walks in time and per metre travelled (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`). Without any range for
+    :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
 
     def __init__(self) -> None:
         self.kf = LinearKalman(3)

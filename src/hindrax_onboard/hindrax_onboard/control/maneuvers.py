@@ -137,10 +137,9 @@ class HoldController:
     (:func:`dof_authority`). natural_frequency_rad_s: target bandwidth w of the position holds; the velocity holds use
     ``velocity_gain`` w. hold_fraction: share of each axis' authority the holds may use. model: the
     :class:`~hindrax_onboard.control.model.ControlModel` (default: the vehicle file's, the campaign's model before any
-    identification exists). reference_accel: DOF -> acceleration limit of the reference models (default: from the
-    model, :class:`~hindrax_onboard.control.law.Controller`). settings: a
-    :class:`~hindrax_onboard.control.law.ControlSettings` replacing the bandwidths and hold fraction above (the
-    controller node's ``control.*``).
+    identification exists). reference_accel: DOF -> acceleration limit of the reference models (default: from the model,
+    :class:`~hindrax_onboard.control.law.Controller`). settings: a :class:`~hindrax_onboard.control.law.ControlSettings`
+    replacing the bandwidths and hold fraction above (the controller node's ``control.*``).
 
     ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not in ``free``: depth (Z) to
     ``depth_setpoint_m`` on ``depth_estimate_m`` and ``depth_rate_m_s`` (which the caller sets from a

@@ -1,9 +1,8 @@
 """Drag coefficients and Reynolds numbers of the identified DOFs ([Hindrax-Drag] Table 4).
 
-[Hindrax-Drag] Table 4 reports, per DOF, a mean drag coefficient C_D with its standard deviation and
-the Reynolds-number range of the self-propelled tests, but it prints neither the projected
-areas, nor the characteristic length, nor the definition used for the rotational DOFs. What we
-implement (and what we cannot verify against the paper):
+[Hindrax-Drag] Table 4 reports, per DOF, a mean drag coefficient C_D with its standard deviation and the Reynolds-number
+range of the self-propelled tests, but it prints neither the projected areas, nor the characteristic length, nor the
+definition used for the rotational DOFs. What we implement (and what we cannot verify against the paper):
 
 * Translational DOFs, from the quadratic damping (docs/identification.md §1.A (h), [T] 4.6.3):
   C_D = 2 k_q / (rho A_p), A_p the projected area normal to the motion (m^2). Valid when C_D

@@ -11,18 +11,16 @@ This module is the offline estimation core of the identification package:
   ("the absolute value symbol is to conserve the velocity sign"), so that one model covers
   both signs of the velocity.
 
-Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a
-rank diagnosis we can turn into a clear error; we use an SVD of the regressor with its columns
-scaled to unit norm (numerically equivalent to lstsq; regressors of very different magnitudes,
-such as P^3 and 1 of a thruster curve, then trigger no false rank deficiency) and build the
-covariance from the same SVD, mapped back exactly to the original columns.
+Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a rank diagnosis we can
+turn into a clear error; we use an SVD of the regressor with its columns scaled to unit norm (numerically equivalent to
+lstsq; regressors of very different magnitudes, such as P^3 and 1 of a thruster curve, then trigger no false rank
+deficiency) and build the covariance from the same SVD, mapped back exactly to the original columns.
 
 The module also hosts :class:`EstimationError` and the small input-validation helpers shared
 by the other estimation modules (one place, no copy-paste).
 
-Conventions: SI units; forces in N (moments in N m), velocities in m/s (rad/s), accelerations
-in m/s^2 (rad/s^2). Damping and inertia are reported as positive numbers (Fossen/SNAME,
-docs/architecture.md §3)."""
+Conventions: SI units; forces in N (moments in N m), velocities in m/s (rad/s), accelerations in m/s^2 (rad/s^2).
+Damping and inertia are reported as positive numbers (Fossen/SNAME, docs/architecture.md §3)."""
 
 from __future__ import annotations
 

@@ -66,8 +66,7 @@ docs/identification.md §1.D):
 * :meth:`published_std`: the std where the estimate has converged (std <= rel_tol |theta| + abs_tol,
   enough samples, excitation above ``min_excitation``), NaN ("not converged") elsewhere.
 
-Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for
-50-100 Hz per DOF."""
+Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for 50-100 Hz per DOF."""
 
 from __future__ import annotations
 

@@ -34,10 +34,9 @@ declared ``thrusters.thrust_uncertainty_rel`` in the intervals
 (:mod:`hindrax_fit.assessment.verdicts`). It is the fit's statistical uncertainty at the bollard-pull
 test's battery voltage only; a voltage that sags during a session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
 
-:func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses
-it because [Hindrax-Drag] Table 2's printed positive-direction row evaluates to about -1070 N at
-1500 us (docs/architecture.md §4), while the negative row is consistent (-15.6 N at 1100 us,
-about -1.1 N at 1500 us)."""
+:func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses it because
+[Hindrax-Drag] Table 2's printed positive-direction row evaluates to about -1070 N at 1500 us (docs/architecture.md §4),
+while the negative row is consistent (-15.6 N at 1100 us, about -1.1 N at 1500 us)."""
 
 from __future__ import annotations
 

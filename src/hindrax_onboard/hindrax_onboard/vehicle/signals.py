@@ -43,12 +43,11 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
     ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
     samples, so :class:`~hindrax_onboard.vehicle.state.SensorState` must not remove it again.
 
-    Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
-    attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
-    first (as the emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e.
-    measured at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
-    50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as
-    damping."""
+    Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the attitude
+    comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it first (as the
+    emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e. measured at the end
+    of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A 50 ms error there shows
+    up in roll and pitch as a restoring moment out of phase, i.e. as damping."""
     t = _stamp_s(msg.header)
     half = 0.5 * float(msg.delta_time_s)
     t_att = t + half if math.isfinite(half) and half > 0.0 else t

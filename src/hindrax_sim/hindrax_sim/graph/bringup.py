@@ -52,10 +52,9 @@ class Graph:
     """A running node graph: ``nodes`` (name -> node), the executor, the virtual hardware (sim only).
 
     ``stepped`` (sim with driven clocks, :func:`build_graph`): the simulator node is not in the executor; each
-    :meth:`spin_once` advances it by one /clock period and then runs the callbacks ready at that
-    instant (:meth:`spin_until_idle`). What runs at a tick then never depends on wall-clock timing
-    (on a timer, the simulator could advance again before a driver's timer due at this tick had
-    run, or not, depending on the load)."""
+    :meth:`spin_once` advances it by one /clock period and then runs the callbacks ready at that instant
+    (:meth:`spin_until_idle`). What runs at a tick then never depends on wall-clock timing (on a timer, the simulator
+    could advance again before a driver's timer due at this tick had run, or not, depending on the load)."""
 
     config: VehicleConfig
     nodes: dict[str, Any]

@@ -70,18 +70,16 @@ class VirtualOperator:
     """The virtual pool's operator for the calibration steps on the ROS graph (module docstring);
     what each step code does is :class:`~.sim.campaign.PoolOperator`'s, as in-process.
 
-    simulator: the :class:`~hindrax_sim.simulator.Simulator`; ballast_weight_n, line_pull_n,
-    inclining_load_n_m (weight in water N, arm m), float_buoyancy_n: the known forces
-    (:mod:`~.identification.online.executive`: ``calibration_forces``, ``inclining_load``,
-    ``float_buoyancy``); request_continue: sends one ``identification/continue`` request and returns
-    its future (or None); say: progress lines; freeze / resume: hold simulated time
-    (:meth:`~hindrax_sim.graph.bringup.Graph.freeze_time`) from acting on a prompt until the continue
-    answer, so the step goes on at the simulated instant the operator acted. Feed it every feedback
-    prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step and :meth:`poll`
-    from the wait loop: a request with no answer within ``resend_after_s`` of wall time is sent
-    again (after a continue every step holds at least
-    :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat
-    finds nothing awaited and is answered False)."""
+    simulator: the :class:`~hindrax_sim.simulator.Simulator`; ballast_weight_n, line_pull_n, inclining_load_n_m (weight
+    in water N, arm m), float_buoyancy_n: the known forces (:mod:`~.identification.online.executive`:
+    ``calibration_forces``, ``inclining_load``, ``float_buoyancy``); request_continue: sends one
+    ``identification/continue`` request and returns its future (or None); say: progress lines; freeze / resume: hold
+    simulated time (:meth:`~hindrax_sim.graph.bringup.Graph.freeze_time`) from acting on a prompt until the continue
+    answer, so the step goes on at the simulated instant the operator acted. Feed it every feedback prompt
+    (:meth:`on_prompt`), call :meth:`on_step` after every integration step and :meth:`poll` from the wait loop: a
+    request with no answer within ``resend_after_s`` of wall time is sent again (after a continue every step holds at
+    least :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing
+    awaited and is answered False)."""
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
                  request_continue: Callable[[], object], say: Callable[[str], None] = lambda _m: None,
@@ -194,11 +192,10 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
                        sections: Callable | None = None) -> GraphCampaignOutcome:
     """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
 
-    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers
-    the prompts); with ``dofs`` empty only the calibration steps run (goal ``calibration_only``).
-    sections(doc, record, identifications): optional, adds sections to identification.yaml from
-    the identification node's own record (e.g. ``free_decay`` and ``inclining`` of the tilt_decay
-    and inclining steps, which need its sensor log).
+    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers the prompts); with
+    ``dofs`` empty only the calibration steps run (goal ``calibration_only``). sections(doc, record, identifications):
+    optional, adds sections to identification.yaml from the identification node's own record (e.g. ``free_decay`` and
+    ``inclining`` of the tilt_decay and inclining steps, which need its sensor log).
 
     Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration,
     ``TimeoutError`` when a step does not finish within its wall-clock deadline (the graph is shut

@@ -1,29 +1,26 @@
 """The one-process graph's executor: rclpy's ``SingleThreadedExecutor`` visiting its nodes in the
 order they were added, with a leaner construction of its wait set and of its callbacks' handlers.
 
-Order: rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready
-at the same instant run (e.g. the allocation's wrench subscription and the ESC node's output timer)
-follows the nodes' memory addresses and changes from one run to the next; with a fixed order a
-stepped simulation is reproducible.
+Order: rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready at the same instant
+run (e.g. the allocation's wrench subscription and the ESC node's output timer) follows the nodes' memory addresses and
+changes from one run to the next; with a fixed order a stepped simulation is reproducible.
 
-Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle
-through an ``ExitStack``, asking every entity's callback group (a weak reference and a lock each),
-adding up the waitables' ``NumberOfEntities`` one object at a time and looking every entity of
-every node up in the ready lists; the virtual pool's graph waits once per /clock tick, on about 120
-entities (:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`s: no parameter services, few QoS event
-handlers). :meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the
-same callbacks in the same order (tasks in progress; ready waitables node by node; then per node
-its timers, subscriptions, guard conditions, clients and services in creation order) from a
-snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts, each entity's rank in
-that order by its handle pointer), taken again whenever an entity or a node comes or goes (rclpy
-wakes the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is
-free to run (a callback group is busy, or an entity's handler pending, only inside a task), so the
-snapshot's lists go into the wait set as they are; otherwise each entity is asked as rclpy asks it.
-The snapshot's handles are marked in use (rclpy enters each at every wait) once, when it is taken,
-and released in the executor's thread when the next one is taken, or at ``shutdown``: an entity
-destroyed meanwhile (out of the snapshot from its wake on) is freed then.
-QoS event handlers (most waitables) enter their event handle into the wait set directly, without
-their Python wrappers. A wait over a subset of the nodes is rclpy's.
+Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle through an
+``ExitStack``, asking every entity's callback group (a weak reference and a lock each), adding up the waitables'
+``NumberOfEntities`` one object at a time and looking every entity of every node up in the ready lists; the virtual
+pool's graph waits once per /clock tick, on about 120 entities
+(:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`s: no parameter services, few QoS event handlers).
+:meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the same callbacks in the same order
+(tasks in progress; ready waitables node by node; then per node its timers, subscriptions, guard conditions, clients and
+services in creation order) from a snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts, each
+entity's rank in that order by its handle pointer), taken again whenever an entity or a node comes or goes (rclpy wakes
+the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is free to run (a callback
+group is busy, or an entity's handler pending, only inside a task), so the snapshot's lists go into the wait set as they
+are; otherwise each entity is asked as rclpy asks it. The snapshot's handles are marked in use (rclpy enters each at
+every wait) once, when it is taken, and released in the executor's thread when the next one is taken, or at
+``shutdown``: an entity destroyed meanwhile (out of the snapshot from its wake on) is freed then. QoS event handlers
+(most waitables) enter their event handle into the wait set directly, without their Python wrappers. A wait over a
+subset of the nodes is rclpy's.
 
 Handlers: a ready timer or subscription whose callback is a plain function gets a :class:`_Call`;
 the other entities get rclpy's."""
@@ -151,8 +148,7 @@ def _release(held: list) -> None:
 
 class LeanWaitExecutor(SingleThreadedExecutor):
     """A ``SingleThreadedExecutor`` whose nodes run in the order they were added and whose wait is
-    :meth:`_wait_for_ready_callbacks` (module docstring). ``kwargs`` go to the executor
-    (``context``)."""
+    :meth:`_wait_for_ready_callbacks` (module docstring). ``kwargs`` go to the executor (``context``)."""
 
     def __init__(self, **kw: Any) -> None:
         self._order: list = []
@@ -170,8 +166,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
         return done
 
     def wake(self) -> None:
-        """rclpy's wake (an entity was created or destroyed, a task finished); the next wait takes a
-        new snapshot."""
+        """rclpy's wake (an entity was created or destroyed, a task finished); the next wait takes a new snapshot."""
         self._snapshot = None
         super().wake()
 
@@ -368,12 +363,11 @@ class LeanWaitExecutor(SingleThreadedExecutor):
 
 
 class _Call:
-    """The handler of a ready timer or subscription whose callback is a plain function: takes and
-    runs it when called, with the part of rclpy's ``Task`` interface that ``spin_once`` and
-    ``Graph.spin_until_idle`` use (call, ``exception``, ``result``, ``done``). rclpy instead wraps
-    every callback in a ``Task`` over two coroutines and triggers the executor's guard condition
-    twice; with one thread running one callback at a time, every callback group is free and the
-    handler runs before the next wait, so none of that changes what runs or in which order."""
+    """The handler of a ready timer or subscription whose callback is a plain function: takes and runs it when called,
+    with the part of rclpy's ``Task`` interface that ``spin_once`` and ``Graph.spin_until_idle`` use (call,
+    ``exception``, ``result``, ``done``). rclpy instead wraps every callback in a ``Task`` over two coroutines and
+    triggers the executor's guard condition twice; with one thread running one callback at a time, every callback group
+    is free and the handler runs before the next wait, so none of that changes what runs or in which order."""
 
     __slots__ = ("_entity", "_kind", "_exc", "_done")
 
@@ -414,8 +408,7 @@ class _Call:
 
 
 def _plain(entity: Any) -> bool:
-    """The entity's callback is a plain function (not a coroutine function), asked once per
-    callback object."""
+    """The entity's callback is a plain function (not a coroutine function), asked once per callback object."""
     cb = entity.callback
     c = entity.__dict__.get("_lean_plain")
     if c is None or c[0] is not cb:

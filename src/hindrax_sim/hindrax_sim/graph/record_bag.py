@@ -18,10 +18,9 @@ has subscribed to and matched every topic; at the end simulated time is frozen a
 only once it has written every message the drivers published. The only driver traffic before the recording
 are the ESC node's constructor writes (PCA9685 configuration and first neutral), inside ``build_graph``.
 
-Simulated content is deterministic for a seed, but the exact message count is not (how the executor
-interleaves the driver timers with /clock steps varies with machine load), so tests check
-properties, not counts fixed in advance. It lives here, not in hindrax_bringup, so that the drivers
-do not import the simulator."""
+Simulated content is deterministic for a seed, but the exact message count is not (how the executor interleaves the
+driver timers with /clock steps varies with machine load), so tests check properties, not counts fixed in advance. It
+lives here, not in hindrax_bringup, so that the drivers do not import the simulator."""
 from __future__ import annotations
 
 import argparse
@@ -57,11 +56,10 @@ SIM_BAGS: dict[str, tuple[float, dict[str, Any]]] = {
 
 def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any,
                          overrides: dict | None = None) -> dict:
-    """Record ``duration_s`` (s) of simulated time of the whole driver graph (the shipped vehicle
-    file, seed :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if
-    it exists), in the initialised rclpy ``context``. Returns topic -> number of messages the
-    graph's nodes published while recording (every one is in the bag). Raises
-    :class:`~hindrax_common.process.conditions.ConditionTimeout` naming the condition not reached (each
+    """Record ``duration_s`` (s) of simulated time of the whole driver graph (the shipped vehicle file, seed
+    :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if it exists), in the initialised
+    rclpy ``context``. Returns topic -> number of messages the graph's nodes published while recording (every one is in
+    the bag). Raises :class:`~hindrax_common.process.conditions.ConditionTimeout` naming the condition not reached (each
     wait: 60 s of wall time), ConfigError for bad overrides."""
     timeout_s = 60.0
     bag_dir = Path(bag_dir)

@@ -1,14 +1,13 @@
 """``hindrax ident fit`` on realistic virtual-pool data nobody designed: held-out prediction against two baselines.
 
-Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_sim.piloted_bag`) with a
-different truth: three vehicles (Hindrax; a smaller BlueROV2-sized frame; a larger 45 kg work-class-like frame with
-stronger thrusters), the setpoint pilot or the closed-loop survey autopilot, the command through the thrusters (so
-the real force differs from the recorded wrench: lag, ESC latency, reverse asymmetry, battery sag, inflow loss), the
-simulated DVL, IMU and pressure sensor, and the scenario suite's disturbances (current, tether, DVL latency, scale
-error, misalignment and multipath dropouts). The first ``train`` bags are fitted, the other ``holdout`` bags are
-predicted. Per DOF and data set the held-out prediction NRMSE (RMS(v_pred - v_meas) / std(v_meas) over 10 s
-open-loop predictions re-initialised from the measured velocity,
-:func:`..identification.fit.fit_core.validation_measures`) of
+Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_sim.piloted_bag`) with a different truth:
+three vehicles (Hindrax; a smaller BlueROV2-sized frame; a larger 45 kg work-class-like frame with stronger thrusters),
+the setpoint pilot or the closed-loop survey autopilot, the command through the thrusters (so the real force differs
+from the recorded wrench: lag, ESC latency, reverse asymmetry, battery sag, inflow loss), the simulated DVL, IMU and
+pressure sensor, and the scenario suite's disturbances (current, tether, DVL latency, scale error, misalignment and
+multipath dropouts). The first ``train`` bags are fitted, the other ``holdout`` bags are predicted. Per DOF and data set
+the held-out prediction NRMSE (RMS(v_pred - v_meas) / std(v_meas) over 10 s open-loop predictions re-initialised from
+the measured velocity, :func:`..identification.fit.fit_core.validation_measures`) of
 
 * ``fit``: ``hindrax ident fit`` (no vehicle file, as on another vehicle's data);
 * ``ls``: a plain per-DOF least squares: M nu_dot + k_q |nu| nu + k_l nu + b = tau on the same resampled record,

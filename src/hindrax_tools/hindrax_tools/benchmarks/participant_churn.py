@@ -285,8 +285,7 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
 
 
 def topside_topics(vehicle: str) -> tuple[str, ...]:
-    """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics
-    and odometry."""
+    """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics and odometry."""
     return (f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/supervisor/status",
             f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status", f"nav_msgs.msg:Odometry=/{vehicle}/odom")
 

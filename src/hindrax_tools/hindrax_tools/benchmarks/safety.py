@@ -54,10 +54,9 @@ The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench'
 * ``guard_without_line_arming_refused``: the guard started while its /OE line is busy (the request fails); the arm
   requests refused of those made, then the line is granted and the time until an arm is accepted is in the note.
 
-A partial freeze without the hardware watchdog (:func:`partial_freeze_rows`; the shipped vehicle file has no feed
-line): the same layout with /OE but no feed, its processes under :class:`SystemdWatchdogStandIn` (what systemd does
-for the bare-metal unit: ``WatchdogSec`` :data:`UNIT_WATCHDOG_S`, SIGKILL; without systemd's timer slack of up to
-0.25 s):
+A partial freeze without the hardware watchdog (:func:`partial_freeze_rows`; the shipped vehicle file has no feed line):
+the same layout with /OE but no feed, its processes under :class:`SystemdWatchdogStandIn` (what systemd does for the
+bare-metal unit: ``WatchdogSec`` :data:`UNIT_WATCHDOG_S`, SIGKILL; without systemd's timer slack of up to 0.25 s):
 
 * ``partial_freeze_no_feed_outputs_stopped_ms``: SIGSTOP of the ESC and the guard while the supervisor runs, armed
   at 1700 us, until no thruster carries a pulse (the guard's pings stop, the unit is killed, the freed /OE line

@@ -12,9 +12,8 @@ The graph: the sensor drivers, the ESC, the allocation, the identification node,
 ``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`, ``drive_clocks``) in one
 executor; per node the CPU of its callbacks less the emulators' time in them, plus its own threads; the rest is
 ``executor+dds``. ``launch``: the processes of :data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the
-virtual pool in another process; CPU per process from ``/proc/<pid>/stat``; the running phase in
-:data:`RUNNING_WINDOWS` windows, each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the
-launch layout's bag.
+virtual pool in another process; CPU per process from ``/proc/<pid>/stat``; the running phase in :data:`RUNNING_WINDOWS`
+windows, each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the launch layout's bag.
 
 Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at the reference
 machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`. Wake-ups per process and the
@@ -23,12 +22,11 @@ commit's launch layout first (:func:`baseline_launch`, rows ``..._vs_baseline``)
 the launch layout alone in a Pi-sized CPU rig of F cores here (:func:`rig_rows`,
 :mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
 
-Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
-with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
-launch-prefix and environment, each topic at the launch's rate with a recorded message, callbacks
-doing nothing: the floor of moving the vehicle's messages (``launch_skeleton_*``,
-``launch_*_vs_skeleton_ratio_*``). ``cpu_bare_rclpy_same_topics`` is one publisher process for the
-one-process idle phase's topics."""
+Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes with the same endpoints
+(read back by SIGUSR1, :func:`read_topologies`, and checked equal), launch-prefix and environment, each topic at the
+launch's rate with a recorded message, callbacks doing nothing: the floor of moving the vehicle's messages
+(``launch_skeleton_*``, ``launch_*_vs_skeleton_ratio_*``). ``cpu_bare_rclpy_same_topics`` is one publisher process for
+the one-process idle phase's topics."""
 from __future__ import annotations
 
 import argparse
@@ -123,11 +121,10 @@ def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, fl
 
 
 def _proc_mb(pid: int, key: str) -> float:
-    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size,
-    from /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private
-    pages plus its share of the pages it shares, the venv's libraries mapped by every node process,
-    so the sum over processes is the memory they hold together, unlike the sum of RSS, which counts
-    shared pages once per process)."""
+    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size, from
+    /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private pages plus its share of the
+    pages it shares, the venv's libraries mapped by every node process, so the sum over processes is the memory they
+    hold together, unlike the sum of RSS, which counts shared pages once per process)."""
     path = Path(f"/proc/{pid}/{'status' if key == 'VmRSS' else 'smaps_rollup'}")
     for line in path.read_text().splitlines():
         if line.startswith(key + ":"):

@@ -227,11 +227,10 @@ def _inclining(args) -> int:
 
 
 def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
-    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the
-    free-decay result ``out`` (in place) by the campaign's verdict rule itself
-    (:func:`~hindrax_fit.assessment.verdicts.apply_reference_verdicts` on a one-DOF
-    document: suspect beyond ``REFERENCE_Z_MAX`` combined std). Raises ``ValueError`` when ``path``
-    has no ``dofs.<dof>``."""
+    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the free-decay result
+    ``out`` (in place) by the campaign's verdict rule itself
+    (:func:`~hindrax_fit.assessment.verdicts.apply_reference_verdicts` on a one-DOF document: suspect beyond
+    ``REFERENCE_Z_MAX`` combined std). Raises ``ValueError`` when ``path`` has no ``dofs.<dof>``."""
     from hindrax_fit.assessment.results import read_identification
     from hindrax_fit.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
 

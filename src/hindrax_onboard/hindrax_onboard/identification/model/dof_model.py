@@ -258,11 +258,10 @@ RLS_STD_DOFS = ("surge", "sway", "heave", "yaw")
 def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg: VehicleConfig) -> np.ndarray:
     """The online RLS standard deviations worth publishing (p,), NaN = "not converged / not trusted".
 
-    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping
-    parameters of :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty
-    (:func:`thrust_covariance`): the RLS inertia and bias carry the lag of the causal filter behind
-    the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
-    suite."""
+    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping parameters of
+    :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty (:func:`thrust_covariance`): the RLS
+    inertia and bias carry the lag of the causal filter behind the acceleration, so their std would not cover the truth;
+    roll and pitch are not in the scenario suite."""
     std = np.asarray(converged_std, dtype=float)
     keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
                     dtype=bool)

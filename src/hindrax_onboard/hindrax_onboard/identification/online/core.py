@@ -114,13 +114,12 @@ def goal_problem(dofs: Sequence[str], calibrate: Sequence[str], calibration_only
 class Event:
     """One thing the node does, in order; ``kind`` and its ``data`` are below.
 
-    ``status`` (phase name: idle, positioning, running, returning, done, aborted; ExecutiveStatus or
-    None; message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus,
-    operator prompt: the action feedback), ``estimates`` (the executive whose online estimates to
-    publish), ``calibration`` (every step result since start, list of
-    :func:`~..model.calibration_topic.statuses` items), ``abort`` (the reason for
-    ``supervisor/abort``), ``log`` (level info / warn / error, text), ``warn_throttled`` (text),
-    ``end`` (the :class:`GoalRun` that ended: deliver its result)."""
+    ``status`` (phase name: idle, positioning, running, returning, done, aborted; ExecutiveStatus or None; message),
+    ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus, operator prompt: the action feedback),
+    ``estimates`` (the executive whose online estimates to publish), ``calibration`` (every step result since start,
+    list of :func:`~..model.calibration_topic.statuses` items), ``abort`` (the reason for ``supervisor/abort``), ``log``
+    (level info / warn / error, text), ``warn_throttled`` (text), ``end`` (the :class:`GoalRun` that ended: deliver its
+    result)."""
 
     kind: str
     data: tuple = ()

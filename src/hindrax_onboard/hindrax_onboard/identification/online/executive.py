@@ -35,13 +35,12 @@ ladder (``identification.levels_per_dof`` levels, or the goal's fractions of the
 ``identification.excitation`` (or the ``excitation`` argument) ``multisine``, ``prbs`` or ``chirp``, one broadband run
 of ``identification.excitation_duration_s``.
 
-Command rate (``identification.command_rate_hz``, default the tick's rate): the steps' control laws run every tick,
-and the wrench :meth:`Executive.start` or :meth:`Executive.step` returns is the law's output of the last command tick,
-every :attr:`Executive.command_ticks` ticks, held in between (sample-and-hold); :attr:`Executive.new_command` says
-whether this tick's wrench is a new one (the identification node publishes only those). Both plants get the same
-held command. Why: on the vehicle each wrench is a message through the allocation, the ESC and the
-recorder (docs/architecture.md §10.1), while the samples, the recorded force, the online estimators
-and the thrust lag stay at the tick's rate.
+Command rate (``identification.command_rate_hz``, default the tick's rate): the steps' control laws run every tick, and
+the wrench :meth:`Executive.start` or :meth:`Executive.step` returns is the law's output of the last command tick, every
+:attr:`Executive.command_ticks` ticks, held in between (sample-and-hold); :attr:`Executive.new_command` says whether
+this tick's wrench is a new one (the identification node publishes only those). Both plants get the same held command.
+Why: on the vehicle each wrench is a message through the allocation, the ESC and the recorder (docs/architecture.md
+§10.1), while the samples, the recorded force, the online estimators and the thrust lag stay at the tick's rate.
 
 Stops (:class:`CampaignAbort`, the record says why): a limit (``limits.*``: depth, altitude, roll, pitch; the
 pool box grown by half ``pool.margin_m``), no valid DVL velocity for ``dvl_lock_timeout_s`` during surge or sway,
@@ -140,10 +139,9 @@ class TickInput:
 
 @dataclass
 class ExecutiveStatus:
-    """Where the campaign is: phase ``"positioning"`` (dive, moving, settling), ``"running"`` (a level is
-    commanded) or ``"returning"`` (between runs of a DOF), or ``"done"`` / ``"aborted"``; the DOF under test
-    ('' when none), level index and count, level command (N or N m, FRD; 0 outside runs), progress 0-1 and
-    the current step's message."""
+    """Where the campaign is: phase ``"positioning"`` (dive, moving, settling), ``"running"`` (a level is commanded) or
+    ``"returning"`` (between runs of a DOF), or ``"done"`` / ``"aborted"``; the DOF under test ('' when none), level
+    index and count, level command (N or N m, FRD; 0 outside runs), progress 0-1 and the current step's message."""
 
     phase: str
     dof: str
@@ -159,12 +157,11 @@ def ordered_samples(samples: Iterable[tuple[str, Any]], not_before_s: float = -m
     """Samples sorted by stamp (stable), each stamped before ``not_before_s`` moved to it (a copy), those stamped
     after ``not_after_s`` or before ``drop_before_s`` (s) left out.
 
-    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion
-    start, the DVL time of validity), the online filters have already been predicted to the previous
-    tick, ``not_before_s``; the messages and the bag keep the original stamps. Samples outside
-    [``drop_before_s``, ``not_after_s``] cannot be valid (a publisher on another clock, such as a
-    second graph on the same ROS domain; :mod:`.core`'s tolerances); the caller counts those left
-    out (``len(samples) - len(result)``)."""
+    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion start, the DVL time
+    of validity), the online filters have already been predicted to the previous tick, ``not_before_s``; the messages
+    and the bag keep the original stamps. Samples outside [``drop_before_s``, ``not_after_s``] cannot be valid (a
+    publisher on another clock, such as a second graph on the same ROS domain; :mod:`.core`'s tolerances); the caller
+    counts those left out (``len(samples) - len(result)``)."""
     out = []
     for dev, s in sorted(samples, key=lambda ds: ds[1].stamp_s):
         if not drop_before_s <= s.stamp_s <= not_after_s:

@@ -2,14 +2,13 @@
 
 A thin rclpy node over two pure objects: :class:`~.core.IdentificationCore` (goal checks, the goal's life from
 acceptance to the end of its neutral hold, what each tick publishes; table-tested in
-``test/test_identification_core.py``) and the :class:`~.executive.Executive` it drives (the dive, positioning,
-level ladders, holds, pool-box planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the
-in-process campaign steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples
-(:mod:`...vehicle.signals`) for the core, and at every tick of its control timer
-(``identification.estimate_rate_hz``, ROS clock) turns the core's events into messages (wrench, status, feedback,
-estimates, calibration results, supervisor abort, the goal's result). Nothing in a callback waits, and no
-coroutine runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is
-simulated: it sees the same topics from the drivers either way.
+``test/test_identification_core.py``) and the :class:`~.executive.Executive` it drives (the dive, positioning, level
+ladders, holds, pool-box planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the in-process
+campaign steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples
+(:mod:`...vehicle.signals`) for the core, and at every tick of its control timer (``identification.estimate_rate_hz``,
+ROS clock) turns the core's events into messages (wrench, status, feedback, estimates, calibration results, supervisor
+abort, the goal's result). Nothing in a callback waits, and no coroutine runs while a goal does (see "Action execution"
+below). The node does not know whether the vehicle is simulated: it sees the same topics from the drivers either way.
 
 The force in the regression is the thrust model of the pulse widths the ESC node actually wrote
 (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed, through the allocation's cubic curves,
@@ -125,10 +124,9 @@ __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
     """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
 
-    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`
-    (:func:`~..model.dof_model.rls_published_std`), -1 where that is NaN ("not converged or
-    not trusted": the message's float64 std has no NaN convention). ``covariance`` stays the raw
-    RLS one."""
+    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std` (:func:`~..model.dof_model.rls_published_std`),
+    -1 where that is NaN ("not converged or not trusted": the message's float64 std has no NaN convention).
+    ``covariance`` stays the raw RLS one."""
     rls = estimator.rls
     units = parameter_units(dof)
     msg = HydroEstimate(dof=dof, method=method)

@@ -1,5 +1,4 @@
-"""Reference steps with known forces or moments, run before the manoeuvres
-(docs/identification.md §6.1 and §6.4).
+"""Reference steps with known forces or moments, run before the manoeuvres (docs/identification.md §6.1 and §6.4).
 
 Thrust steps (:class:`KnownForceStep`): hold, average the holding force X1 (thrust model, on one body axis); the
 operator applies a known force E along that axis; hold again, X2; the operator removes it. At rest the thrust

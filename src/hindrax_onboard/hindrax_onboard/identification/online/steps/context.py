@@ -158,8 +158,7 @@ class StepContext:
 
     # ------------------------------------------------------------------ sensor helpers
     def axis_velocity(self, k: int) -> float:
-        """Velocity on axis k (0-5): DVL body velocity (surge, sway), depth rate (heave), gyro rate; 0 when
-        unknown."""
+        """Velocity on axis k (0-5): DVL body velocity (surge, sway), depth rate (heave), gyro rate; 0 when unknown."""
         st = self.state
         if k < 2:
             v = st.velocity_frd_m_s[k]
