@@ -133,8 +133,7 @@ class Campaign:
         rate = float(cfg.identification.estimate_rate_hz)
         self.steps_per_tick = max(1, int(round(1.0 / (rate * self.sim.step_s))))
         self.tick_s = self.steps_per_tick * self.sim.step_s
-        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, progress=progress,
-                                   **executive)
+        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, progress=progress, **executive)
         #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
         self.operator = PoolOperator.for_steps(self.executive.steps)
         self._external_used = False

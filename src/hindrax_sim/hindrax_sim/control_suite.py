@@ -58,8 +58,7 @@ def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, see
     sim = Simulator(cfg, seed=seed, truth=truth)
     rec = Campaign(cfg, dofs=SUITE_DOFS, levels=levels, seed=seed, sim=sim).run()
     idents, errors = identify_all_with_errors(apply_thrust_calibration(rec), cfg)
-    row: dict = {"scenario": name, "aborted": rec.abort_reason if rec.aborted else "",
-                 "not_identified": sorted(errors)}
+    row: dict = {"scenario": name, "aborted": rec.abort_reason if rec.aborted else "", "not_identified": sorted(errors)}
     if idents:
         doc = build_results(idents, cfg, source=f"simulation, truth {truth_path.name}", seed=seed,
                             calibration=rec.calibration)

@@ -244,6 +244,5 @@ class VehicleModel:
                 d = (kln - kqn * vel) * vel
             rhs.append(tau[i] - c - d - g)
         f0, f1, f2, f3, f4, f5 = rhs
-        acc = [row[0] * f0 + row[1] * f1 + row[2] * f2 + row[3] * f3 + row[4] * f4 + row[5] * f5
-               for row in self._minv]
+        acc = [row[0] * f0 + row[1] * f1 + row[2] * f2 + row[3] * f3 + row[4] * f4 + row[5] * f5 for row in self._minv]
         return [xd, yd, zd, qxd, qyd, qzd, qwd, *acc]

@@ -167,8 +167,7 @@ class _SetpointPilot:
         self.targets(t, float(eul[2]))
         c, sn = math.cos(eul[2]), math.sin(eul[2])
         e = self.target_pos - pos
-        err = np.array([c * e[0] + sn * e[1], -sn * e[0] + c * e[1], e[2],
-                        frames.wrap_angle(self.target_yaw - eul[2])])
+        err = np.array([c * e[0] + sn * e[1], -sn * e[0] + c * e[1], e[2], frames.wrap_angle(self.target_yaw - eul[2])])
         return self.kp * err - self.kd * np.array([nu[0], nu[1], nu[2], nu[5]])
 
 

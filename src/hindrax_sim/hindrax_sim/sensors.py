@@ -395,8 +395,7 @@ class AccelModel(_ImuBase):
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
 
     def measure(self, truth: VehicleTruth) -> AccelSample:
-        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation,
-                                               self.gravity_m_s2))
+        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
         return AccelSample(truth.t_s, self._noisy3(m), DEFAULT_WATER_TEMPERATURE_C)
 
@@ -418,8 +417,7 @@ class MagModel(_ImuBase):
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
         super().__init__("icm20948_mag", "t", config, seed)
-        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t,
-                           DEFAULT_EARTH_FIELD_NED_T)
+        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:

@@ -131,8 +131,7 @@ class EmulatedDevices(DriverEndpoints):
             if self._server is None:
                 if os.path.exists(self.socket_path):
                     os.unlink(self.socket_path)
-                self._server = I2CSocketServer(self.bus, self.socket_path,
-                                               realtime_priority=HARDWARE_STAND_IN_PRIORITY)
+                self._server = I2CSocketServer(self.bus, self.socket_path, realtime_priority=HARDWARE_STAND_IN_PRIORITY)
 
     def stop_i2c(self) -> None:
         """The I2C bus is gone: opening fails, open connections fail with ENODEV (idempotent)."""

@@ -174,8 +174,7 @@ class ProcessRunner:
         def write(values: Mapping) -> Path:  # <param> runs as a file keyed /**, as launch_ros does
             return write_parameter_file(values, self._params_dir)
 
-        return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write)
-                + self._extra_args.get(p.label, []))
+        return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write) + self._extra_args.get(p.label, []))
 
     def environment(self, p: NodeProcess) -> dict[str, str]:
         """The environment ``p`` is started with: this runner's, then the launch file's for it (``<set_env>``,

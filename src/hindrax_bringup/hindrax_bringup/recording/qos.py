@@ -114,8 +114,7 @@ def subscription_policies(offered: Iterable[Mapping[str, Any]]) -> tuple[str, st
     if not offered:
         return "reliable", "volatile"
     reliability = "reliable" if all(p.get("reliability") == "reliable" for p in offered) else "best_effort"
-    durability = ("transient_local" if all(p.get("durability") == "transient_local" for p in offered)
-                  else "volatile")
+    durability = ("transient_local" if all(p.get("durability") == "transient_local" for p in offered) else "volatile")
     return reliability, durability
 
 

@@ -76,8 +76,7 @@ def bag_files(path: str | Path) -> list[Path]:
         present = []
     # metadata.yaml may be stale after a crash (written before the last split): add unlisted files
     listed = {f.name for f in present}
-    extra = [f for f in sorted(path.glob("*.mcap"), key=_recover.file_index)
-             if f.name not in listed]
+    extra = [f for f in sorted(path.glob("*.mcap"), key=_recover.file_index) if f.name not in listed]
     files = present + extra
     if not files:
         raise BagError(f"{path}: no .mcap files")
@@ -167,8 +166,7 @@ class BagReader:
         same = msgdefs.matches_installed(ch.type, ch.definition, ch.metadata.get("topic_type_hash"))
         return cls if same else None
 
-    def installed_messages(self, topics: Iterable[str],
-                           lean: bool = False) -> Iterator[tuple[RawMessage, Any]]:
+    def installed_messages(self, topics: Iterable[str], lean: bool = False) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, instance of the installed class) pairs of ``topics`` in log-time order.
 
         Records whose type has the installed layout (:meth:`installed_class`) go through rclpy's C
@@ -189,8 +187,7 @@ class BagReader:
         changed = {t: message_class(self.channels[t].type) for t, c in classes.items() if c is None}
         decode = {t: cdr_decoder(c) if lean else (lambda data, c=c: deserialize_message(data, c))
                   for t, c in classes.items() if c is not None}
-        for raw, obj in (self.decoded(wanted) if changed
-                         else ((raw, None) for raw in self.messages(wanted))):
+        for raw, obj in (self.decoded(wanted) if changed else ((raw, None) for raw in self.messages(wanted))):
             dec = decode.get(raw.topic)
             yield raw, dec(raw.data) if dec is not None else from_decoded(changed[raw.topic], obj)
 
@@ -215,8 +212,7 @@ class BagReader:
                     topics=None if wanted is None else sorted(wanted), log_time_order=True,
                     starting_at=None if start_ns is None else int(start_ns),
                     ending_before=None if end_ns is None else int(end_ns)):
-                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time,
-                                 msg.publish_time, msg.data)
+                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time, msg.data)
 
     def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas

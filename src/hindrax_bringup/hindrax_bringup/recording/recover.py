@@ -237,8 +237,7 @@ def _topic_info(ch: Channel, type_name: str) -> TopicInfo:
         qos = profiles_from_yaml(ch.metadata.get("offered_qos_profiles", ""))
     except Exception:  # noqa: BLE001 - unreadable QoS is recorded as none
         qos = []
-    return TopicInfo(ch.topic, type_name, qos, ch.metadata.get("topic_type_hash", ""), 0,
-                     ch.message_encoding or "cdr")
+    return TopicInfo(ch.topic, type_name, qos, ch.metadata.get("topic_type_hash", ""), 0, ch.message_encoding or "cdr")
 
 
 def metadata_from_files(files: list[Path]) -> BagMetadata:

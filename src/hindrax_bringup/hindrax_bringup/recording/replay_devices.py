@@ -70,8 +70,7 @@ __all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverRep
 PARSED_TOPICS: dict[str, str] = {t: d.name for d in device_table.DEVICES for t in d.topics}
 #: Topics of the I2C drivers, stamped with the ROS time of a read their own timers make: not
 #: lock-stepped with the replay (compare_parsed).
-I2C_STAMPED = frozenset(t for d in device_table.DEVICES if d.transport == device_table.I2C
-                        for t in d.topics)
+I2C_STAMPED = frozenset(t for d in device_table.DEVICES if d.transport == device_table.I2C for t in d.topics)
 
 _NACK = errno.EREMOTEIO  # 121, what i2c-dev returns for an unanswered address
 

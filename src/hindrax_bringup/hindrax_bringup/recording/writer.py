@@ -81,8 +81,7 @@ class WriterOptions:
     @classmethod
     def from_section(cls, recording: RecordingSection) -> "WriterOptions":
         """From the validated ``recording.*`` section (``VehicleConfig.recording``)."""
-        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s",
-                "flush_interval_s")
+        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s", "flush_interval_s")
         return cls(**{k: getattr(recording, k) for k in keys})
 
 

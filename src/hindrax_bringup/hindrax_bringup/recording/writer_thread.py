@@ -53,8 +53,7 @@ class ThreadedBagWriter:
         self._thread.start()
 
     # -- producer side (any thread) ---------------------------------------------------------------
-    def add_topic(self, name: str, type_name: str,
-                  offered_qos_profiles: Iterable[Mapping[str, Any]] = ()) -> None:
+    def add_topic(self, name: str, type_name: str, offered_qos_profiles: Iterable[Mapping[str, Any]] = ()) -> None:
         """Queue a topic registration (see :meth:`BagWriter.add_topic`); ordered before later writes."""
         self._queue.append(("topic", name, type_name, [dict(p) for p in offered_qos_profiles]))
 

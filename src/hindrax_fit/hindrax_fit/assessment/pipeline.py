@@ -57,8 +57,7 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
 
 
 @without_collector()
-def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
-             opts: FitOptions = FitOptions()) -> FitResult:
+def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()) -> FitResult:
     """:func:`fit_bags` of bags already read (:func:`..bag_input.reader.read_any_topics` of the
     training bags and the ``holdout`` bags, named in the design)."""
     core = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
@@ -142,8 +141,7 @@ class OverlappedFits:
     def __init__(self, bag_dir: str | Path, cfg: VehicleConfig) -> None:
         ctx = multiprocessing.get_context("spawn")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_overlap_worker, args=(child, Path(bag_dir), cfg),
-                                 daemon=True)
+        self._proc = ctx.Process(target=_overlap_worker, args=(child, Path(bag_dir), cfg), daemon=True)
         self._proc.start()
         child.close()
         self.error = ""

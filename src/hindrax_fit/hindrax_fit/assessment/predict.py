@@ -42,8 +42,7 @@ from ..fit import fit_core
 from ..bag_input.any_topics import FitInputError, FitOptions, TopicChoice, dof_records, preprocess_bag
 from .results import IdentificationFileError, model_spec, validate
 
-__all__ = ["ModelError", "DofModel", "load_model", "Prediction", "predict_bag", "score", "write_csv",
-           "VELOCITY_NAMES"]
+__all__ = ["ModelError", "DofModel", "load_model", "Prediction", "predict_bag", "score", "write_csv", "VELOCITY_NAMES"]
 
 #: SNAME velocity name and unit per DOF (body FRD)
 VELOCITY_NAMES = {"surge": ("u", "m/s"), "sway": ("v", "m/s"), "heave": ("w", "m/s"), "roll": ("p", "rad/s"),

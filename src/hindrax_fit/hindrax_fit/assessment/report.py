@@ -215,8 +215,7 @@ def references_html(document: Mapping) -> str:
         else:
             head = (f"{name} mean of both directions", "-", "-", _USES_MEAN.get(name, ""))
         verdict = "curve off" if abs(z) > 1.96 else "curve agrees"
-        srow.append((head[0], _fmt(v), _fmt(sd, 2), *head[1:], f"{100 * off:+.1f} %", _fmt(z, 3),
-                     verdict))
+        srow.append((head[0], _fmt(v), _fmt(sd, 2), *head[1:], f"{100 * off:+.1f} %", _fmt(z, 3), verdict))
     if srow:
         parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
                      "scale s (true thrust / curve thrust, per thruster group and rotation direction) from its prior "
@@ -254,8 +253,7 @@ def references_html(document: Mapping) -> str:
                 lo, hi = (par.get("ci95") or [math.nan, math.nan])[:2]
                 ratio = p / par["value"] if (p is not None and par["value"]) else math.nan
                 inside = "-" if p is None else ("inside" if lo <= p <= hi else "outside")
-                prow.append((dof, n, _fmt(par["value"]), f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(p),
-                             _fmt(ratio, 3), inside))
+                prow.append((dof, n, _fmt(par["value"]), f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(p), _fmt(ratio, 3), inside))
     if prow:
         parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] App. A.1/A.2)</h3><p>rough "
                      "estimates (the thesis reports differences of tens of percent against panel codes and CFD); "
@@ -362,13 +360,10 @@ def _plot(r, path: Path, h: float) -> None:
     for i in range(min(m, 12)):  # at most 12 segments: 2 minutes
         t = (i * L + np.arange(L)) * h
         ax.plot(t, meas[i], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
-        ax.plot(t, pred[i], "C1-", lw=1.2,
-                label="predicted (open loop from the segment start)" if i == 0 else None)
-        ax.plot(t, np.full(L, meas[i, 0]), "C2:", lw=1,
-                label="held initial value" if i == 0 else None)
+        ax.plot(t, pred[i], "C1-", lw=1.2, label="predicted (open loop from the segment start)" if i == 0 else None)
+        ax.plot(t, np.full(L, meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
-    _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data",
-                        path)
+    _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data", path)
 
 
 def _save_velocity_plot(fig, ax, dof: str, xlabel: str, title: str, path: Path) -> None:
@@ -513,8 +508,7 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
                       for dof, e in dofs.items())))
     parts.append("<p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in dofs.items()
                                      for line in training_lines(e.get("training"))) + "</p>")
-    advice = [(f"{dof} {a['parameter']}", a) for dof, e in dofs.items()
-              for a in e.get("advice", [])]
+    advice = [(f"{dof} {a['parameter']}", a) for dof, e in dofs.items() for a in e.get("advice", [])]
     if advice:
         parts.append("<h2>What data would fix the suspect parameters</h2>" + _advice_table(advice))
     if not doc.get("config_ready", True):

@@ -615,8 +615,7 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
             e["training"] = c.training
         e["timing"] = {"delay_s": c.timing.delay_s, "lag_s": c.timing.lag_s, "source": c.timing.source}
         if c.timing.bound_s is not None:
-            e["timing"].update(searched_up_to_s=c.timing.bound_s, bound=c.timing.bound_why,
-                               at_edge=c.timing.at_edge)
+            e["timing"].update(searched_up_to_s=c.timing.bound_s, bound=c.timing.bound_why, at_edge=c.timing.at_edge)
             if c.timing.at_edge:
                 e["timing"]["note"] = c.timing.edge_note
         e["interval"] = {"method": "cluster-robust (sandwich) covariance, contiguous blocks of segments as "
@@ -654,8 +653,7 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
 
 
 # ------------------------------------------------------------------------------------------------ references
-def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restoring_std: float,
-                       progress) -> dict:
+def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restoring_std: float, progress) -> dict:
     """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
     (:func:`~..fit.calibration.decay_inertia`; :func:`~.verdicts.apply_reference_verdicts` compares it with the
     self-propelled one). The restoring stiffness: the record's inclining step, else ``restoring_n_m_per_rad``
@@ -697,6 +695,5 @@ def reference_sections(doc: dict, record, cfg, restoring_n_m_per_rad: float | No
         doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
                                 for kk, vv in v.items()} for k, v in record.inclining.items()}
     if getattr(record, "decays", None):
-        doc["free_decay"] = free_decay_section(record, cfg, restoring_n_m_per_rad, restoring_std,
-                                               progress)
+        doc["free_decay"] = free_decay_section(record, cfg, restoring_n_m_per_rad, restoring_std, progress)
         apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std

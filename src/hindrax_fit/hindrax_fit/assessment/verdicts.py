@@ -492,8 +492,7 @@ def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float
 REFERENCE_Z_MAX = 1.96
 
 
-def free_decay_reason(dof: str, self_propelled: tuple[float, float],
-                      free_decay: tuple[float, float]) -> str | None:
+def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay: tuple[float, float]) -> str | None:
     """The reason text when the free-decay inertia (value, std; kg m^2) contradicts the self-propelled one
     (value, std): |I_sp - I_fd| > :data:`REFERENCE_Z_MAX` sqrt(std_sp^2 + std_fd^2); None when they
     agree. Raises

@@ -109,8 +109,7 @@ def dof_records(record, cfg: VehicleConfig, dofs=DOFS) -> tuple[dict, dict, dict
     return recs, sigs, errors
 
 
-def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None
-                      ) -> DofIdentification:
+def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None) -> DofIdentification:
     """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the reported values,
     covariance and intervals, unchanged) on the campaign reader's signals ``sig`` (:class:`CampaignSignals`), with the
     comparisons of :mod:`.dof_model` beside it (``online``: the online RLS estimator or its recorded history, or None).
@@ -247,8 +246,7 @@ def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured: str, jerk_psd: float, st
     z = np.full(keys.size, np.nan)
     z[np.searchsorted(keys, key_meas)] = z_meas
     if aid is None:
-        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd,
-                                          measurement_std=std)
+        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd, measurement_std=std)
     else:
         a = np.full(keys.size, np.nan)
         if isinstance(aid, AccelerometerAid):

@@ -449,8 +449,7 @@ def _kinds(layout: list) -> list[str]:
 
 def _column_params(layout: list) -> list[int]:
     """Indices of the parameters multiplying the time-dependent columns :attr:`SegmentData.cols`."""
-    return [i for i, k in enumerate(_kinds(layout))
-            if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
+    return [i for i, k in enumerate(_kinds(layout)) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
 
 
 def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None = None,
@@ -668,8 +667,7 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     r = sol.fun
     w = (1.0 + (r / f_scale) ** 2) ** -0.5 if robust else np.ones_like(r)
     th, v0 = split(sol.x)
-    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac,
-                      float(f_scale))
+    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac, float(f_scale))
 
 
 # ------------------------------------------------------------------------------------------------ covariance
@@ -880,10 +878,8 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     for a in range(0, len(points), GRID_BATCH):
         batch = points[a:a + GRID_BATCH]
         tms = [Timing(d, lag, "estimated") for d, lag in batch]
-        sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
-               for tm in tms]
-        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s, excited_only=False)
-                                    for tm in tms]
+        sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts)) for tm in tms]
+        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s, excited_only=False) for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
         start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
         smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
@@ -1113,8 +1109,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     sd = build_segments(rec, terms, timing, opts.segment_s, inertia,
                         excited_only=_excited_only(rec, opts) if excited_only is None else excited_only)
     sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=False)
-    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names,
-                              rec.run_count)
+    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names, rec.run_count)
     start = _equation_error_start(sd, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:
         start = theta0
@@ -1126,8 +1121,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     # without folds: no fold estimates, no score, and the reason in the notes (make_folds)
     th, sse, nn, sst, notes = _cv(sd, sv, folds, rec.dof, layout, fit, opts.robust, free_v0)
     cv = _cv_summary(sv, folds, sse, nn, sst)
-    return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, list(folds.notes) + notes,
-                     free_v0)
+    return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, list(folds.notes) + notes, free_v0)
 
 
 def persistence(cv: dict, margin: float = PERSISTENCE_MARGIN) -> dict:
@@ -1329,8 +1323,7 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
                      else None, training)
 
 
-def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None
-                 ) -> DofResult:
+def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None) -> DofResult:
     """Timing, terms by cross-validation (or ``opts.terms``), fit and intervals of one DOF (module docstring).
     ``inertia`` (6,): the other DOFs' inertias for the Coriolis candidate (NaN: unknown). Raises
     :class:`EstimationError`."""
@@ -1434,8 +1427,7 @@ def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timin
     return not_below_nested(c, rest + [c]), rest + [c]
 
 
-def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict,
-                        opts: CoreOptions) -> dict:
+def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict, opts: CoreOptions) -> dict:
     """Score every chosen model with the inertias it is predicted with (docs/identification.md
     §7 step 4): selection fits a DOF's Coriolis force with preliminary inertias of the other DOFs
     (``used``: {dof: (6,)}); until they agree with the stated ones (:data:`COUPLING_RTOL`, at most
@@ -1444,12 +1436,10 @@ def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict,
     used = dict(used)
     for _ in range(COUPLING_PASSES):
         stated = inertia_vector(chosen)
-        stale = [d for d, c in chosen.items()
-                 if c.terms.coriolis and _inertia_moved(used[d], stated, d)]
+        stale = [d for d, c in chosen.items() if c.terms.coriolis and _inertia_moved(used[d], stated, d)]
         if not stale:
             break
         for d in stale:
-            chosen[d], tried[d] = refit_coupling(records[d], chosen[d], tried[d], timings[d], opts,
-                                                 stated)
+            chosen[d], tried[d] = refit_coupling(records[d], chosen[d], tried[d], timings[d], opts, stated)
             used[d] = stated
     return used

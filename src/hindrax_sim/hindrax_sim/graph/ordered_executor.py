@@ -46,8 +46,7 @@ __all__ = ["LeanWaitExecutor"]
 
 #: NumberOfEntities fields in the order _rclpy.WaitSet takes them (after subscriptions: guards,
 #: timers, clients, services, events)
-_COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num_clients",
-                 "num_services", "num_events")
+_COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num_clients", "num_services", "num_events")
 #: entity kinds in rclpy's per-node order of ready callbacks
 _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE = range(5)
 #: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves every
@@ -117,10 +116,8 @@ class _Snapshot:
             self.subs, self.clients, self.services, self.timers))
         self.events = [(wt, node, wt._EventHandler__event) for wt, node in self.waitables
                        if isinstance(wt, EventHandler)]
-        self.others = [(wt, node) for wt, node in self.waitables
-                       if not isinstance(wt, EventHandler)]
-        self.handles = (self.sub_h + self.cli_h + self.srv_h + self.tmr_h
-                        + [h for *_w, h in self.events])
+        self.others = [(wt, node) for wt, node in self.waitables if not isinstance(wt, EventHandler)]
+        self.handles = (self.sub_h + self.cli_h + self.srv_h + self.tmr_h + [h for *_w, h in self.events])
 
 
 def _enter_each(handles: list) -> list | None:
@@ -191,8 +188,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
         return (self._take_timer, self._take_subscription, self._take_guard_condition,
                 self._take_client, self._take_service)[kind]
 
-    def _wait_for_ready_callbacks(self, timeout_sec=None, nodes=None,
-                                  condition: Callable[[], bool] = lambda: False):
+    def _wait_for_ready_callbacks(self, timeout_sec=None, nodes=None, condition: Callable[[], bool] = lambda: False):
         """rclpy's ``Executor._wait_for_ready_callbacks`` (same arguments, exceptions, callbacks and
         order), with the wait set built as the module docstring says."""
         if nodes is not None:
@@ -220,13 +216,11 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                 tasks = list(self._tasks)
             if tasks:
                 for task, entity, node in reversed(tasks):
-                    if (not task.executing() and not task.done()
-                            and (node is None or node in nodes_to_use)):
+                    if (not task.executing() and not task.done() and (node is None or node in nodes_to_use)):
                         yielded_work = True
                         yield task, entity, node
                 with self._tasks_lock:
-                    self._tasks = [t for t in self._tasks
-                                   if not t[0].done() and not t[0].cancelled()]
+                    self._tasks = [t for t in self._tasks if not t[0].done() and not t[0].cancelled()]
                     busy = bool(self._tasks)
             else:
                 busy = False
@@ -328,8 +322,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                                 if wt._ready_to_take_data or is_ready('event', wt._event_index)}
                 in_set = ready_events | {id(wt) for wt, _node in others}
                 for wt, node in snap.waitables:
-                    if (id(wt) in in_set and wt.is_ready(wait_set)
-                            and wt.callback_group.can_execute(wt)):
+                    if (id(wt) in in_set and wt.is_ready(wait_set) and wt.callback_group.can_execute(wt)):
                         yielded_work = True
                         yield self._make_handler(wt, node, self._take_waitable), wt, node
             finally:
@@ -353,8 +346,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                     else:
                         yield self._make_handler(entity, node, self._take(kind)), entity, node
 
-            if timeout_nsec == 0 or (timeout_timer is not None
-                                     and timeout_timer.handle.pointer in timers_ready):
+            if timeout_nsec == 0 or (timeout_timer is not None and timeout_timer.handle.pointer in timers_ready):
                 raise TimeoutException()
         if self._is_shutdown:
             raise ShutdownException()

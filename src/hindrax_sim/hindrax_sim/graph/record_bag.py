@@ -92,14 +92,12 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     wanted = {pub.topic_name for node in drivers + [sim_node] for pub in node.publishers}
     try:
         graph.freeze_time()  # at 0 until the drivers' start-up and the recorder's subscriptions
-        wait_until(graph.startup_complete, timeout_s, spin,
-                   "the drivers' start-up and the recorder's subscriptions")
+        wait_until(graph.startup_complete, timeout_s, spin, "the drivers' start-up and the recorder's subscriptions")
         links = list(graph.hardware.serial_lock_steps.values())
         counting[0] = True
         graph.resume_time()
         sim = sim_node.simulator
-        wait_until(lambda: sim.t_s >= duration_s, timeout_s, spin,
-                   f"{duration_s} s of simulated time")
+        wait_until(lambda: sim.t_s >= duration_s, timeout_s, spin, f"{duration_s} s of simulated time")
         graph.freeze_time()
 
         def flushed() -> bool:

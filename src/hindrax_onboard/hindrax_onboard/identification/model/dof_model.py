@@ -44,8 +44,7 @@ def core_index(names: Sequence[str], core_names: Sequence[str]) -> list:
     out = []
     for n in names:
         base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
-        out.append(core_names.index(n) if n in core_names
-                   else core_names.index(base) if base in core_names else None)
+        out.append(core_names.index(n) if n in core_names else core_names.index(base) if base in core_names else None)
     return out
 
 
@@ -92,13 +91,11 @@ def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
     one = np.ones_like(v)
     if dof == "heave":
         pos = v > 0
-        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0),
-                np.where(pos, 0.0, v), one]
+        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0), np.where(pos, 0.0, v), one]
     else:
         cols = [q, v, one]
         if dof in ("roll", "pitch"):
-            cols.append(np.zeros_like(v) if restoring is None
-                        else np.asarray(restoring, dtype=float))
+            cols.append(np.zeros_like(v) if restoring is None else np.asarray(restoring, dtype=float))
     return np.stack(cols, axis=-1)
 
 
@@ -123,11 +120,9 @@ def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
     added = float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)])
     out = {"inertia": rigid_inertia(cfg, dof) + added, "added_mass": added}
     if dof == "heave":  # its damping parameters are named as the fields of DofHydrodynamics
-        out.update({n: getattr(h, n) for n in parameter_names(dof)[1:5]},
-                   bias=float(cfg.buoyancy_n - cfg.weight_n))
+        out.update({n: getattr(h, n) for n in parameter_names(dof)[1:5]}, bias=float(cfg.buoyancy_n - cfg.weight_n))
     else:
-        out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive,
-                   bias=0.0)
+        out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive, bias=0.0)
     if dof in ("roll", "pitch"):
         out["restoring"] = float(cfg.vehicle.centre_of_gravity_frd_m[2] * cfg.weight_n
                                  - cfg.vehicle.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n)
@@ -208,8 +203,7 @@ def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, resto
                 if sel.sum() < 4:
                     return None, wins, f"{int(sel.sum())} steady windows in {suffix} heave (need 4)", t_end
                 fit = fit_drag(vm[sel], fm[sel])
-                out.update({f"{k}_{suffix}": (getattr(fit, k), getattr(fit, f"{k}_std"))
-                            for k in _DRAG})
+                out.update({f"{k}_{suffix}": (getattr(fit, k), getattr(fit, f"{k}_std")) for k in _DRAG})
         else:
             if len(wins) < 4:
                 return None, wins, f"{len(wins)} steady windows (need 4)", t_end

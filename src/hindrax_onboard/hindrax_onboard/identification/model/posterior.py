@@ -56,8 +56,7 @@ def prior_entries(cfg) -> dict[str, dict]:
         return {}
     src = "[NTNU-Thesis] App. A.1/A.2 empirical estimate, solid prism of the configured box"
     keys = ("added_mass", "linear_damping", "quadratic_damping")
-    return {dof: {**{k: finite_or_none(p[k][i]) for k in keys}, "source": src}
-            for i, dof in enumerate(DOFS)}
+    return {dof: {**{k: finite_or_none(p[k][i]) for k in keys}, "source": src} for i, dof in enumerate(DOFS)}
 
 
 def theta_priors(dof: str, names: Sequence[str], cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:

@@ -342,8 +342,7 @@ class IdentificationCore:
         else:
             samples, self.samples = self.samples, []
             previous = ex.t_s
-            valid = ordered_samples(samples, previous, t + FUTURE_STAMP_TOLERANCE_S,
-                                    previous - STALE_STAMP_TOLERANCE_S)
+            valid = ordered_samples(samples, previous, t + FUTURE_STAMP_TOLERANCE_S, previous - STALE_STAMP_TOLERANCE_S)
             if len(valid) < len(samples):
                 self.samples_dropped += len(samples) - len(valid)
                 out.append(Event("warn_throttled", (

@@ -80,8 +80,7 @@ class Multisine:
         object.__setattr__(self, "_scale", self.amplitude / peak)
 
     @classmethod
-    def design(cls, amplitude: float, f_min_hz: float, f_max_hz: float, period_s: float | None = None
-               ) -> "Multisine":
+    def design(cls, amplitude: float, f_min_hz: float, f_max_hz: float, period_s: float | None = None) -> "Multisine":
         """Lines k / P for k from ceil(f_min P) (>= 1) to floor(f_max P); the period P defaults to 1 / f_min (the
         lowest line is then f_min). Raises ``ValueError`` when no line falls in the band."""
         p = 1.0 / f_min_hz if period_s is None else float(period_s)

@@ -274,8 +274,7 @@ class Executive:
         self.levels_per_dof = levels
         self.fractions = [float(x) for x in fractions] if fractions else None
         self.heave_repeats = max(1, int(heave_repeats))
-        self.max_level_s = float(ident.max_level_duration_s if max_level_duration_s is None
-                                 else max_level_duration_s)
+        self.max_level_s = float(ident.max_level_duration_s if max_level_duration_s is None else max_level_duration_s)
         self.dvl_lock_timeout_s = float(dvl_lock_timeout_s)
         #: the state every step shares (sensors, holds, pool box, tick log, results, operator hand-shake)
         self.ctx = StepContext(cfg, self.tick_s, progress)

@@ -177,8 +177,7 @@ class IdentificationNode(VehicleNode):
         # no QoS event handlers (VehicleNode): a missing sensor fails the goal (timeouts, DVL lock)
         self._inputs: list = []  # the sensor subscriptions, open while a goal is accepted or runs
         # the ESC's armed flag while no goal runs (latched, on change; the goal's pulse_width reports carry it too)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
-                                 esc_state_qos())
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
         self.create_subscription(DiagnosticStatus, "supervisor/status", lambda m: self.core.on_disarm_cause(
             next((kv.value for kv in m.values if kv.key == "disarm_cause"), "")), 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
@@ -188,8 +187,7 @@ class IdentificationNode(VehicleNode):
         # transient local: a recorder or tool that subscribes after the step still gets every result
         latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC,
-                                                     latched)
+        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC, latched)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._goal_result,
                                     goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
                                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)

@@ -98,8 +98,7 @@ class KnownForceStep(Step):
         yield from self._holds(ctx, self.settle_s, centre)
         t1 = ctx.t_s
         yield from self._holds(ctx, self.window_s, centre)
-        return (*ctx.mean_recorded_force(self.axis, t1),
-                *ctx.mean_force_by_direction(self.axis, t1))
+        return (*ctx.mean_recorded_force(self.axis, t1), *ctx.mean_force_by_direction(self.axis, t1))
 
     def run(self, ctx: StepContext) -> Wrenches:
         yield from ctx.move_to_centre()

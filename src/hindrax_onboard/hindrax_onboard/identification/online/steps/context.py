@@ -140,8 +140,7 @@ class StepContext:
     def mean_force_by_direction(self, k: int, t_from: float) -> tuple[float, float]:
         """Means since ``t_from`` of the parts of the recorded force on axis k made by thrusters turning forward
         (positive thrust) and in reverse (negative thrust), N; their sum is :meth:`mean_recorded_force`'s mean."""
-        return (float(np.mean(self._window("wp", t_from)[:, k])),
-                float(np.mean(self._window("wn", t_from)[:, k])))
+        return (float(np.mean(self._window("wp", t_from)[:, k])), float(np.mean(self._window("wn", t_from)[:, k])))
 
     def mean_tilt(self, i: int, t_from: float) -> tuple[float, float]:
         """Mean of the attitude log's angle i (0 roll, 1 pitch; the DVL-75's own IMU) since ``t_from`` and the std
