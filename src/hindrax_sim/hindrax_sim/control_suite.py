@@ -49,8 +49,7 @@ def scenario_names(names: str | None, truth_dir: str | None) -> tuple[list[str],
 
 
 def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, seed: int = 1, levels: int = 3,
-                 setup: EvaluationSetup = EvaluationSetup(),
-                 progress: Callable[[str], None] | None = None) -> dict:
+                 setup: EvaluationSetup = EvaluationSetup(), progress: Callable[[str], None] | None = None) -> dict:
     """Identify against one truth, then evaluate (module docstring). Returns the scenario's summary row."""
     say = progress or (lambda _m: None)
     truth = load_truth(cfg, truth_path)

@@ -88,8 +88,7 @@ class Simulator:
     bad truth file."""
 
     def __init__(self, config: VehicleConfig, *, seed: int | None = None, step_s: float | None = None,
-                 sensors: bool | Sequence[str] | None = True, pool: bool = True,
-                 truth: Any = None) -> None:
+                 sensors: bool | Sequence[str] | None = True, pool: bool = True, truth: Any = None) -> None:
         if not isinstance(truth, Truth):
             truth = load_truth(config, truth)
         self.truth_model: Truth = truth

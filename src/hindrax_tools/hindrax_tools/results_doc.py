@@ -53,8 +53,7 @@ def commit() -> str:
     here = Path(__file__).resolve().parent
     try:
         return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=here,
-                              capture_output=True, text=True, timeout=10,
-                              check=False).stdout.strip() or "unknown"
+                              capture_output=True, text=True, timeout=10, check=False).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 

@@ -198,8 +198,7 @@ class BagReader:
         for f in self.files:
             yield from self.file_messages(f, wanted, start_ns, end_ns)
 
-    def file_messages(self, f: Path, topics: Iterable[str] | None = None,
-                      start_ns: int | None = None,
+    def file_messages(self, f: Path, topics: Iterable[str] | None = None, start_ns: int | None = None,
                       end_ns: int | None = None) -> Iterator[RawMessage]:
         """:meth:`messages` of one file ``f`` of :attr:`files` (log-time order within the file)."""
         wanted = set(topics) if topics is not None else None

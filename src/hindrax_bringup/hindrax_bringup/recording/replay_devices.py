@@ -62,8 +62,7 @@ from .msgtypes import message_class
 from .reader import BagReader, iter_raw_device_data
 
 __all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
-           "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed",
-           "strip_stamp"]
+           "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed", "strip_stamp"]
 
 #: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_common.base.devices.DEVICES`), with the device
 #: whose raw data they are parsed from.

@@ -28,8 +28,7 @@ from .report import write_fit_outputs, write_outputs
 from .results import build_document, reference_sections
 
 __all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options",
-           "write_any_outputs", "write_campaign_outputs", "without_collector",
-           "OverlappedFits"]
+           "write_any_outputs", "write_campaign_outputs", "without_collector", "OverlappedFits"]
 
 
 @contextlib.contextmanager
@@ -72,8 +71,7 @@ def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (), opts: FitO
 
 @without_collector()
 def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None,
-                 fitted: dict | None = None):
+                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None, fitted: dict | None = None):
     """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag: :func:`..bag_input.reader.read_campaign`,
     then :func:`..fit.campaign_fit.identify_all_with_errors` with the fit core's options ``opts`` (None: the
     defaults). The fits see the thrust-model force times the ``calibration`` scales (None:

@@ -327,8 +327,7 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
 
 
 def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | Path | None, note: str,
-                  source: str = "bag", seed: int | None = None, calibration: dict | None = None,
-                  sections=None) -> Path:
+                  source: str = "bag", seed: int | None = None, calibration: dict | None = None, sections=None) -> Path:
     """identification.yaml (provenance names the bag, when there is one) and report/index.html in ``out``; returns
     the yaml path.
 

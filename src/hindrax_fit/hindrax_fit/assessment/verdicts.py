@@ -76,8 +76,7 @@ from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, pers
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts",
            "WHITENESS_MAX", "INDEPENDENCE_Z", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "FitEvidence", "core_signals", "core_evidence", "model_selection",
-           "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
-           "with_added_mass", "assess_dof",
+           "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess", "with_added_mass", "assess_dof",
            "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET",
            "POOL_DAY_S", "RUN_KINDS"]
 

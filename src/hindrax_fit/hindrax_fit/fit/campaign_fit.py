@@ -30,8 +30,7 @@ from hindrax_onboard.identification.model.dof_model import (DofIdentification, c
                         truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "fit_dofs", "identification_of", "identify_all_with_errors",
-           "identify_dof"]
+           "dof_records", "fit_dofs", "identification_of", "identify_all_with_errors", "identify_dof"]
 
 
 @dataclass
@@ -181,8 +180,7 @@ def fit_dofs(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.C
     return {d: (results[d], sigs[d]) for d in results}, errors
 
 
-def identify_all_with_errors(record, cfg: VehicleConfig,
-                             opts: fit_core.CoreOptions = fit_core.CoreOptions(),
+def identify_all_with_errors(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions(),
                              fitted: dict | None = None) -> tuple[dict, dict]:
     """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``:
     :func:`fit_dofs` of the DOFs not in ``fitted`` (results of :func:`fit_dofs` already made, on

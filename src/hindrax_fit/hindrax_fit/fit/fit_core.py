@@ -31,8 +31,7 @@ __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUST
            "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
            "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN",
            "NO_MODEL_VERDICT", "resolvable_delay", "with_edge", "NESTED", "not_below_nested",
-           "input_correlation", "INPUT_CORRELATION_LAG_S", "coupling_consistent", "refit_coupling",
-           "COUPLING_RTOL"]
+           "input_correlation", "INPUT_CORRELATION_LAG_S", "coupling_consistent", "refit_coupling", "COUPLING_RTOL"]
 
 #: (force std, velocity std) within a segment below which it does not move the DOF: translational (N, m/s),
 #: rotational (N m, rad/s)

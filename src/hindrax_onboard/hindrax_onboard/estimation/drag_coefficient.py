@@ -76,8 +76,7 @@ def reynolds_range(speed, characteristic_length_m: float,
     return float(np.min(re)), float(np.max(re))
 
 
-def drag_coefficient(quadratic_damping: float, projected_area_m2: float,
-                     fluid_density_kg_m3: float = 1000.0,
+def drag_coefficient(quadratic_damping: float, projected_area_m2: float, fluid_density_kg_m3: float = 1000.0,
                      quadratic_damping_std: float = 0.0) -> Tuple[float, float]:
     """C_D = 2 k_q / (rho A_p) and its std (docs/identification.md §1.A (h); [Hindrax-Drag] Table 4).
 

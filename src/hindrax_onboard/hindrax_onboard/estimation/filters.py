@@ -72,8 +72,7 @@ def _check_settings(measured: str, jerk_psd: float, measurement_std: float) -> N
         raise EstimationError(f"measurement_std must be > 0, got {measurement_std}")
 
 
-def _initial_state(measured: str, z0: float, measurement_std: float,
-                   initial_velocity_std: float,
+def _initial_state(measured: str, z0: float, measurement_std: float, initial_velocity_std: float,
                    initial_acceleration_std: float) -> Tuple[np.ndarray, np.ndarray]:
     if measured == "position":
         x0 = np.array([z0, 0.0, 0.0])

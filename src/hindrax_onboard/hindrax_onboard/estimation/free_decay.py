@@ -552,8 +552,7 @@ def _simulate_decay(tt: np.ndarray, theta: np.ndarray, k: float, output: str):
 
 
 def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[float] = None,
-                             output: str = "acceleration",
-                             initial_total_inertia: Optional[float] = None,
+                             output: str = "acceleration", initial_total_inertia: Optional[float] = None,
                              initial_linear_damping: Optional[float] = None) -> QuadraticDecayFit:
     """Fit M x'' + b1 x' + b2 |x'| x' + k x = 0 to a whole free-decay record (output error).
 

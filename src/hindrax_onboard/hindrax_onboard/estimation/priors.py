@@ -309,8 +309,7 @@ def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m
     inertia = list(v.inertia_kg_m2)
     zg = float(v.centre_of_gravity_frd_m[2])
     zb = float(v.centre_of_buoyancy_frd_m[2])
-    out = empirical_priors(g, PriorInputs(mass_kg=float(v.mass_kg), bg_m=zg - zb,
-                                          roll_inertia_kg_m2=float(inertia[0]),
+    out = empirical_priors(g, PriorInputs(mass_kg=float(v.mass_kg), bg_m=zg - zb, roll_inertia_kg_m2=float(inertia[0]),
                                           pitch_inertia_kg_m2=float(inertia[1]),
                                           gravity_m_s2=float(cfg.environment.gravity_m_s2)))
     missing = [k for k, v in given.items() if v is None]

@@ -104,8 +104,7 @@ class RecursiveLeastSquares:
     Raises:
         EstimationError: invalid sizes or values."""
 
-    def __init__(self, n_params: int, forgetting: float = 0.995,
-                 initial_covariance=1e3, initial_theta=None,
+    def __init__(self, n_params: int, forgetting: float = 0.995, initial_covariance=1e3, initial_theta=None,
                  max_covariance: Optional[float] = None, directional: bool = False,
                  min_excitation: float = 0.0, lower_bounds=None,
                  change_threshold: Optional[float] = None, change_samples: int = 50):

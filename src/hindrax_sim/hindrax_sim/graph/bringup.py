@@ -204,8 +204,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
                 drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None, controller: bool = False,
-                model_file: str = "", truth_rate_hz: float | None = None,
-                parameter_services: bool = True) -> Graph:
+                model_file: str = "", truth_rate_hz: float | None = None, parameter_services: bool = True) -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder

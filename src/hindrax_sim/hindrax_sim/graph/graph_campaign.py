@@ -345,6 +345,5 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
             # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
             add = sections if sections is not None and node_record is not None else None
             write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),
-                          calibration=calibration,
-                          sections=add and (lambda doc: add(doc, node_record, idents)))
+                          calibration=calibration, sections=add and (lambda doc: add(doc, node_record, idents)))
     return outcome

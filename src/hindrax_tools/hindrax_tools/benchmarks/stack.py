@@ -630,8 +630,7 @@ def read_topologies(procs: dict[str, subprocess.Popen], directory: Path) -> dict
 
 
 def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
-              envs: dict | None = None, stream_phase: str | None = None,
-              check: dict | None = None) -> dict:
+              envs: dict | None = None, stream_phase: str | None = None, check: dict | None = None) -> dict:
     """Run ``spec`` (:func:`skeleton_spec`; ``envs[label] = (launch-prefix, env)``) and measure
     ``phases`` (name, windows of ``duration_s``; SIGUSR2, 2 s warm-up first), the pilot's wrench
     stream on in ``stream_phase``; ``check``: topology to match (else RuntimeError). Returns
@@ -908,8 +907,7 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 
 
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
-        duration_s: float | None = None, baselines: bool = True,
-        baseline: str | None = None) -> list[dict]:
+        duration_s: float | None = None, baselines: bool = True, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running windows of
     the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length, s; baselines:
     bare rclpy and the launch's skeleton; baseline: a git ref whose launch layout is measured first in the same run

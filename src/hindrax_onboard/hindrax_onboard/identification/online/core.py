@@ -59,8 +59,7 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 from .steps import undo_line
 
-__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem",
-           "NEEDED_SENSORS",
+__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
            "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED", "STARVED_WARN_TICKS"]
 
