@@ -74,8 +74,8 @@ def write_section(path: str | Path, name: str, title: str, body: str, command: s
     Markdown (a trailing newline is added when missing). command: the command line that produced it, for the provenance
     line. supersedes_prefix: every other section whose name starts with it is removed in the same write (``bench-`` for
     the full benchmark run). supersedes_rows: ``(section, keys)``: the table rows of that section whose first cell is
-    one of ``keys`` are removed in the same write (:func:`supersede_rows`; ``("bench", ["stack"])`` for ``--only
-    stack``).
+    one of ``keys`` are removed in the same write (:func:`supersede_rows`; ``("bench", ["stack"])`` for
+    ``--only stack``).
 
     Raises :class:`ResultsDocError` for a bad name, or a document holding only one of the section's
     two markers or the end marker before the begin marker (nothing is written then);

@@ -1,7 +1,7 @@
 """The campaign bag reader: rebuild the campaign record (:class:`~.campaign_record.CampaignRecord`) from a bag.
 
-``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_tools.commands.ident_bag`), and ``hindrax ident
-fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
+``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_tools.commands.ident_bag`), and
+``hindrax ident fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
 :func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and ``hindrax run``
 (docs/identification.md §7).
 

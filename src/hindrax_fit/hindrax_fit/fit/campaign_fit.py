@@ -2,10 +2,10 @@
 :class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.dof_model.DofIdentification`.
 
 ``hindrax run``, ``hindrax ident bag``, ``hindrax ident fit`` on a bag with the campaign's topics and the in-process
-campaign identify with :func:`identify_all_with_errors`, with the same :class:`~.fit_core.CoreOptions` as ``hindrax
-ident fit``. What the campaign knows that an arbitrary bag does not (docs/identification.md §7, "The campaign's
-topics"): the DOF windows (one chunk each, the thrust-model force of the widths the ESC wrote), the sensors conditioned
-by RTS smoothers (:func:`_smooth_on_ticks`), the gyro bias left after the still window
+campaign identify with :func:`identify_all_with_errors`, with the same :class:`~.fit_core.CoreOptions` as
+``hindrax ident fit``. What the campaign knows that an arbitrary bag does not (docs/identification.md §7, "The
+campaign's topics"): the DOF windows (one chunk each, the thrust-model force of the widths the ESC wrote), the sensors
+conditioned by RTS smoothers (:func:`_smooth_on_ticks`), the gyro bias left after the still window
 (:func:`rate_bias_against_angle`), the design (``DofRecord.terms``, ``DofRecord.all_segments``) and the roll/pitch
 restoring regressor s(eta) ([NTNU-Thesis] eq. 2.23) from the DVL attitude fused with the gyro
 (:func:`_smoothed_roll_pitch`).
