@@ -12,9 +12,8 @@ durations are ``{sec, nsec}`` with infinity = 2^63-1 ns = {9223372036, 854775807
 
 - The MCAP channel metadata ``offered_qos_profiles`` is the YAML *string* of the list
   (:func:`profiles_to_yaml`); metadata.yaml (version 9) holds the list itself.
-- :func:`subscription_policies` is rosbag2's ``adapt_request_to_offers``: reliable only if every
-  publisher is reliable (a reliable subscription never matches a best-effort publisher), transient
-  local only if every publisher is.
+- :func:`subscription_policies` is rosbag2's ``adapt_request_to_offers``: reliable only if every publisher is reliable
+  (a reliable subscription never matches a best-effort publisher), transient local only if every publisher is.
 - :func:`recorder_policies` is what this project's recorder requests: best effort for every
   volatile topic (why: :func:`hindrax_common.node_support.node_common.sensor_input_qos`), rosbag2's rule for the
   transient-local ones (their history reaches a late reader only when it is reliable).

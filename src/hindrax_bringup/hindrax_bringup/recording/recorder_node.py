@@ -8,11 +8,10 @@ Behaviour
   configuration key ``recording.topics`` is used, and without it every topic. The graph is polled every
   ``discovery_period_s`` so topics that appear after the start are recorded too. A topic is subscribed
   to once it has a publisher (its QoS is then known).
-- QoS: each subscription is best effort unless the topic is transient local, where it matches the
-  topic's publishers as rosbag2 does (:func:`~hindrax_bringup.recording.qos.recorder_policies`: the
-  writers then run no reliability protocol for the recorder), keep-last depth ``queue_depth``; the
-  publishers' profiles are stored in the bag (``offered_qos_profiles``). A sample sent before the
-  recorder's reader has matched its writer is not recorded.
+- QoS: each subscription is best effort unless the topic is transient local, where it matches the topic's publishers as
+  rosbag2 does (:func:`~hindrax_bringup.recording.qos.recorder_policies`: the writers then run no reliability protocol
+  for the recorder), keep-last depth ``queue_depth``; the publishers' profiles are stored in the bag
+  (``offered_qos_profiles``). A sample sent before the recorder's reader has matched its writer is not recorded.
 - Data: one subscription callback per message on the node's executor, whatever the clock (the
   vehicle, the virtual pool and the tests take the same path). The subscriptions are raw: the
   callback gets the CDR bytes and they are written unchanged, never converted into a Python message
@@ -32,10 +31,9 @@ Behaviour
   (:class:`~hindrax_bringup.recording.sequence_gaps.SequenceGaps`; a best-effort reader's loss is
   otherwise silent). The info has no publisher gid here, so the count is keyed by topic and a gap
   counts only while the topic has one publisher (``get_publisher_count``, asked on a gap only).
-- Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag,
-  messages written, dropped (the writer's queue) and lost (in transit; WARN when either is above 0),
-  one key per topic (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name``
-  -> samples lost).
+- Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag, messages written,
+  dropped (the writer's queue) and lost (in transit; WARN when either is above 0), one key per topic
+  (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name`` -> samples lost).
 - Disk floor: every ``disk_check_period_s`` (and before a start) the free space of the filesystem the bag
   goes to is compared with ``recording.min_free_disk_mb``; below it the recorder stops cleanly (the bag is
   finished: summary, metadata.yaml), refuses new starts, and reports the reason at level ERROR on

@@ -11,24 +11,22 @@ uses, so the real parsing code runs on the recorded stream:
   order, each at the step of the replay clock that reaches its recorded receive time
   (``paced=True``) or all at once (``paced=False``). Host->device bytes are ignored (the recorded
   replies are in the device->host stream already).
-- :class:`I2CReplayDevice` (one per I2C address on an
-  :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`): answers each read transaction with the
-  next recorded read data *of that register* (the register pointer is the first byte of the preceding
-  write, as on the wire), and accepts writes, comparing each with the next recorded write of the address
-  (:attr:`I2CReplayDevice.write_mismatches`). When a register's recorded reads are used up, reads NACK
-  (``OSError`` errno 121, as an absent device): the driver counts an I2C failure and publishes nothing,
-  so a replay never invents data.
+- :class:`I2CReplayDevice` (one per I2C address on an :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`):
+  answers each read transaction with the next recorded read data *of that register* (the register pointer is the first
+  byte of the preceding write, as on the wire), and accepts writes, comparing each with the next recorded write of the
+  address (:attr:`I2CReplayDevice.write_mismatches`). When a register's recorded reads are used up, reads NACK
+  (``OSError`` errno 121, as an absent device): the driver counts an I2C failure and publishes nothing, so a replay
+  never invents data.
 - :class:`ReplayHardware`: all of it for one bag (``dvl75`` and ``ping1d`` on ptys served by the
   caller, every recorded I2C device on one bus).
 - :class:`DriverReplay`: the driver nodes (DVL-75, Ping1D, MS5837, ICM-20948, ESC) on that hardware with
-  ``use_sim_time``, a ``/clock`` publisher stepping through the recorded ``/clock`` values (or, without
-  them, a 100 Hz grid over the recorded span), and a probe collecting every parsed message; it runs until
-  every recorded device->host byte and every recorded I2C read has been consumed. The serial
-  devices run in lock-step with that clock, as in the simulator that records such bags: at each
-  step, every driver's clock already there, the chunks due are written and each driver reads and
-  handles them in the harness's thread (``SerialTransport.pump``) before time moves on, so every
-  chunk is received at its recorded time whatever the load (a rule on receive times, such as the
-  DVL node's "no ``$DVPDL`` for 1 s", sees the recorded gaps).
+  ``use_sim_time``, a ``/clock`` publisher stepping through the recorded ``/clock`` values (or, without them, a 100 Hz
+  grid over the recorded span), and a probe collecting every parsed message; it runs until every recorded device->host
+  byte and every recorded I2C read has been consumed. The serial devices run in lock-step with that clock, as in the
+  simulator that records such bags: at each step, every driver's clock already there, the chunks due are written and
+  each driver reads and handles them in the harness's thread (``SerialTransport.pump``) before time moves on, so every
+  chunk is received at its recorded time whatever the load (a rule on receive times, such as the DVL node's "no
+  ``$DVPDL`` for 1 s", sees the recorded gaps).
 
 What "the same" means after a replay: :func:`compare_parsed` (checked by ``test/test_bag_replay_drivers.py``)."""
 from __future__ import annotations

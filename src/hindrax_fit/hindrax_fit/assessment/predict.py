@@ -11,10 +11,9 @@ force (:func:`..fit.fit_core.simulate`), re-initialised at the start of each seg
 
 Segments:
 
-* ``segment_s`` given: boundaries every ``segment_s`` seconds from the first instant where force and velocity both
-  exist (the bag's first continuous chunk), whatever the DOF does; a gap in the data ends a segment and the next
-  starts where the data resume; pieces shorter than 10 grid steps (0.5 s) or with fewer than 3 measurements are not
-  predicted;
+* ``segment_s`` given: boundaries every ``segment_s`` seconds from the first instant where force and velocity both exist
+  (the bag's first continuous chunk), whatever the DOF does; a gap in the data ends a segment and the next starts where
+  the data resume; pieces shorter than 10 grid steps (0.5 s) or with fewer than 3 measurements are not predicted;
 * ``segment_s`` None: the tool's own rule, the one of its holdout validation (:func:`..fit.fit_any.fit_records`):
   segments of :data:`..fit.fit_core.VALIDATION_S` from each continuous chunk's start, a last part kept when at least
   half a segment long.

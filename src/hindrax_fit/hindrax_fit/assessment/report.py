@@ -6,9 +6,8 @@ Plots per DOF:
   tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
   smoothed velocity, the steady-window means of [Hindrax-Drag]'s method, and the fitted curve
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
-* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band (where the RLS has
-  a noise estimate; the title says how many parameters have one) and the
-  reported (offline) value.
+* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band (where the RLS has a
+  noise estimate; the title says how many parameters have one) and the reported (offline) value.
 
 For a fit of bags of any topics (``hindrax ident fit``, :func:`write_fit_outputs`): per fitted DOF, the validation
 segments laid end to end (the holdout bags when given, else the cross-validation folds), measured velocity, the

@@ -26,22 +26,20 @@ and
      buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide when the
      difference is more than :data:`BIAS_MIN_REL` of the damping force at the typical speed, else the bias alone (a
      small bias outside its interval is a miss whatever its size).
-   * ``methods``: the steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
-     quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not
-     explain the transients and the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The
-     equation-error fit is not used: its inertia is biased low by the noise of the differentiated velocity even when
-     nothing is wrong.)
+   * ``methods``: the steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported quadratic damping by more
+     than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not explain the transients and
+     the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
+     its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)
    * ``direction``: the steady-window misfits (relative to the model force) of the two directions of motion differ
      by more than :data:`DIRECTION_MAX` and beyond their scatter (z > 4) (heave: up/down; others: forward/backward),
      a level-to-level inconsistency. DOF-wide.
    * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
-     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file
-     does not have, a late DVL). DOF-wide.
-     A measured position (heave's depth) is judged by the independence of its residuals from the input instead
-     (:data:`INDEPENDENCE_Z`, :func:`~..fit.fit_core.input_correlation`): its residual is the double integral of
-     every force the model does not have, so a few tenths of a newton of disturbance make consecutive depth samples
-     correlated (0.86 on the README's pool day, whose intervals all hold the truth) whatever the model; for an
-     output-error model the residuals' colour is the disturbance's, and the dynamics are judged by whether the
+     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file does
+     not have, a late DVL). DOF-wide. A measured position (heave's depth) is judged by the independence of its residuals
+     from the input instead (:data:`INDEPENDENCE_Z`, :func:`~..fit.fit_core.input_correlation`): its residual is the
+     double integral of every force the model does not have, so a few tenths of a newton of disturbance make consecutive
+     depth samples correlated (0.86 on the README's pool day, whose intervals all hold the truth) whatever the model;
+     for an output-error model the residuals' colour is the disturbance's, and the dynamics are judged by whether the
      residuals follow the input ([Ljung1999] §16.6).
    * ``thrust`` (across DOFs, :func:`apply_verdicts`): heave's bias is the force that holds the vehicle at depth,
      the net buoyancy (rho V - m) g known from the vehicle's mass and volume. When the identified heave bias

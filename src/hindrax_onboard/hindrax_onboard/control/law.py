@@ -13,10 +13,9 @@ docs/control.md §2 (its items 1-6 give the reasons and the numbers):
   k_p = w_c^2, k_d = 2 zeta w_c, k_i = w_c k_p / 10 (velocity holds k_v = w_c, k_i = w_c k_v / 10),
   at the bandwidth w_c = w (1 - 1.96 sigma) that the inertia's relative 1-sigma sigma allows (not
   below w / 2, :func:`design_gains`);
-* **saturation and anti-windup**: each wrench component clipped to ``hold_fraction`` of the axis'
-  authority per direction; conditional integration ([AstromHagglund2006] Ch. 3) stops while the
-  output is clipped or the allocation reported the axis short (:meth:`Controller.note_allocation`)
-  in the direction of the error.
+* **saturation and anti-windup**: each wrench component clipped to ``hold_fraction`` of the axis' authority per
+  direction; conditional integration ([AstromHagglund2006] Ch. 3) stops while the output is clipped or the allocation
+  reported the axis short (:meth:`Controller.note_allocation`) in the direction of the error.
 
 Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis
 as Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range over a local floor plane

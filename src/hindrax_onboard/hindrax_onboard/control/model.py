@@ -6,17 +6,14 @@ the vehicle still (heave: the net buoyancy B - W, FRD down; feedforward) and, fo
 the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources
 (docs/control.md §4 gives the rules and why):
 
-* :func:`model_from_config` - the vehicle file (``hydrodynamics.*``, mass, volume, geometry), with
-  the declared thrust-curve uncertainty as the inertia's (a lower bound: the file states none for
-  its added masses).
-* :func:`load_model` - ``identification.yaml``
-  (:mod:`hindrax_fit.assessment.results`), read by this small tolerant loader
-  (``provenance.vehicle_parameters`` or ``provenance.configuration_sha256``,
-  ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and ``joint.scales``; other keys are
-  ignored). Values are in commanded-thrust units: a calibrated file's are divided by the thrust
-  scale of their group. A ``suspect`` parameter, a value that is not a finite number, or a negative
-  inertia or damping falls back to the vehicle file's, except for the reasons of
-  :data:`CONTROL_IRRELEVANT_REASONS`; a heave bias no thrust scale explains
+* :func:`model_from_config` - the vehicle file (``hydrodynamics.*``, mass, volume, geometry), with the declared
+  thrust-curve uncertainty as the inertia's (a lower bound: the file states none for its added masses).
+* :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_fit.assessment.results`), read by this small tolerant
+  loader (``provenance.vehicle_parameters`` or ``provenance.configuration_sha256``,
+  ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and ``joint.scales``; other keys are ignored). Values are
+  in commanded-thrust units: a calibrated file's are divided by the thrust scale of their group. A ``suspect``
+  parameter, a value that is not a finite number, or a negative inertia or damping falls back to the vehicle file's,
+  except for the reasons of :data:`CONTROL_IRRELEVANT_REASONS`; a heave bias no thrust scale explains
   (:func:`unexplained_bias`) makes the bias and damping fall back. Each value carries its source
   (:attr:`AxisModel.sources`).
 

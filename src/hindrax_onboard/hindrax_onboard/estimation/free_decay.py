@@ -9,9 +9,8 @@ equation; docs/identification.md §2.2) give the added mass, damping, C_M, KC an
 
 Signal processing (our choices; [Hindrax-AM] only says "double integration" in MATLAB):
 
-* Release: the first sample whose |a - median(a)| exceeds :data:`RELEASE_THRESHOLD` (0.5) times
-  the largest deviation (at release the acceleration jumps to its largest value, -omega_n^2 A).
-  The record is analysed from there on.
+* Release: the first sample whose |a - median(a)| exceeds :data:`RELEASE_THRESHOLD` (0.5) times the largest deviation
+  (at release the acceleration jumps to its largest value, -omega_n^2 A). The record is analysed from there on.
 * Displacement (:func:`displacement_from_acceleration`): the accelerometer bias is the
   (trapezoid-weighted) mean of the acceleration over the analysed record (exact when it starts
   and ends at rest, because the velocity change is then zero); velocity = cumulative

@@ -2,10 +2,9 @@
 
 This module is the offline estimation core of the identification package:
 
-* :func:`fit_linear_model` is the ordinary least-squares estimator of [Hindrax-Drag] eq. 6,
-  theta = (X^T X)^-1 X^T Y, with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the
-  unbiased residual variance sigma^2 = S / (n - p) of eq. 8 (Beck and Arnold 1977; also
-  docs/identification.md §1.D "Ordinary LS covariance").
+* :func:`fit_linear_model` is the ordinary least-squares estimator of [Hindrax-Drag] eq. 6, theta = (X^T X)^-1 X^T Y,
+  with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the unbiased residual variance sigma^2 = S / (n - p) of
+  eq. 8 (Beck and Arnold 1977; also docs/identification.md §1.D "Ordinary LS covariance").
 * :func:`fit_drag` fits [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, to steady-state samples.
   [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
   ("the absolute value symbol is to conserve the velocity sign"), so that one model covers

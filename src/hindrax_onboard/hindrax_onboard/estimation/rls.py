@@ -59,10 +59,9 @@ docs/identification.md §1.D):
   constrained minimiser of the forgetting-weighted cost (Goodwin and Sin 1984, "Adaptive Filtering
   Prediction and Control", ch. 3), by an active set (p <= 6). The recursion keeps the
   unconstrained estimate; :meth:`at_bound` says which parameters sit on their bound.
-* ``change_threshold``: when the mean of the normalised a-priori error
-  ``e^2 / (sigma2_hat (1 + phi^T P phi))`` (chi-square with 1 degree of freedom for a correct model)
-  over ``change_samples`` consecutive samples exceeds it, the covariance is reset
-  (:meth:`reset_covariance`) and the residual statistics restart (:attr:`changes_detected`).
+* ``change_threshold``: when the mean of the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
+  (chi-square with 1 degree of freedom for a correct model) over ``change_samples`` consecutive samples exceeds it, the
+  covariance is reset (:meth:`reset_covariance`) and the residual statistics restart (:attr:`changes_detected`).
 * :meth:`published_std`: the std where the estimate has converged (std <= rel_tol |theta| + abs_tol,
   enough samples, excitation above ``min_excitation``), NaN ("not converged") elsewhere.
 

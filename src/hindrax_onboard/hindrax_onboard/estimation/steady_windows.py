@@ -18,11 +18,10 @@ Algorithm (all thresholds are arguments; defaults in brackets):
 3. Samples covered by at least one passing sub-window form the steady region; each maximal
    contiguous run of them lasting at least ``min_duration_s`` (after step 4) is reported, with
    its mean, standard deviation and slope of velocity and force.
-4. Edge trimming: leading and trailing samples of a region farther than :data:`EDGE_FACTOR` (2)
-   times ``max_std`` from the region mean are dropped (a 2 s window whose first samples are
-   still in the tail of the transient can pass the std test, since its std dilutes the tail);
-   the duration test is repeated after trimming. So every sample at a window's edges is within
-   ``EDGE_FACTOR * max_std`` of the window mean.
+4. Edge trimming: leading and trailing samples of a region farther than :data:`EDGE_FACTOR` (2) times ``max_std`` from
+   the region mean are dropped (a 2 s window whose first samples are still in the tail of the transient can pass the std
+   test, since its std dilutes the tail); the duration test is repeated after trimming. So every sample at a window's
+   edges is within ``EDGE_FACTOR * max_std`` of the window mean.
 
 Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise (DVL ~ 0.01 m/s,
 filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient accelerations (force / inertia).

@@ -11,24 +11,21 @@ the heartbeats; hardware is never starved by a CPU load, so it takes ``SCHED_FIF
 the right to, the rows say so). Each run gives the rows of :meth:`_Watch.rows` (disarms, target 0;
 heartbeat gaps as received, with a target, and between send stamps; tick gaps) under its prefix:
 
-* ``participant_churn_*``: a new ROS 2 process starts every :data:`PERIOD_S` seconds for
-  :data:`DURATION_S` seconds (alternately a 3 s subscriber to ``/diagnostics`` and the three
-  heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each exiting on its
-  own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a safety process on
-  such a start; gap target :data:`GAP_TARGET_MS` (the heartbeat timeouts are 200 ms).
-* ``busy_neighbours_*``: :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a
-  session of their own (as another service or a terminal on the Pi), run for :data:`DURATION_S`
-  seconds (:func:`cpu_bound_neighbours`; these rows are not measured without ``SCHED_FIFO``);
-  ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's
-  nice -5 only), no target: what the priority buys here (docs/deployment.md §1).
+* ``participant_churn_*``: a new ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds
+  (alternately a 3 s subscriber to ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and
+  ``hindrax health --quiet``), each exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can
+  stall a safety process on such a start; gap target :data:`GAP_TARGET_MS` (the heartbeat timeouts are 200 ms).
+* ``busy_neighbours_*``: :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as
+  another service or a terminal on the Pi), run for :data:`DURATION_S` seconds (:func:`cpu_bound_neighbours`; these rows
+  are not measured without ``SCHED_FIFO``); ``busy_neighbours_nice_only_*``: the same with the real-time priority
+  withheld (the launch file's nice -5 only), no target: what the priority buys here (docs/deployment.md §1).
 * ``pool_day_churn_*``: the same processes with the gateway beside them
-  (:func:`~hindrax_tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz
-  beside :data:`NEIGHBOURS` CPU-bound processes; each of :data:`TRIALS` trials starts three
-  processes together and waits for them to exit, as an operator and a curious user do on the pool
-  day: a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three heartbeats on the Pi's
-  internal domain with Fast DDS's default transports (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``,
-  no profile: shared memory + UDP), one to the gateway's topside topics on the topside domain, and
-  ``hindrax health --quiet`` on the internal domain (the Pi's shell); gap target
+  (:func:`~hindrax_tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz beside :data:`NEIGHBOURS`
+  CPU-bound processes; each of :data:`TRIALS` trials starts three processes together and waits for them to exit, as an
+  operator and a curious user do on the pool day: a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three
+  heartbeats on the Pi's internal domain with Fast DDS's default transports
+  (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, no profile: shared memory + UDP), one to the gateway's topside topics on
+  the topside domain, and ``hindrax health --quiet`` on the internal domain (the Pi's shell); gap target
   :data:`POOL_DAY_GAP_TARGET_MS`."""
 from __future__ import annotations
 

@@ -5,9 +5,8 @@ the safety supervisor, and a probe (controller, operator, sensors). For each pat
 commanded to 1700 us on every thruster, then the event happens; the time is taken from the event to the first
 I2C transaction after which the emulator decodes every thruster channel at neutral (1500 us within one count):
 
-* ``watchdog``: commands stop; measured from the last command the node took, so it includes
-  ``esc.watchdog_timeout_s`` (0.5 s in the shipped file); the row ``..._beyond_timeout`` subtracts it (the design
-  bound: one output period);
+* ``watchdog``: commands stop; measured from the last command the node took, so it includes ``esc.watchdog_timeout_s``
+  (0.5 s in the shipped file); the row ``..._beyond_timeout`` subtracts it (the design bound: one output period);
 * ``disarm_service``: ``esc/set_armed`` with ``arm=False`` called;
 * ``supervisor_breach``: a ``pressure/depth`` message beyond ``supervisor.max_depth_m`` published;
 * ``estop``: ``supervisor/estop`` called;
@@ -38,8 +37,7 @@ the player with ``safety_topics`` and its graph check off, as a tool without tha
 supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
 
 * ``supervisor_killed_during_replay_thrust_after_kill``: from the kill until no thruster carries a non-neutral pulse
-  (0 when the outputs had already stopped; :data:`REPLAY_CENSOR_S` when thrust was still on then, counted in the
-  note);
+  (0 when the outputs had already stopped; :data:`REPLAY_CENSOR_S` when thrust was still on then, counted in the note);
 * ``replay_alone_stopped_outputs``: the repeats in which the replay itself stopped the outputs before the kill (a
   second heartbeat publisher is a fault), with the time from the replay process's start in the note.
 

@@ -33,12 +33,11 @@ Rules (one test row each in ``test/test_identification_core.py``):
   phase and the step's message; estimates every ``publish_period_s``.
 * **Undo** (:attr:`~IdentificationCore.pending_undo`): the loads a stopped goal's calibration asked for and did not
   see removed are named in its result and confirmed first by the next goal (:class:`~.steps.Confirm`).
-* **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more
-  than :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is
-  said in a warning naming it ("identification starved for 0.31 s"); one later than twice
-  ``thrusters.wrench_timeout_s`` (the allocation has held neutral for as long as a wrench may be old: the manoeuvre
-  is not what the executive commanded) stops the goal with that reason, which trips the supervisor (its
-  ``disarm_cause`` then names the starvation).
+* **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more than
+  :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is said in a
+  warning naming it ("identification starved for 0.31 s"); one later than twice ``thrusters.wrench_timeout_s`` (the
+  allocation has held neutral for as long as a wrench may be old: the manoeuvre is not what the executive commanded)
+  stops the goal with that reason, which trips the supervisor (its ``disarm_cause`` then names the starvation).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
   past the next control tick while a goal runs."""
 from __future__ import annotations

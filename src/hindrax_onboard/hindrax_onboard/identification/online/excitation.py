@@ -13,10 +13,9 @@ the start of the run.
   and Schoukens 2012, *System Identification: A Frequency Domain Approach*, 2nd ed., §5.2.4), scaled so that
   its peak over one period is the amplitude. Periodic, so a run of whole periods has power on the designed
   lines only (no leakage) and a bounded displacement.
-* :class:`Prbs` - a maximum-length binary sequence (m-sequence, ``scipy.signal.max_len_seq``) of ``nbits`` bits
-  held for a clock period ``clock_s`` each: +-A, period (2^nbits - 1) clock_s, spectrum flat to about
-  0.44 / clock_s (Godfrey 1993, *Perturbation Signals for System Identification*, ch. 1; Pintelon and Schoukens
-  2012 §5.2.6).
+* :class:`Prbs` - a maximum-length binary sequence (m-sequence, ``scipy.signal.max_len_seq``) of ``nbits`` bits held for
+  a clock period ``clock_s`` each: +-A, period (2^nbits - 1) clock_s, spectrum flat to about 0.44 / clock_s (Godfrey
+  1993, *Perturbation Signals for System Identification*, ch. 1; Pintelon and Schoukens 2012 §5.2.6).
 * :class:`Chirp` - a logarithmic swept sine from ``f_min`` to ``f_max`` over the run (``scipy.signal.chirp``).
 * :func:`design_band` - the band from the DOF's time constant: with the vehicle file's inertia M, linear and
   quadratic damping k_l, k_q, the speed reached under the amplitude A is v_A (k_q v^2 + k_l v = A) and the
