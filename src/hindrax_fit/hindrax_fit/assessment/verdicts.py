@@ -81,8 +81,7 @@ __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts",
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.2
 #: Largest z of a measured position's residual-input cross-correlation a trusted fit may leave
-#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual
-#: test draws it.
+#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual test draws it.
 INDEPENDENCE_Z = 2.58
 #: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
 METHODS_MAX = 0.05

@@ -557,8 +557,7 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
     its known lag (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
     out: dict[str, fit_core.DofRecord] = {}
     h = opts.grid_s
-    # the force's mean over each grid step, no lag: the fit core applies delay and lag
-    # (docs/identification.md §7)
+    # the force's mean over each grid step, no lag: the fit core applies delay and lag (docs/identification.md §7)
     stretches_of = [_grid_stretches(p, opts.grid_s, step_mean=True, lag_s=0.0) for p in pres]
     for dof in dofs:
         k = DOFS.index(dof)

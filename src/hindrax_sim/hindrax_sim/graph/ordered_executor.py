@@ -49,8 +49,7 @@ __all__ = ["LeanWaitExecutor"]
 _COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num_clients", "num_services", "num_events")
 #: entity kinds in rclpy's per-node order of ready callbacks
 _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE = range(5)
-#: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves every
-#: handle)
+#: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves every handle)
 _ENTER, _EXIT = methodcaller("__enter__"), methodcaller("__exit__", None, None, None)
 _MESSAGE_ONLY = Subscription.CallbackType.MessageOnly
 
@@ -109,9 +108,8 @@ class _Snapshot:
                 self.waitables.append((wt, node))
                 counts = [a + b for a, b in zip(counts, _counts(wt))]
         self.waitable_counts = counts
-        # with every entity free (no task in progress) the wait takes these as they are: the handles
-        # of the subscriptions, clients, services and timers, then the QoS event handlers' event
-        # handles (module docstring)
+        # with every entity free (no task in progress) the wait takes these as they are: the handles of the
+        # subscriptions, clients, services and timers, then the QoS event handlers' event handles (module docstring)
         self.sub_h, self.cli_h, self.srv_h, self.tmr_h = ([e.handle for e in group] for group in (
             self.subs, self.clients, self.services, self.timers))
         self.events = [(wt, node, wt._EventHandler__event) for wt, node in self.waitables
@@ -315,8 +313,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                     if gc.handle.pointer in guards_ready:
                         gc._executor_triggered = True
 
-                # ready waitables (node by node, in each node's order), checked before the wait set
-                # is destroyed
+                # ready waitables (node by node, in each node's order), checked before the wait set is destroyed
                 is_ready = wait_set.is_ready
                 ready_events = {id(wt) for wt, _node, _h in events
                                 if wt._ready_to_take_data or is_ready('event', wt._event_index)}

@@ -130,8 +130,7 @@ class _Watch:
         node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
         #: status name -> the worst tick gap it reported on /diagnostics, (gap, thread CPU, process CPU) in ms
         self.tick_gaps: dict[str, tuple[float, float, float]] = {}
-        #: status name -> heartbeats its process took at a stale judgement
-        #: (liveness.HeartbeatWatch.fresh)
+        #: status name -> heartbeats its process took at a stale judgement (liveness.HeartbeatWatch.fresh)
         self.taken_late: dict[str, int] = {}
         self._active_since: float | None = None
         node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
@@ -261,9 +260,8 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
     with running_layout("hindrax-bench-busy-", layout=layout) as lay:
         watch = _Watch(lay.probe)
         lay.armed_at_1700()
-        # real-time from here on: every thread of this process, the emulation's serving threads
-        # included (one per node process, started when it connected: a thread started under
-        # SCHED_RESET_ON_FORK would not be)
+        # real-time from here on: every thread of this process, the emulation's serving threads included (one per node
+        # process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
         with hardware_priority() as refused:
             if refused:  # the same rows, not measured
                 return [{**r, "value": None, "note": f"not measured: {refused}"}

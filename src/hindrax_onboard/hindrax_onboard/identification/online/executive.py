@@ -76,8 +76,7 @@ __all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "comman
            "CALIBRATION_STEPS", "THRUST_STEPS", "expand_calibration", "calibration_forces", "inclining_load",
            "float_buoyancy"]
 
-#: Reference steps the executive can run before the manoeuvres; ``thrust`` runs
-#: every step of :data:`THRUST_STEPS`.
+#: Reference steps the executive can run before the manoeuvres; ``thrust`` runs every step of :data:`THRUST_STEPS`.
 CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay", "inclining", "float", "line_pull_negative", "thrust")
 #: The steps the per-direction thrust scales need (docs/identification.md §6.1): sinker and float (the vertical
 #: thrusters' reverse and forward directions; their hovers against the weighed net buoyancy), line pulls in both
@@ -299,10 +298,9 @@ class Executive:
             self.ctx.undo.update(dict(confirm))
 
     # ------------------------------------------------------------------ the shared state, by name
-    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents
-    #: them): the conditioned sensors ``state``, the pool ``box``, the allocation model ``core``,
-    #: ``curve``, ``matrix``, ``authority``, ``time_constant_s``, the step results, ``awaiting``
-    #: and ``prompt`` (operator), ``message``, ...
+    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents them): the conditioned
+    #: sensors ``state``, the pool ``box``, the allocation model ``core``, ``curve``, ``matrix``, ``authority``,
+    #: ``time_constant_s``, the step results, ``awaiting`` and ``prompt`` (operator), ``message``, ...
     _SHARED = frozenset({"state", "box", "core", "curve", "matrix", "authority", "time_constant_s",
                          "calibration", "inclining", "decays", "windows", "levels", "awaiting",
                          "prompt", "message", "depth_hold_m", "t_s"})

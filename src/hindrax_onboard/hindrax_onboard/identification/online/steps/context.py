@@ -78,10 +78,9 @@ class StepContext:
         self.calibration: dict = {}
         self.inclining: dict = {}
         self.decays: dict[str, tuple[float, float]] = {}
-        #: what a step waits for the operator to do ("" when not waiting): attach_ballast,
-        #: remove_ballast, attach_float, remove_float, apply_line_pull_<surge|sway>[_negative],
-        #: release_line_<surge|sway>[_negative], attach_inclining_mass_<dof>,
-        #: remove_inclining_mass_<dof>
+        #: what a step waits for the operator to do ("" when not waiting): attach_ballast, remove_ballast, attach_float,
+        #: remove_float, apply_line_pull_<surge|sway>[_negative], release_line_<surge|sway>[_negative],
+        #: attach_inclining_mass_<dof>, remove_inclining_mass_<dof>
         self.awaiting = ""
         #: the operator's instruction while :attr:`awaiting` ("" otherwise), e.g. 'calibration:
         #: attach the ballast (8.56 N in water), then call continue'
