@@ -515,8 +515,7 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
         parts.append(f"<p><b>{html.escape(dof)}</b>: {html.escape(e['status'])} ({html.escape(e['reason'])})</p>")
     parts.append("<h2>Validation</h2>" + _table(
         ("DOF", "data", "nrmse", "nrmse_hold", "nrmse_zero", "samples"),
-        ((dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")),
-          v["samples"])
+        ((dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")), v["samples"])
          for dof, r in res.dofs.items() for key, v in r.validation.items()
          if isinstance(v, dict) and "nrmse" in v)))
     parts.append("<p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, "

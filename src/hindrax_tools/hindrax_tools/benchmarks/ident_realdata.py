@@ -115,8 +115,7 @@ DATASETS: tuple[DataSet, ...] = (
 
 def run(only: list[str] | None = None, keep: str | None = None) -> dict:
     """{data set name: {"note", "bags_s", "fit_s", dof: row of :func:`.ident_fit.evaluate`}}."""
-    return {data.name: {"note": data.note, "bags_s": bags_s, "fit_s": fit_s,
-                        **{d: res[d] for d in DOFS_COMPARED}}
+    return {data.name: {"note": data.note, "bags_s": bags_s, "fit_s": fit_s, **{d: res[d] for d in DOFS_COMPARED}}
             for data, bags_s, fit_s, res in evaluated(DATASETS, only, keep, gray_box=True)}
 
 

@@ -862,8 +862,7 @@ def replay_rows(quick: bool = False) -> list[dict]:
                     "before the kill" + (f", {1e3 * float(np.median(by_replay)):.0f} ms median, "
                                          f"{1e3 * float(np.max(by_replay)):.0f} ms max after the replay process "
                                          "started" if by_replay else ""))
-    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill,
-                    target=500.0, note=note),
+    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill, target=500.0, note=note),
             {"name": "replay_alone_stopped_outputs", "value": len(by_replay), "unit": f"of {repeats} repeats",
              "note": stopped_note}]
 

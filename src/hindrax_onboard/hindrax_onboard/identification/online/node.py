@@ -239,8 +239,7 @@ class IdentificationNode(VehicleNode):
                                 (Dvl, "dvl/data", lambda m: add(samples_from_dvl(m)), 20),
                                 (FluidPressure, "pressure/fluid_pressure",
                                  lambda m: add([sample_from_pressure(m)]), 20),
-                                (Imu, "imu/data_raw",
-                                 lambda m: add(samples_from_imu(m, self._mount_t)), 50),
+                                (Imu, "imu/data_raw", lambda m: add(samples_from_imu(m, self._mount_t)), 50),
                                 (Range, "ping/altitude", lambda m: add([sample_from_range(m)]), 20),
                                 (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))]
         else:
