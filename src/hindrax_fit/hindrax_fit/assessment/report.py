@@ -216,11 +216,10 @@ def references_html(document: Mapping) -> str:
         verdict = "curve off" if abs(z) > 1.96 else "curve agrees"
         srow.append((head[0], _fmt(v), _fmt(sd, 2), *head[1:], f"{100 * off:+.1f} %", _fmt(z, 3), verdict))
     if srow:
-        parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
-                     "scale s (true thrust / curve thrust, per thruster group and rotation direction) from its prior "
-                     "and the calibration steps; the "
-                     "self-propelled values without the calibration would be off by 1/s - 1; z = (s - 1) / std "
-                     "(|z| > 1.96: the thrust curve disagrees with the known forces)</p>" + _table(
+        parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each scale "
+                     "s (true thrust / curve thrust, per thruster group and rotation direction) from its prior and the "
+                     "calibration steps; the self-propelled values without the calibration would be off by 1/s - 1; "
+                     "z = (s - 1) / std (|z| > 1.96: the thrust curve disagrees with the known forces)</p>" + _table(
                          ("scale", "value", "std", "prior", "steps", "DOFs", "uncalibrated error",
                           "z", "verdict"), srow))
     frow = []
@@ -309,9 +308,8 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
             adv = [(n, e["advice"]) for n, e in a["parameters"].items() if e.get("advice")]
             if adv:
                 parts.append(_advice_table(adv))
-        parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
-                     f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "
-                     f"{html.escape(r.steady_note)}</p>")
+        parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time {r.pool_time_s:.0f} s; "
+                     f"RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: {html.escape(r.steady_note)}</p>")
         fv = out / f"{dof}_force_velocity.png"
         _force_velocity_plot(r, fv)
         parts.append(f"<img src='{fv.name}' alt='{dof} force vs velocity'>")
@@ -495,10 +493,9 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
     def candidates(e: Mapping) -> str:
         return "; ".join(f"{c['terms']}: {c['cv_nrmse']:.3f}" if c.get("cv_nrmse") is not None
                          else c["terms"] for c in e.get("model_selection", []))
-    parts.append("<p>std: the cluster-robust (sandwich) covariance with contiguous blocks of "
-                 "segments as clusters, at least the model-based one; 95 % intervals Student t "
-                 "with clusters - 1 degrees of freedom (docs/identification.md §7).</p>"
-                 "<h2>Model and timing</h2>" + _table(
+    parts.append("<p>std: the cluster-robust (sandwich) covariance with contiguous blocks of segments as clusters, at "
+                 "least the model-based one; 95 % intervals Student t with clusters - 1 degrees of freedom "
+                 "(docs/identification.md §7).</p><h2>Model and timing</h2>" + _table(
                      ("DOF", "model (chosen by cross-validation)", "candidates: CV nrmse",
                       "delay, s", "lag, s", "clusters"),
                      ((dof, e.get("model", "-"), candidates(e), f"{e['timing']['delay_s']:.3f}",
@@ -518,10 +515,9 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
         ((dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")), v["samples"])
          for dof, r in res.dofs.items() for key, v in r.validation.items()
          if isinstance(v, dict) and "nrmse" in v)))
-    parts.append("<p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, "
-                 "v_pred simulated open loop from the recorded force and re-initialised from the "
-                 "measured velocity at the start of each segment; nrmse_hold: velocity held at the "
-                 "segment's initial value; nrmse_zero: 0.</p>")
+    parts.append("<p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred simulated open "
+                 "loop from the recorded force and re-initialised from the measured velocity at the start of each "
+                 "segment; nrmse_hold: velocity held at the segment's initial value; nrmse_zero: 0.</p>")
     for dof, r in res.dofs.items():
         if r.status == "fitted" and r.plot:
             png = rep / f"{dof}_validation.png"

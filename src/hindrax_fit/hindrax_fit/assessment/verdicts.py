@@ -501,8 +501,7 @@ def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay:
     if abs(z) <= REFERENCE_Z_MAX:
         return None
     return (f"{dof} inertia {v:.4g} kg m^2 (self-propelled) differs from the free decay's {vf:.4g} +- {sf:.2g} kg m^2 "
-            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): "
-            f"the thrust curve (or the model) is off in {dof}")
+            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): the thrust curve (or the model) is off in {dof}")
 
 
 def apply_reference_verdicts(document: dict) -> dict:

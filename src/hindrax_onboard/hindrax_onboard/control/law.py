@@ -136,8 +136,7 @@ class AxisGains:
             g = f"Kv {m * self.kp:.3g} N s/m, Ki {m * self.ki:.3g} N/m"
         else:
             f, x = ("N m", "rad") if rot else ("N", "m")
-            g = (f"Kp {m * self.kp:.3g} {f}/{x}, Kd {m * self.kd:.3g} {f} s/{x}, "
-                 f"Ki {m * self.ki:.3g} {f}/({x} s)")
+            g = (f"Kp {m * self.kp:.3g} {f}/{x}, Kd {m * self.kd:.3g} {f} s/{x}, Ki {m * self.ki:.3g} {f}/({x} s)")
         low = "" if self.factor >= 1.0 else (f", lowered x{self.factor:.2f} by the inertia's "
                                              f"{100 * self.rel_std:.1f} % std")
         return (f"{self.dof}: {g} at {self.w:.2f} rad/s (target {self.w_target:.2f}{low}); inertia {m:.4g} "

@@ -156,8 +156,7 @@ class DragFit:
     quadratic_damping_std = _Param("Standard deviation of k_q ([Hindrax-Drag] eq. 7).")
     linear_damping = _Param("Linear damping k_l of [Hindrax-Drag] eq. 2 (Table 3 second column).")
     linear_damping_std = _Param("Standard deviation of k_l.")
-    bias = _Param("Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net "
-                   "buoyancy in heave).")
+    bias = _Param("Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net buoyancy in heave).")
     bias_std = _Param("Standard deviation of b.")
 
     def predict(self, velocity) -> np.ndarray:

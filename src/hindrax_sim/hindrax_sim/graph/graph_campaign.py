@@ -339,9 +339,8 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
         outcome.wall_time_s = time.monotonic() - wall0
         if idents:
             ticker.set("offline identification: writing identification.yaml and the report")
-            note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), "
-                    f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
-                    f"action result: {outcome.message}")
+            note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), {outcome.sim_time_s:.0f} s "
+                    f"simulated, wall {outcome.wall_time_s:.0f} s; action result: {outcome.message}")
             # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
             add = sections if sections is not None and node_record is not None else None
             write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),

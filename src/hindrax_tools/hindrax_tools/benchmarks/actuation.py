@@ -155,8 +155,7 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
          "target": "<= 3 ms (event-driven ESC output)", "note": f"SCHED_FIFO {sched.requested}"
          if sched.granted else f"nice 0: {sched.reason or 'no priority in the launch file'}"},
         {"name": "wrench_to_registers_cpu_p99", "value": float(np.percentile(np.array(cpu_latencies) * 1e3, 99)),
-         "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait "
-                               "for a core"},
+         "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait for a core"},
         {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count", "note": f"of {state['sent']} sent"},
         {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
          "note": "whole process: publisher + allocation + ESC node"},

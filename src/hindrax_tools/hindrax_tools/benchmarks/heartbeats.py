@@ -100,9 +100,8 @@ def cycle_rows(n: int) -> list[dict]:
                     per[kind].append((time.process_time() - t0) / n * 1e6)
         tx.destroy_node()
     return _cpu_rows("cycle", per, n,
-                     "process CPU per beat built, published, delivered to a second participant "
-                     "through the EventsExecutor and read ({k}), median of {blocks} alternating "
-                     "blocks")
+                     "process CPU per beat built, published, delivered to a second participant through the "
+                     "EventsExecutor and read ({k}), median of {blocks} alternating blocks")
 
 
 def _cpu_rows(what: str, per: dict[str, list[float]], n: int, note: str) -> list[dict]:

@@ -277,9 +277,8 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
             rows.append({"name": f"{data.name} {dof} nrmse fit / ls / hold",
                          "value": f"{r['fit']:.3f} / {r['ls']:.3f} / {r['hold']:.3f}", "unit": "",
                          "target": "fit <= 0.9 ls and < hold",
-                         "note": f"cv {r.get('cv', math.nan):.3f}; noise floor "
-                                 f"{r.get('floor', math.nan):.3f}; {r['status']}; {r['samples']} "
-                                 f"samples; {r.get('model', '')}"})
+                         "note": f"cv {r.get('cv', math.nan):.3f}; noise floor {r.get('floor', math.nan):.3f}; "
+                                 f"{r['status']}; {r['samples']} samples; {r.get('model', '')}"})
             rows.append({"name": f"{data.name} {dof} fit / ls", "unit": "", "target": "<= 0.9",
                          "value": round(r["fit"] / r["ls"], 3) if r["ls"] > 0 else math.nan})
     return rows

@@ -161,10 +161,9 @@ class _Watch:
         worst = max(v[0] for v in self.tick_gaps.values())
         each = "; ".join(f"{k} {g:.0f} ms ({t:.1f} / {p:.1f})" for k, (g, t, p) in sorted(self.tick_gaps.items()))
         return {"name": name, "value": worst, "unit": "ms",
-                "note": f"longest gap between two steady ticks of a safety process (reports "
-                        f"covering the window only), each with the CPU time in it (its executor "
-                        f"thread / the whole process, ms): {each}; heartbeats taken at a stale "
-                        f"judgement: {self.taken_late or 'none reported'}"}
+                "note": f"longest gap between two steady ticks of a safety process (reports covering the window only), "
+                        f"each with the CPU time in it (its executor thread / the whole process, ms): {each}; "
+                        f"heartbeats taken at a stale judgement: {self.taken_late or 'none reported'}"}
 
     def _beat(self, name: str, msg) -> None:
         if self.active:
@@ -232,9 +231,8 @@ def churn_rows(quick: bool = False) -> list[dict]:
             for p in started:
                 p.wait(60)
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
-            f"`hindrax health` alternately) while armed at 1700 us; safety processes on the UDP "
-            f"loopback transport; emulated hardware "
-            f"{'not real-time: ' + refused if refused else 'real-time, above them'}")
+            f"`hindrax health` alternately) while armed at 1700 us; safety processes on the UDP loopback transport; "
+            f"emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
     return watch.rows("participant_churn_", what, GAP_TARGET_MS, n=k)
 
 
@@ -310,11 +308,10 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
                 watch.active = False
                 load = os.getloadavg()[0]
     hardware = "not real-time: " + refused if refused else "real-time, above them"
-    what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with "
-            f"default transports, one on the topside and `hindrax health` started together (exit "
-            f"codes {sorted(set(exits))}), armed and commanded at 1700 us, 50 Hz, beside "
-            f"{NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the end); emulated "
-            f"hardware {hardware}")
+    what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with default transports, "
+            f"one on the topside and `hindrax health` started together (exit codes {sorted(set(exits))}), armed and "
+            f"commanded at 1700 us, 50 Hz, beside {NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the "
+            f"end); emulated hardware {hardware}")
     return watch.rows("pool_day_churn_", what, POOL_DAY_GAP_TARGET_MS, n=trials)
 
 

@@ -1005,8 +1005,7 @@ def run_processes(quick: bool = False) -> list[dict]:
         times["clock_step_back_detected"] = _clock_rows(lay, repeats)
         rearms = lay.rearms
     rows = [{"name": "guard_cpu_percent", "value": guard_cpu, "unit": "% of a core",
-             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz "
-                     "timer)"},
+             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz timer)"},
             {"name": "esc_disarmed_right_after_arm", "value": len(rearms), "unit": "arms",
              "note": f"of {5 * repeats + 1} arm requests, the ESC disarmed itself before 1700 us "
                      "reached the wire (the bench armed again)"

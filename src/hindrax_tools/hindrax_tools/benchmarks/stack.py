@@ -728,9 +728,8 @@ def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
             target = ("<= 1.3" if phase == "running" else "<= 1.0") if n == "total" else ""
             rows += [{"name": f"launch_skeleton_{phase}_cpu_{n}_per_pool", "value": sk[n] / pool,
                       "unit": "x", "target": target,
-                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and "
-                              f"messages without logic; unit: the pool's {100 * pool:.1f} % in the "
-                              f"launch's {phase} windows"},
+                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and messages without "
+                              f"logic; unit: the pool's {100 * pool:.1f} % in the launch's {phase} windows"},
                      {"name": f"launch_{phase}_vs_skeleton_ratio_{n}", "value": la[n] / sk[n],
                       "unit": "x",
                       "note": f"launch {la[n] / pool:.3f} - skeleton {sk[n] / pool:.3f} = "

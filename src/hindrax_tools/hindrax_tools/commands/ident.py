@@ -71,10 +71,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--volume", type=float, required=True, help="displaced volume V, m^3")
         parser.add_argument("--density", type=float, default=1000.0, help="water density, kg/m^3 (default 1000)")
         parser.add_argument("--model", choices=("linear", "quadratic"), default="linear",
-                            help="linear: log decrement and period only (default); quadratic: also fit the "
-                                 "nonlinear ODE with linear + quadratic damping to the whole record "
-                                 "([SmallROV] eq. 12), adding linear_damping_n_s_per_m, "
-                                 "quadratic_damping_n_s2_per_m2 and their _std")
+                            help="linear: log decrement and period only (default); quadratic: also fit the nonlinear "
+                                 "ODE with linear + quadratic damping to the whole record ([SmallROV] eq. 12), adding "
+                                 "linear_damping_n_s_per_m, quadratic_damping_n_s2_per_m2 and their _std")
     elif which == "thruster-fit":
         parser.add_argument("file", help="CSV with a header: pulse width (us), thrust (N)")
         parser.add_argument("--write", metavar="CONFIG", default=None,

@@ -42,8 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "velocity in cross-validation, else its verdict is 'no model beats "
                              "holding the velocity' (default 0.05; docs/identification.md §7)")
     parser.add_argument("--max-delay-s", type=float, default=1.0,
-                        help="largest input delay + lag searched for a commanded wrench, s "
-                             "(default 1.0)")
+                        help="largest input delay + lag searched for a commanded wrench, s (default 1.0)")
     parser.add_argument("--config", default=None,
                         help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
                              "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")

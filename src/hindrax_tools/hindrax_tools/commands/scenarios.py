@@ -82,9 +82,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--excitation-duration", type=float, default=None,
                         help="broadband run per DOF, s (default identification.excitation_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="reference steps before the manoeuvres of every case, as hindrax run "
-                             "--calibrate (docs/identification.md §6.2); the label gains "
-                             "[calibrate <steps>]")
+                        help="reference steps before the manoeuvres of every case, as hindrax run --calibrate "
+                             "(docs/identification.md §6.2); the label gains [calibrate <steps>]")
     parser.add_argument("--cached-only", action="store_true",
                         help="with --cache: use only the cases found there (re-assess them with the current verdicts "
                              "and tables; the others are listed as not run)")
@@ -340,8 +339,7 @@ def run(args: argparse.Namespace) -> int:
     names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]
     missing = [n for n in names if not _truth_path(n).is_file()]
     if missing:
-        raise CommandError(f"--scenarios: no truth file for {missing}; "
-                           f"shipped: {', '.join(scenario_names())}")
+        raise CommandError(f"--scenarios: no truth file for {missing}; shipped: {', '.join(scenario_names())}")
     dofs = choices("--dofs", args.dofs, DOFS, "DOF", empty_ok=False)
     if args.seeds < 1 or args.jobs < 1:
         raise CommandError("--seeds and --jobs must be >= 1")

@@ -89,8 +89,7 @@ def expand_calibration(steps: Iterable[str]) -> list[str]:
     Raises ``ValueError`` for a name not in :data:`CALIBRATION_STEPS`."""
     bad = [s for s in steps if s not in CALIBRATION_STEPS]
     if bad:
-        raise ValueError(f"unknown calibration step(s) {bad}; "
-                         f"choose from {', '.join(CALIBRATION_STEPS)}")
+        raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
     out: list[str] = []
     for s in steps:
         for x in (THRUST_STEPS if s == "thrust" else (s,)):
@@ -535,8 +534,7 @@ class Executive:
         if math.isfinite(st.depth_m) and st.depth_m > lim.max_depth_m:
             raise CampaignAbort(f"depth {st.depth_m:.2f} m beyond limits.max_depth_m {lim.max_depth_m:g}")
         if math.isfinite(st.altitude_m) and st.altitude_m < lim.min_altitude_m:
-            raise CampaignAbort(f"altitude {st.altitude_m:.2f} m below limits.min_altitude_m "
-                                f"{lim.min_altitude_m:g}")
+            raise CampaignAbort(f"altitude {st.altitude_m:.2f} m below limits.min_altitude_m {lim.min_altitude_m:g}")
         roll, pitch = st.rpy_rad[0], st.rpy_rad[1]
         if math.isfinite(roll) and abs(roll) > lim.max_roll_rad:
             raise CampaignAbort(f"roll {roll:.2f} rad beyond limits.max_roll_rad {lim.max_roll_rad:g}")

@@ -196,9 +196,8 @@ class IdentificationNode(VehicleNode):
         self._timer = self.create_timer(self.tick_s, self._on_tick, autostart=False)
         self._idle_timer = self.create_timer(IDLE_STATUS_PERIOD_S, self._on_tick)
         command_hz = 1.0 / (self.tick_s * command_ticks(self.config, self.tick_s))
-        log.info(f"identification executive ready: action run_identification, ticks at "
-                 f"{1.0 / self.tick_s:g} Hz, wrench at {command_hz:g} Hz, estimates at "
-                 f"{1.0 / self.publish_period_s:g} Hz")
+        log.info(f"identification executive ready: action run_identification, ticks at {1.0 / self.tick_s:g} Hz, "
+                 f"wrench at {command_hz:g} Hz, estimates at {1.0 / self.publish_period_s:g} Hz")
 
     def _param(self, name: str, default: float, description: str) -> float:
         """A read-only node parameter (> 0, s). Raises :class:`ConfigError` (one line) for another value."""

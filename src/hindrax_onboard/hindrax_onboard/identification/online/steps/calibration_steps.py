@@ -117,8 +117,7 @@ class KnownForceStep(Step):
         dx = x1 - x2
         scale = e / dx if dx != 0.0 else math.nan
         if not scale > 0.0:
-            raise CampaignAbort(f"{head} the holding force did not {self.change} "
-                                f"({x1:.3g} -> {x2:.3g} N)")
+            raise CampaignAbort(f"{head} the holding force did not {self.change} ({x1:.3g} -> {x2:.3g} N)")
         ctx.calibration[self.key] = {
             "value": scale, "std": scale * math.hypot(s1, s2) / abs(dx), "known_force_n": self.force_n,
             "holding_force_n": [x1, x2], "holding_force_std_n": [s1, s2], "method": self.method,
@@ -183,8 +182,7 @@ class LinePull(KnownForceStep):
     def prompts(self):
         sign = "+" if self.sense > 0 else "-"
         return ((f"apply_line_pull_{self.key}",
-                 f"calibration: pull the line along {sign}{'xy'[self.axis]} "
-                 f"({self.force_n:.3g} N over the pulley)"),
+                 f"calibration: pull the line along {sign}{'xy'[self.axis]} ({self.force_n:.3g} N over the pulley)"),
                 (f"release_line_{self.key}", "calibration: release the line"))
 
 
