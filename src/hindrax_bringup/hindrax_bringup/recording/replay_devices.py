@@ -6,11 +6,10 @@ drivers)". A bag recorded by the stack holds every byte and register transaction
 This module serves them again to *fresh, unmodified* driver nodes through the same transports the simulator
 uses, so the real parsing code runs on the recorded stream:
 
-- :class:`SerialReplayDevice` (a :class:`~hindrax_common.transport.pty_device.ByteStreamEmulator`, served on a
-  pty by :class:`~hindrax_common.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in
-  order, each at the step of the replay clock that reaches its recorded receive time
-  (``paced=True``) or all at once (``paced=False``). Host->device bytes are ignored (the recorded
-  replies are in the device->host stream already).
+- :class:`SerialReplayDevice` (a :class:`~hindrax_common.transport.pty_device.ByteStreamEmulator`, served on a pty by
+  :class:`~hindrax_common.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in order, each at the
+  step of the replay clock that reaches its recorded receive time (``paced=True``) or all at once (``paced=False``).
+  Host->device bytes are ignored (the recorded replies are in the device->host stream already).
 - :class:`I2CReplayDevice` (one per I2C address on an :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`):
   answers each read transaction with the next recorded read data *of that register* (the register pointer is the first
   byte of the preceding write, as on the wire), and accepts writes, comparing each with the next recorded write of the

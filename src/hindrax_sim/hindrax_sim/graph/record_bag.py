@@ -3,13 +3,12 @@
 Usage: ``python -m hindrax_sim.graph.record_bag [--out DIR]`` (default: the repository's
 ``src/hindrax_bringup/test/data``; the synthetic bags are :mod:`hindrax_bringup.recording.make_test_bags`).
 
-Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with
-``sim=True``: simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837,
-ICM-20948 and ESC driver nodes), recorded by the stack's own recorder node (all topics), simulated time
-starting at 0 (``/clock``), as fast as possible. The vehicle floats passively from
-``pool.start_position_ned_m`` = :data:`START_POSITION_NED_M` (ESC disarmed, neutral): every parsed topic
-(``dvl/*``, ``ping/*``, ``pressure/*``, ``imu/*``, ``thrusters/pulse_width``) beside the raw device data
-(``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chunk and I2C transaction), the simulator's
+Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with ``sim=True``:
+simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837, ICM-20948 and ESC driver
+nodes), recorded by the stack's own recorder node (all topics), simulated time starting at 0 (``/clock``), as fast as
+possible. The vehicle floats passively from ``pool.start_position_ned_m`` = :data:`START_POSITION_NED_M` (ESC disarmed,
+neutral): every parsed topic (``dvl/*``, ``ping/*``, ``pressure/*``, ``imu/*``, ``thrusters/pulse_width``) beside the
+raw device data (``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chunk and I2C transaction), the simulator's
 ground truth (``sim/*``) and ``/clock``.
 
 A clean start and end, so that a replay of the raw data through fresh drivers reproduces the parsed topics
