@@ -19,11 +19,9 @@ tau = [X Y Z K M N]:
   chosen by the sign of the velocity (heave: ``*_positive`` for w > 0, moving down, [Hindrax-Drag]
   §4.1). No off-diagonal damping.
 * g(eta) ([NTNU-Thesis] eqs. 2.22-2.23 with the corrected sign of f_b): W = m g, B = rho g V, B
-  times the submerged fraction of a free-surface model when one is given (:mod:`.pool`), else fully
-  submerged.
+  times the submerged fraction of a free-surface model when one is given (:mod:`.pool`), else fully submerged.
 * Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
-  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an
-  output only.
+  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an output only.
 
 Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats
 (3-vectors as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call

@@ -17,9 +17,8 @@ Publishes
     (``sim/contact/<face>``, WARN while touching, value ``since_s``), on every change and once per
     simulated second. Ground truth is for evaluation only: no node under test may read ``sim/*``.
 Parameters
-    The vehicle configuration (``--params-file hindrax.yaml``; or ``config_file``; or the shipped file).
-    Node-specific: ``truth_rate_hz`` (simulated-time rate of sim/odometry and sim/wrench, default
-    ``simulation.clock_rate_hz``).
+    The vehicle configuration (``--params-file hindrax.yaml``; or ``config_file``; or the shipped file). Node-specific:
+    ``truth_rate_hz`` (simulated-time rate of sim/odometry and sim/wrench, default ``simulation.clock_rate_hz``).
 
 Time: the node steps the model from a timer on the steady (wall) clock, never on its own /clock. With
 ``simulation.real_time_factor`` r > 0 the simulated time follows ``r`` x the wall time (if the machine cannot

@@ -10,15 +10,14 @@ names, substitutions, conditions, the ``--ros-args`` a node gets); anything else
 :class:`LaunchFileError`, never ignored.
 
 Supported
-    ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``, ``<node pkg exec name namespace
-    output respawn respawn_delay args launch-prefix exec_name if unless>``
-    holding ``<param from/>``, ``<param name value/>`` and
-    ``<remap from to/>`` and ``<env name value/>``, ``<include file>`` holding ``<arg name value/>``, ``<group>``
-    (with ``if``/``unless``), and ``<set_env name value/>`` (for the nodes after it in its ``<launch>`` or
-    scoped ``<group>``, as ``launch`` does: included files see it, and one set in an included file stays set
-    after the ``<include>``; a node's own ``<env>`` wins);
-    the substitutions ``$(var NAME)``, ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that
-    evaluate to ``true``/``false``/``1``/``0`` (any case), as ``launch.conditions.evaluate_condition_expression``.
+    ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``,
+    ``<node pkg exec name namespace output respawn respawn_delay args launch-prefix exec_name if unless>`` holding
+    ``<param from/>``, ``<param name value/>`` and ``<remap from to/>`` and ``<env name value/>``, ``<include file>``
+    holding ``<arg name value/>``, ``<group>`` (with ``if``/``unless``), and ``<set_env name value/>`` (for the nodes
+    after it in its ``<launch>`` or scoped ``<group>``, as ``launch`` does: included files see it, and one set in an
+    included file stays set after the ``<include>``; a node's own ``<env>`` wins); the substitutions ``$(var NAME)``,
+    ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that evaluate to ``true``/``false``/``1``/``0``
+    (any case), as ``launch.conditions.evaluate_condition_expression``.
 Command of a node (``launch_ros.actions.Node``)
     ``<executable> [args...] --ros-args -r __node:=<name> [-r __ns:=<ns>] --params-file <file> ... -r from:=to``,
     the ``<param name value>`` elements written, as ``launch_ros`` does, to a parameter file keyed ``/**``, with

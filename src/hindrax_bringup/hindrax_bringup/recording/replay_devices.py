@@ -219,9 +219,8 @@ class ReplayHardware:
             in the bag).
         paced: see :class:`SerialReplayDevice`.
     Attributes:
-        serial (name -> SerialReplayDevice), ptys (name -> PtyDevice without a thread: served by
-        :class:`DriverReplay`), ports (name -> pty path), i2c (address -> I2CReplayDevice),
-        i2c_device_of (address -> device name), i2c_bus.
+        serial (name -> SerialReplayDevice), ptys (name -> PtyDevice without a thread: served by :class:`DriverReplay`),
+        ports (name -> pty path), i2c (address -> I2CReplayDevice), i2c_device_of (address -> device name), i2c_bus.
     Raises:
         FileNotFoundError / BagError: bad bag path."""
 

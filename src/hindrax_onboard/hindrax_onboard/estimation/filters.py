@@ -139,8 +139,7 @@ class KinematicKalmanFilter:
             z: measurement in the measured unit, or NaN/None when missing.
 
         Returns:
-            (position, velocity, acceleration) estimates at ``t_s`` (NaN before the first
-            valid measurement).
+            (position, velocity, acceleration) estimates at ``t_s`` (NaN before the first valid measurement).
 
         Raises:
             EstimationError: non-finite ``t_s`` or time going backwards."""

@@ -6,9 +6,8 @@ This module is the offline estimation core of the identification package:
   with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the unbiased residual variance sigma^2 = S / (n - p) of
   eq. 8 (Beck and Arnold 1977; also docs/identification.md §1.D "Ordinary LS covariance").
 * :func:`fit_drag` fits [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, to steady-state samples.
-  [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
-  ("the absolute value symbol is to conserve the velocity sign"), so that one model covers
-  both signs of the velocity.
+  [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state ("the absolute
+  value symbol is to conserve the velocity sign"), so that one model covers both signs of the velocity.
 
 Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a rank diagnosis we can
 turn into a clear error; we use an SVD of the regressor with its columns scaled to unit norm (numerically equivalent to

@@ -2,12 +2,10 @@
 tools (the references of priors, inclining and tilt-decay do not depend on the thrust curve).
 
 * ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO] [--model linear|quadratic]``:
-  [Hindrax-AM] analysis of a free-decay record (CSV with a header row; column 1 time in s, column 2
-  acceleration in m/s^2). Prints one JSON object
-  (:meth:`hindrax_onboard.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
-  added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8),
-  kc (eq. 9)... ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear +
-  quadratic damping, [SmallROV] eq. 12;
+  [Hindrax-AM] analysis of a free-decay record (CSV with a header row; column 1 time in s, column 2 acceleration in
+  m/s^2). Prints one JSON object (:meth:`hindrax_onboard.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s,
+  zeta, added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
+  ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear + quadratic damping, [SmallROV] eq. 12;
   :func:`hindrax_onboard.estimation.free_decay.quadratic_free_decay_keys`).
 * ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints

@@ -38,12 +38,11 @@ Service ``identification/continue`` (std_srvs/Trigger)
     (8.56 N in water), then call continue``), the step goes on (success True, message ``continuing: <what>``);
     otherwise success False with the reason (no goal, or nothing awaited). Nothing waits in the callback.
 Subscribes
-    ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure``
-    (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
-    ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag): only while a goal is
-    accepted or runs (see "Inputs"); ``esc/output_state`` (the ESC's armed flag, latched, on change; always);
-    ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust, and why, for the result; :mod:`.core`;
-    always).
+    ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure`` (FluidPressure, Pa),
+    ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range), ``thrusters/pulse_width`` (ThrusterPwm, widths written by
+    the ESC node and the armed flag): only while a goal is accepted or runs (see "Inputs"); ``esc/output_state`` (the
+    ESC's armed flag, latched, on change; always); ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust,
+    and why, for the result; :mod:`.core`; always).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz``
     (the control tick is ``identification.estimate_rate_hz``; executive module docstring, "Command
