@@ -12,8 +12,7 @@ does not import ROS (src/hindrax_tools/test/test_cli_help.py; time: ``make bench
 Exit status: 0 on success, 1 when the command found a problem (it raises
 :class:`~hindrax_onboard.commands.common.CommandError`, whose one-line message goes to stderr) or names a
 command of a package not installed here (a topside command on the vehicle), 2 on a usage error (argparse),
-130 when interrupted, 141 when the reader of its output closed the pipe (``| head``: no traceback).
-"""
+130 when interrupted, 141 when the reader of its output closed the pipe (``| head``: no traceback)."""
 from __future__ import annotations
 
 import argparse
@@ -73,8 +72,7 @@ def build_parser(argv: Sequence[str] | None = None, commands=None) -> argparse.A
     argv: the command line (without the program name; default ``sys.argv[1:]``); commands: the rows (default
     :func:`all_commands`). Only the module of the
     subcommand its leading words name is imported (:func:`_add_module_arguments`); the other subcommands get
-    their help line only, which is all ``hindrax --help`` and ``hindrax <group> --help`` print.
-    """
+    their help line only, which is all ``hindrax --help`` and ``hindrax <group> --help`` print."""
     commands = all_commands() if commands is None else commands
     words_given = _command_words(commands, sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(prog="hindrax", description="Hindrax ROV onboard stack")

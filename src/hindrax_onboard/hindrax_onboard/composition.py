@@ -2,16 +2,14 @@
 recorder.
 
 ``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their names (``identification``, ``controller``),
-read the same vehicle file and are spun by one executor (:func:`hindrax_bringup.layout.composition.run_group`; the
-node list is :data:`hindrax_bringup.layout.composition.IDENT_GROUPS`, this module maps it to classes).
-``ident_record_node`` (recording on, the default): the same two and the recorder (the other nodes ignore keys they do
-not declare).
+read the same vehicle file and are spun by one executor (:func:`hindrax_bringup.layout.composition.run_group`; the node
+list is :data:`hindrax_bringup.layout.composition.IDENT_GROUPS`, this module maps it to classes). ``ident_record_node``
+(recording on, the default): the same two and the recorder (the other nodes ignore keys they do not declare).
 
 Why composed: docs/architecture.md §10.1. None of them has a safety role (§8): a failure of one ends all, and the
 allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source. The recorder's bag writer
 keeps its own thread, and its keep-last depth (``queue_depth``, 1000) holds what arrives while an identification
-callback runs.
-"""
+callback runs."""
 from __future__ import annotations
 
 from typing import Sequence

@@ -6,8 +6,7 @@ device measures, with noise), :mod:`.simulator` (:class:`Simulator`: everything 
 :mod:`.node` (rclpy node publishing /clock and ground truth; imported only on demand). Above control and
 identification, it runs them: :mod:`.campaign` (the identification campaign stepped in-process),
 :mod:`.control_evaluate` and :mod:`.control_suite` (closed-loop holds against a truth), :mod:`.live_pool`; above them
-the graph in one process (:mod:`.graph`: bringup, its executor, the campaign on the graph, bag recording).
-"""
+the graph in one process (:mod:`.graph`: bringup, its executor, the campaign on the graph, bag recording)."""
 from .simulator import PulseWidthError, Simulator
 
 __all__ = ["Simulator", "PulseWidthError"]

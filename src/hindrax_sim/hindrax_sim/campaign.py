@@ -9,11 +9,9 @@ curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and 
 produced during the tick go to the executive. At the end or on abort every thruster is commanded neutral. The
 simulator's truth (position, attitude) goes into the record for tests and plots only; the executive never sees it.
 
-Calibration steps (``calibrate``): the virtual pool plays the operator (:class:`PoolOperator`,
-shared with the graph's :class:`~..graph_campaign.VirtualOperator`): each known force a step
-prompts for acts on the vehicle until the executive asks for its removal; ``continue`` is given at
-once.
-"""
+Calibration steps (``calibrate``): the virtual pool plays the operator (:class:`PoolOperator`, shared with the graph's
+:class:`~..graph_campaign.VirtualOperator`): each known force a step prompts for acts on the vehicle until the executive
+asks for its removal; ``continue`` is given at once."""
 from __future__ import annotations
 
 import math
@@ -43,8 +41,7 @@ class PoolOperator:
     inclining test mass. :meth:`act` does what a step's operator code asks (``attach_ballast``, ``remove_ballast``,
     ``attach_float``, ``remove_float``, ``apply_line_pull_<surge|sway>[_negative]``, ``release_line_<...>``,
     ``attach_inclining_mass_<dof>``, ``remove_inclining_mass_<dof>``); :meth:`external_wrench_frd` is the wrench the
-    applied forces exert on the vehicle at its current attitude.
-    """
+    applied forces exert on the vehicle at its current attitude."""
 
     def __init__(self, ballast_weight_n: float = 0.0, line_pull_n: float = 0.0, inclining_load_n_m=(0.0, 0.0),
                  float_buoyancy_n: float = 0.0) -> None:
@@ -121,14 +118,12 @@ class Campaign:
     """Runs the identification campaign (:class:`~..identification.online.executive.Executive`) on a
     :class:`~hindrax_sim.simulator.Simulator` (module docstring).
 
-    cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF
-    (default ``identification.levels_per_dof``). seed: simulator seed (default ``simulation.seed``).
-    progress: optional callable receiving one-line progress messages. real_time_factor: > 0 paces the
-    simulation against the wall clock (0: as fast as possible). sim: an existing simulator (else built).
-    Other keywords go to the :class:`~..identification.online.executive.Executive`
-    (``max_level_duration_s``, ``excitation``, the calibration steps and their known forces,
-    ``steps``, ``confirm``). Raises ``ValueError`` for an unknown DOF.
-    """
+    cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF (default
+    ``identification.levels_per_dof``). seed: simulator seed (default ``simulation.seed``). progress: optional callable
+    receiving one-line progress messages. real_time_factor: > 0 paces the simulation against the wall clock (0: as fast
+    as possible). sim: an existing simulator (else built). Other keywords go to the
+    :class:`~..identification.online.executive.Executive` (``max_level_duration_s``, ``excitation``, the calibration
+    steps and their known forces, ``steps``, ``confirm``). Raises ``ValueError`` for an unknown DOF."""
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
                  seed: int | None = None, progress: Callable[[str], None] | None = None,
@@ -138,8 +133,7 @@ class Campaign:
         rate = float(cfg.identification.estimate_rate_hz)
         self.steps_per_tick = max(1, int(round(1.0 / (rate * self.sim.step_s))))
         self.tick_s = self.steps_per_tick * self.sim.step_s
-        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, progress=progress,
-                                   **executive)
+        self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, progress=progress, **executive)
         #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
         self.operator = PoolOperator.for_steps(self.executive.steps)
         self._external_used = False

@@ -19,8 +19,7 @@ altitude hold: the setpoint).
 or the surge start): ``rmse`` (against the specified response; m, or rad for heading; altitude: the
 noise-free Ping1D range), ``rmse_setpoint``, ``overshoot`` (beyond the final setpoint in the step's
 direction; altitude: the largest |error|), ``settling_time_s`` (within ``settling_fraction`` of the
-step, altitude ``altitude_band_m``) and ``effort_n_rms`` (RMS thrust per thruster, N).
-"""
+step, altitude ``altitude_band_m``) and ``effort_n_rms`` (RMS thrust per thruster, N)."""
 from __future__ import annotations
 
 import html
@@ -358,9 +357,8 @@ def jsonable(x: Any) -> Any:
 
 
 def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) -> Path:
-    """``control.json`` (``cases``, ``runs``, ``ratios``, ``info``) and ``report/index.html`` in
-    ``out_dir``, as docs/control.md §6 lists them; a settling time that never came is null. Returns
-    the control.json path."""
+    """``control.json`` (``cases``, ``runs``, ``ratios``, ``info``) and ``report/index.html`` in ``out_dir``, as
+    docs/control.md §6 lists them; a settling time that never came is null. Returns the control.json path."""
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
     summary = summarise(cases)

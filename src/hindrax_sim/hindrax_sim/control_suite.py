@@ -2,12 +2,10 @@
 altitude than the vehicle file (``hindrax control scenarios``, docs/control.md §7).
 
 Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification
-(:class:`~hindrax_sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml``
-read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then
-:data:`SUITE_MANEUVERS` of :mod:`.control_evaluate` on the same truth. Writes
-``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the summary
-``<out>/control_scenarios.json`` / ``control_scenarios.md``.
-"""
+(:class:`~hindrax_sim.campaign.Campaign`, :data:`SUITE_DOFS`), its ``identification.yaml`` read back through
+:func:`~..control.model.load_model` (so the verdict fallbacks apply), then :data:`SUITE_MANEUVERS` of
+:mod:`.control_evaluate` on the same truth. Writes ``<out>/<scenario>/identification.yaml``,
+``<out>/<scenario>/control.json`` and the summary ``<out>/control_scenarios.json`` / ``control_scenarios.md``."""
 from __future__ import annotations
 
 import json
@@ -51,8 +49,7 @@ def scenario_names(names: str | None, truth_dir: str | None) -> tuple[list[str],
 
 
 def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, seed: int = 1, levels: int = 3,
-                 setup: EvaluationSetup = EvaluationSetup(),
-                 progress: Callable[[str], None] | None = None) -> dict:
+                 setup: EvaluationSetup = EvaluationSetup(), progress: Callable[[str], None] | None = None) -> dict:
     """Identify against one truth, then evaluate (module docstring). Returns the scenario's summary row."""
     say = progress or (lambda _m: None)
     truth = load_truth(cfg, truth_path)
@@ -60,8 +57,7 @@ def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, see
     sim = Simulator(cfg, seed=seed, truth=truth)
     rec = Campaign(cfg, dofs=SUITE_DOFS, levels=levels, seed=seed, sim=sim).run()
     idents, errors = identify_all_with_errors(apply_thrust_calibration(rec), cfg)
-    row: dict = {"scenario": name, "aborted": rec.abort_reason if rec.aborted else "",
-                 "not_identified": sorted(errors)}
+    row: dict = {"scenario": name, "aborted": rec.abort_reason if rec.aborted else "", "not_identified": sorted(errors)}
     if idents:
         doc = build_results(idents, cfg, source=f"simulation, truth {truth_path.name}", seed=seed,
                             calibration=rec.calibration)

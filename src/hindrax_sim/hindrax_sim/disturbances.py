@@ -4,15 +4,13 @@
 
 * a thrust factor per thruster (n,) multiplying the thrust of the curves: static per-thruster and per-direction
   scales, the battery law (V(t) / V_nom)^exponent, the inflow loss 1 - k V_a (:meth:`thrust_factor`);
-* an extra body wrench about the body origin (6,), FRD, N / N m, held over one integration step
-  (:meth:`wrench`): damping on the velocity relative to a current instead of the velocity through the pool,
-  cross-coupled linear damping, the moment of the translational drag acting at an offset centre, the tether's
-  lumped drag and tension, and the floor's extra heave added mass as -dM w_dot (previous step's w_dot; explicit,
-  stable for dM below M_RB + M_A).
+* an extra body wrench about the body origin (6,), FRD, N / N m, held over one integration step (:meth:`wrench`):
+  damping on the velocity relative to a current instead of the velocity through the pool, cross-coupled linear damping,
+  the moment of the translational drag acting at an offset centre, the tether's lumped drag and tension, and the floor's
+  extra heave added mass as -dM w_dot (previous step's w_dot; explicit, stable for dM below M_RB + M_A).
 
 Frames: body FRD about the body origin CO (= CG for Hindrax); pool NED (:mod:`.pool`). The physical source of
-each term is in :mod:`.truth`.
-"""
+each term is in :mod:`.truth`."""
 from __future__ import annotations
 
 import math
@@ -32,8 +30,7 @@ class DisturbanceModel:
 
     config: the truth configuration; dist: the disturbances; model: the :class:`~.model.VehicleModel` (its
     damping coefficients and added-mass matrix); pool: the :class:`~.pool.Pool` or None.
-    Attributes: ``thrust_active`` / ``wrench_active`` (anything to do), ``esc_latency_s``.
-    """
+    Attributes: ``thrust_active`` / ``wrench_active`` (anything to do), ``esc_latency_s``."""
 
     def __init__(self, config: VehicleConfig, dist: Disturbances, model, pool) -> None:
         self.model = model

@@ -13,8 +13,7 @@ simulated time as published on ``/clock`` (quantised to ``simulation.clock_rate_
 The simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers
 (:meth:`VirtualHardware.pulse_widths_us`), so the whole path wrench -> allocation -> ESC node -> PCA9685
 registers -> thrust -> vehicle motion runs. A sleeping or full-OFF channel gives 0 us, i.e. no pulses and no
-thrust (docs/devices.md §5.2).
-"""
+thrust (docs/devices.md §5.2)."""
 from __future__ import annotations
 
 import math
@@ -66,8 +65,7 @@ class SerialLockStep:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
         transport: the driver's :class:`~hindrax_common.transport.serial_transport.SerialTransport`.
         wait_s: wall time :meth:`settled` reads for before it answers False, s.
-        ready: extra start-up condition for :meth:`startup_done` (the driver's start-up commands are sent).
-    """
+        ready: extra start-up condition for :meth:`startup_done` (the driver's start-up commands are sent)."""
 
     def __init__(self, pty: PtyDevice, transport: Any, wait_s: float = 0.002,
                  ready: Callable[[], bool] = lambda: True) -> None:
@@ -124,8 +122,7 @@ class VirtualHardware:
     configured addresses), ``ports`` (serial device name -> pty path). Call :meth:`close` to stop the pty threads.
     ``serve_serial=False`` skips the ptys (for tests that only need the I2C side). The ptys are served by their own
     threads, or, with ``serial_threads=False``, in lock-step with a simulator node once :meth:`lock_step_serial`
-    is called (what :func:`~hindrax_sim.graph.bringup.build_graph` does).
-    """
+    is called (what :func:`~hindrax_sim.graph.bringup.build_graph` does)."""
 
     def __init__(self, sim: Simulator, config: VehicleConfig, serve_serial: bool = True, seed: int = 0,
                  serial_threads: bool = True):
@@ -171,8 +168,7 @@ class VirtualHardware:
         name (:meth:`SerialLockStep.startup_done`).
 
         Raises:
-            RuntimeError: the ptys are already served by threads (``serial_threads=True``), or there are none.
-        """
+            RuntimeError: the ptys are already served by threads (``serial_threads=True``), or there are none."""
         if not self._ptys or any(p.threaded for p in self._ptys.values()):
             raise RuntimeError("lock_step_serial needs VirtualHardware(serve_serial=True, serial_threads=False)")
         for name, transport in transports.items():
@@ -186,8 +182,7 @@ class VirtualHardware:
         emulator call under ``lock`` when given (the lock that also guards the simulator's stepping).
 
         Raises:
-            RuntimeError: the ptys are served already (threads or :meth:`lock_step_serial`), or there are none.
-        """
+            RuntimeError: the ptys are served already (threads or :meth:`lock_step_serial`), or there are none."""
         if not self._ptys or any(p.threaded for p in self._ptys.values()) or self.serial_lock_steps:
             raise RuntimeError("serve_serial needs VirtualHardware(serve_serial=True, serial_threads=False), once")
         for pty in self._ptys.values():

@@ -26,8 +26,7 @@ devices are served; then, per command line on stdin: ``act <code>`` -> ``{"ok": 
 e.g. ``attach_ballast``); ``truth`` -> ``{"t_s", "floor_depth_m", "altimeter_range_m", "position_ned_m", "euler_rad",
 "nu", "pulse_widths_us"}`` (the pool floor's depth under the vehicle; the Ping1D's noise-free range along the body
 z axis from where it is mounted; NED pool frame, FRD body, SI units, pulse widths in us); ``quit`` or the end of
-the input stops it.
-"""
+the input stops it."""
 from __future__ import annotations
 
 import argparse
@@ -67,8 +66,7 @@ class LivePoolServer:
     config_path: the vehicle file (the nodes' view; the emulated PCA9685 runs at its ``esc.oscillator_hz``).
     directory: where the I2C socket goes. truth: the pool's truth file (None: the shipped default), seed: the sensor
     noise seed (None: ``simulation.seed``). Every emulator, the stepping and the operator's forces share one lock.
-    Raises :class:`~hindrax_common.config.ConfigError` for a bad vehicle file.
-    """
+    Raises :class:`~hindrax_common.config.ConfigError` for a bad vehicle file."""
 
     def __init__(self, config_path: str | os.PathLike, directory: str | os.PathLike, truth: str | None = None,
                  seed: int | None = None) -> None:
@@ -189,13 +187,11 @@ def main(argv: list[str] | None = None) -> int:
 class LivePool(DriverEndpoints):
     """Client of a live pool process (module docstring): start it, reach its devices, act as the operator.
 
-    config_path: the vehicle file; directory: a folder for the socket (default: a new temporary
-    one); env: the child's environment (default: this one); truth: as :class:`LivePoolServer`. Use
-    as a context manager. The driver-facing methods are those of
-    :class:`~hindrax_bringup.layout.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`,
-    :meth:`env`). Raises RuntimeError when the process does not come up within 60 s or does not
-    answer within 10 s.
-    """
+    config_path: the vehicle file; directory: a folder for the socket (default: a new temporary one); env: the child's
+    environment (default: this one); truth: as :class:`LivePoolServer`. Use as a context manager. The driver-facing
+    methods are those of :class:`~hindrax_bringup.layout.emulated_devices.DriverEndpoints` (``ports``,
+    :meth:`ros_arguments`, :meth:`env`). Raises RuntimeError when the process does not come up within 60 s or does not
+    answer within 10 s."""
 
     def __init__(self, config_path: str | os.PathLike, directory: str | os.PathLike | None = None,
                  env: Mapping[str, str] | None = None, truth: str | None = None) -> None:

@@ -19,11 +19,9 @@ tau = [X Y Z K M N]:
   chosen by the sign of the velocity (heave: ``*_positive`` for w > 0, moving down, [Hindrax-Drag]
   §4.1). No off-diagonal damping.
 * g(eta) ([NTNU-Thesis] eqs. 2.22-2.23 with the corrected sign of f_b): W = m g, B = rho g V, B
-  times the submerged fraction of a free-surface model when one is given (:mod:`.pool`), else fully
-  submerged.
+  times the submerged fraction of a free-surface model when one is given (:mod:`.pool`), else fully submerged.
 * Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
-  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an
-  output only.
+  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an output only.
 
 Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats
 (3-vectors as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call
@@ -31,8 +29,7 @@ overhead dominates for 6x6 problems; the tests check it against the matrix form.
 
 State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
 Not modelled: currents (nu is relative to still water), the variation of added mass and damping near
-the surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] §6).
-"""
+the surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] §6)."""
 from __future__ import annotations
 
 import math
@@ -55,8 +52,7 @@ SurfaceFraction = Callable[[float, float, float, float], float]
 def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, quadratic_negative) -> np.ndarray:
     """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v ([Hindrax-Drag] eq. 2).
 
-    All coefficient arguments are (6,) positive numbers in SNAME order (kg/s, kg/m; kg m^2/s, kg m^2).
-    """
+    All coefficient arguments are (6,) positive numbers in SNAME order (kg/s, kg/m; kg m^2/s, kg m^2)."""
     nu = np.asarray(nu, dtype=float)
     pos = nu >= 0.0
     kl = np.where(pos, linear_positive, linear_negative)
@@ -69,8 +65,7 @@ def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float,
     2.22).
 
     g = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B] (NED).
-    rotation_ned_from_body (3, 3): R, body FRD to NED. W, B in N; r_g, r_b (3,) from CO, FRD, m.
-    """
+    rotation_ned_from_body (3, 3): R, body FRD to NED. W, B in N; r_g, r_b (3,) from CO, FRD, m."""
     down_body = np.asarray(rotation_ned_from_body, dtype=float)[2]  # R^T [0, 0, 1]
     f_g = weight_n * down_body
     f_b = -buoyancy_n * down_body
@@ -90,8 +85,7 @@ def rotation_matrix_from_quaternion(q_xyzw) -> np.ndarray:
 def euler_from_rotation_matrix(r) -> np.ndarray:
     """Fossen ZYX Euler angles [phi theta psi] (rad) of R = Rz(psi) Ry(theta) Rx(phi) ([T] eq. 2.2).
 
-    phi = atan2(R21, R22), theta = -asin(R20), psi = atan2(R10, R00); psi in (-pi, pi].
-    """
+    phi = atan2(R21, R22), theta = -asin(R20), psi = atan2(R10, R00); psi in (-pi, pi]."""
     r = np.asarray(r, dtype=float)
     return np.array([math.atan2(r[2, 1], r[2, 2]), -math.asin(max(-1.0, min(1.0, r[2, 0]))),
                      math.atan2(r[1, 0], r[0, 0])])
@@ -109,8 +103,7 @@ class VehicleModel:
     ``r_b_m`` (3,), ``inertia_o_kg_m2`` (3, 3) about CO, ``mass_matrix_rigid_body`` (6, 6),
     ``added_mass_matrix`` (6, 6), ``mass_matrix`` (6, 6) = M_RB + M_A, ``mass_matrix_inverse`` (6, 6),
     ``damping_linear_positive`` / ``damping_linear_negative`` / ``damping_quadratic_positive`` /
-    ``damping_quadratic_negative`` (6,). Raises ``ValueError`` when M_RB + M_A is singular.
-    """
+    ``damping_quadratic_negative`` (6,). Raises ``ValueError`` when M_RB + M_A is singular."""
 
     def __init__(self, config: VehicleConfig, surface_fraction: SurfaceFraction | None = None) -> None:
         self.mass_kg = float(config.vehicle.mass_kg)
@@ -163,10 +156,8 @@ class VehicleModel:
     def derivative_list(self, s: Sequence[float], tau: Sequence[float]) -> list[float]:
         """Fast state derivative on plain floats: ``s`` (13 floats), ``tau`` (6 floats) -> 13 floats.
 
-        The equations of the module docstring (checked by the tests against their matrix form),
-        written with scalar 3-vector algebra. The quaternion need not be exactly unit (the
-        integrator renormalises after each step).
-        """
+        The equations of the module docstring (checked by the tests against their matrix form), written with scalar
+        3-vector algebra. The quaternion need not be exactly unit (the integrator renormalises after each step)."""
         _, _, z, qx, qy, qz, qw, u, v, w, p, q, r = s
         # rotation body FRD -> NED
         xx, yy, zz = qx * qx, qy * qy, qz * qz
@@ -251,6 +242,5 @@ class VehicleModel:
                 d = (kln - kqn * vel) * vel
             rhs.append(tau[i] - c - d - g)
         f0, f1, f2, f3, f4, f5 = rhs
-        acc = [row[0] * f0 + row[1] * f1 + row[2] * f2 + row[3] * f3 + row[4] * f4 + row[5] * f5
-               for row in self._minv]
+        acc = [row[0] * f0 + row[1] * f1 + row[2] * f2 + row[3] * f3 + row[4] * f4 + row[5] * f5 for row in self._minv]
         return [xd, yd, zd, qxd, qyd, qzd, qwd, *acc]

@@ -17,9 +17,8 @@ Publishes
     (``sim/contact/<face>``, WARN while touching, value ``since_s``), on every change and once per
     simulated second. Ground truth is for evaluation only: no node under test may read ``sim/*``.
 Parameters
-    The vehicle configuration (``--params-file hindrax.yaml``; or ``config_file``; or the shipped file).
-    Node-specific: ``truth_rate_hz`` (simulated-time rate of sim/odometry and sim/wrench, default
-    ``simulation.clock_rate_hz``).
+    The vehicle configuration (``--params-file hindrax.yaml``; or ``config_file``; or the shipped file). Node-specific:
+    ``truth_rate_hz`` (simulated-time rate of sim/odometry and sim/wrench, default ``simulation.clock_rate_hz``).
 
 Time: the node steps the model from a timer on the steady (wall) clock, never on its own /clock. With
 ``simulation.real_time_factor`` r > 0 the simulated time follows ``r`` x the wall time (if the machine cannot
@@ -29,20 +28,18 @@ SingleThreadedExecutor (e.g. nodes under test using ``use_sim_time``) run betwee
 /clock message. (It never stops inside a period: an in-process emulator sampling the vehicle between two
 ticks would then see a state ahead of the clock by an amount that depends on the machine's load.)
 
-Lock-step (``add_step_gate(gate)``): a gate is a callable ``gate(t_s) -> bool`` asked at every /clock boundary
-whether simulated time may advance past ``t_s``; while one says no, the node does not step (and checks again
-at its next timer callback). In one process with the identification node this keeps the control loop
-on every control tick whatever the CPU load (a loaded machine otherwise lets the simulation run ahead of the
-controller, which then overshoots its planned runs). On its timer, a gate that has refused for :data:`GATE_TIMEOUT_S`
-of wall time is overridden with a warning, so a stalled node cannot freeze the simulation; stepped by its caller
-(:meth:`SimulatorNode.advance_clock_period`, the lock-step graph of ``hindrax run``) it holds on, warning every
-:data:`GATE_TIMEOUT_S`: what happens at each simulated instant then never depends on wall time (the caller's own
-wall-clock deadlines end a run that stalls).
+Lock-step (``add_step_gate(gate)``): a gate is a callable ``gate(t_s) -> bool`` asked at every /clock boundary whether
+simulated time may advance past ``t_s``; while one says no, the node does not step (and checks again at its next timer
+callback). In one process with the identification node this keeps the control loop on every control tick whatever the
+CPU load (a loaded machine otherwise lets the simulation run ahead of the controller, which then overshoots its planned
+runs). On its timer, a gate that has refused for :data:`GATE_TIMEOUT_S` of wall time is overridden with a warning, so a
+stalled node cannot freeze the simulation; stepped by its caller (:meth:`SimulatorNode.advance_clock_period`, the
+lock-step graph of ``hindrax run``) it holds on, warning every :data:`GATE_TIMEOUT_S`: what happens at each simulated
+instant then never depends on wall time (the caller's own wall-clock deadlines end a run that stalls).
 
 Python API for in-process device emulators: ``node.simulator`` (its sensor listeners and latest
 samples), :meth:`SimulatorNode.add_step_listener`, :meth:`SimulatorNode.add_clock_listener` and the
-``pulse_width_source`` argument (:class:`SimulatorNode`).
-"""
+``pulse_width_source`` argument (:class:`SimulatorNode`)."""
 from __future__ import annotations
 
 import math
@@ -90,13 +87,11 @@ class SimulatorNode(VehicleNode):
     """Thin rclpy node over :class:`Simulator` (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters, see
-    :func:`~hindrax_common.node_support.node_common.load_node_config`).
-    pulse_width_source: optional callable replacing the ThrusterPwm subscription, called before
-    every step: the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685 emulator; None
-    keeps the previous ones).
-    simulator: optional prebuilt Simulator (must use ``config``). Other keyword arguments go to ``Node``.
-    Raises :class:`ConfigError` for an invalid configuration (logged as one line first).
-    """
+    :func:`~hindrax_common.node_support.node_common.load_node_config`). pulse_width_source: optional callable replacing
+    the ThrusterPwm subscription, called before every step: the widths (n,) in us the ESCs see (e.g. decoded from the
+    PCA9685 emulator; None keeps the previous ones). simulator: optional prebuilt Simulator (must use ``config``). Other
+    keyword arguments go to ``Node``. Raises :class:`ConfigError` for an invalid configuration (logged as one line
+    first)."""
 
     def __init__(self, *, config: VehicleConfig | None = None, pulse_width_source: PulseWidthSource | None = None,
                  simulator: Simulator | None = None, node_name: str = "hindrax_simulator", **kwargs: Any) -> None:

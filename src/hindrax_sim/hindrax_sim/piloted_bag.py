@@ -167,8 +167,7 @@ class _SetpointPilot:
         self.targets(t, float(eul[2]))
         c, sn = math.cos(eul[2]), math.sin(eul[2])
         e = self.target_pos - pos
-        err = np.array([c * e[0] + sn * e[1], -sn * e[0] + c * e[1], e[2],
-                        frames.wrap_angle(self.target_yaw - eul[2])])
+        err = np.array([c * e[0] + sn * e[1], -sn * e[0] + c * e[1], e[2], frames.wrap_angle(self.target_yaw - eul[2])])
         return self.kp * err - self.kd * np.array([nu[0], nu[1], nu[2], nu[5]])
 
 
@@ -251,8 +250,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     """Fly one run (module docstring) and write it to the bag directory ``bag_dir``; returns the path.
 
     cfg: the vehicle file; truth: the simulator's truth (path, :class:`~hindrax_sim.truth.Truth` or None for
-    the shipped default). Raises ``FileExistsError`` when ``bag_dir`` already holds a bag.
-    """
+    the shipped default). Raises ``FileExistsError`` when ``bag_dir`` already holds a bag."""
     s = settings
     rng = np.random.default_rng(seed)
     dvl = s.sensors == "dvl"

@@ -27,8 +27,7 @@ floor, the position is clamped back (the box touches the face) and the NED veloc
 face is removed (a perfectly inelastic, frictionless contact); the same happens at the surface if the
 hull were ever completely out of the water. Reported faces: ``north_wall`` (x = length), ``south_wall``
 (x = 0), ``east_wall`` (y = width), ``west_wall`` (y = 0), ``floor`` (z = depth) and ``surface`` (the hull
-breaks the surface: submerged fraction below 1), each with the time the contact started.
-"""
+breaks the surface: submerged fraction below 1), each with the time the contact started."""
 from __future__ import annotations
 
 import math
@@ -49,8 +48,7 @@ class ContactState:
     """Contact report at time ``t_s`` (s, simulated).
 
     ``since_s``: face name -> simulated time the current contact with that face started (only faces in
-    contact now). ``faces``: the names, in :data:`FACES` order.
-    """
+    contact now). ``faces``: the names, in :data:`FACES` order."""
 
     t_s: float
     since_s: dict[str, float] = field(default_factory=dict)
@@ -62,10 +60,8 @@ class ContactState:
 class FreeSurface:
     """Submerged fraction of a box hull at the free surface (module docstring).
 
-    hull_half_extents_m (3,): half length, width and height of the hull box, m (> 0).
-    hull_centre_frd_m (3,): box centre relative to the body origin CO, FRD, m.
-    Raises ``ValueError`` for non-positive extents.
-    """
+    hull_half_extents_m (3,): half length, width and height of the hull box, m (> 0). hull_centre_frd_m (3,): box centre
+    relative to the body origin CO, FRD, m. Raises ``ValueError`` for non-positive extents."""
 
     def __init__(self, hull_half_extents_m: Sequence[float], hull_centre_frd_m: Sequence[float]) -> None:
         a, b, c = (float(x) for x in hull_half_extents_m)
@@ -92,8 +88,7 @@ class Pool:
     """Pool box with floor, walls and free surface (module docstring).
 
     length_m, width_m, depth_m: box size (north, east, down), m. free_surface: the hull model (its box is
-    used for contacts too). Raises ``ValueError`` for a pool not larger than the hull in every direction.
-    """
+    used for contacts too). Raises ``ValueError`` for a pool not larger than the hull in every direction."""
 
     def __init__(self, length_m: float, width_m: float, depth_m: float, free_surface: FreeSurface) -> None:
         self.length_m, self.width_m, self.depth_m = float(length_m), float(width_m), float(depth_m)
@@ -180,8 +175,7 @@ class Pool:
         """Distance (m) along a unit ray from ``origin_ned_m`` to the first wall or the floor it hits.
 
         Used for the sonar's slant range along the vehicle's down axis. Returns ``inf`` when the ray only
-        leaves through the surface (points upwards) or the origin is outside the box.
-        """
+        leaves through the surface (points upwards) or the origin is outside the box."""
         ox, oy, oz = (float(v) for v in origin_ned_m)
         dx, dy, dz = (float(v) for v in direction_ned)
         best = math.inf
@@ -224,8 +218,7 @@ class Pool:
         """Enforce the box on ``state`` (13 floats, modified in place) at simulated time ``t_s``.
 
         Clamps the position so the hull box is inside the pool and removes the velocity into a touched face
-        (module docstring); updates the contact report (:attr:`contact`).
-        """
+        (module docstring); updates the contact report (:attr:`contact`)."""
         _, _, _, qx, qy, qz, qw = state[:7]
         xx, yy, zz = qx * qx, qy * qy, qz * qz
         r = ((1.0 - 2.0 * (yy + zz), 2.0 * (qx * qy - qz * qw), 2.0 * (qx * qz + qy * qw)),

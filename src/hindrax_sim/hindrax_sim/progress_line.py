@@ -6,8 +6,7 @@ a pipe, where a carriage return would pile up, it writes a line only when the te
 prints a line that stays (a prompt, a result), ending the updating line first. :class:`Ticker` keeps a long step
 alive on a terminal (its text and the seconds elapsed, rewritten every second) and elsewhere names each new step,
 and again every :data:`QUIET_S` while it lasts: ``hindrax ident bag``'s fit, ``make ros-install``'s colcon build
-(:mod:`hindrax_tools.progress_run`; here in the virtual pool's package, below the campaign that ticks it).
-"""
+(:mod:`hindrax_tools.progress_run`; here in the virtual pool's package, below the campaign that ticks it)."""
 from __future__ import annotations
 
 import sys
@@ -26,8 +25,7 @@ class ProgressLine:
     """One updating progress line (module docstring).
 
     write: where whole lines go when not on a terminal (default ``print``). stream / tty: the terminal stream and
-    whether it is one (default ``sys.stdout`` and its ``isatty()``).
-    """
+    whether it is one (default ``sys.stdout`` and its ``isatty()``)."""
 
     def __init__(self, write: Callable[[str], None] = print, stream: TextIO | None = None,
                  tty: bool | None = None) -> None:
@@ -68,8 +66,7 @@ class Ticker:
     the seconds every ``quiet_s`` (s, :data:`QUIET_S`) while the step lasts. A context manager: the thread stops and
     the line ends on the way out. ``clock``: seconds (monotonic).
 
-    ``with Ticker(ProgressLine(), "ident bag: fitting") as t: ...; t.set("ident bag: writing the report")``
-    """
+    ``with Ticker(ProgressLine(), "ident bag: fitting") as t: ...; t.set("ident bag: writing the report")``"""
 
     def __init__(self, progress: ProgressLine, text: str, period_s: float = 1.0,
                  clock: Callable[[], float] = time.monotonic, quiet_s: float = QUIET_S) -> None:

@@ -40,8 +40,7 @@ dropout, the device's configured or default rate):
 Sampling: a model is due at ``k / rate_hz`` (k = 0, 1, ...); the simulator calls it at the first step at or
 after that time and stamps the sample with the step time (jitter below one integration step).
 Determinism: one ``numpy.random.Generator`` per device, seeded from ``(seed, device index)``
-(:data:`DEVICE_INDEX`), so a device's noise does not depend on which other devices are enabled.
-"""
+(:data:`DEVICE_INDEX`), so a device's noise does not depend on which other devices are enabled."""
 from __future__ import annotations
 
 import math
@@ -88,8 +87,7 @@ class VehicleTruth:
     position_ned_m (3,): body origin CO in the pool frame (NED, origin at a pool corner on the surface).
     quaternion_xyzw (4,): body FRD in NED. rotation (3, 3): R, body FRD -> NED. euler_rad (3,): Fossen ZYX
     [roll, pitch, yaw]. nu (6,): [u v w (m/s) p q r (rad/s)], FRD. nu_dot (6,): its time derivative.
-    wrench_frd (6,): thruster wrench about CO [X Y Z K M N] (N, N m). buoyancy_fraction: submerged fraction.
-    """
+    wrench_frd (6,): thruster wrench about CO [X Y Z K M N] (N, N m). buoyancy_fraction: submerged fraction."""
 
     t_s: float
     position_ned_m: np.ndarray
@@ -104,10 +102,9 @@ class VehicleTruth:
 
 @dataclass(frozen=True)
 class DvlVelocitySample:
-    """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
-    altitude_m: true vertical distance DVL -> floor (NaN out of the water); beam_range_m: range
-    along each beam A-D (port, stern, starboard, bow) to the floor with the DVL's range noise (NaN
-    for a beam without lock)."""
+    """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock; altitude_m: true
+    vertical distance DVL -> floor (NaN out of the water); beam_range_m: range along each beam A-D (port, stern,
+    starboard, bow) to the floor with the DVL's range noise (NaN for a beam without lock)."""
 
     stamp_s: float
     velocity_frd_m_s: tuple[float, float, float]
@@ -164,8 +161,7 @@ class PressureSample:
 
 @dataclass(frozen=True)
 class AltitudeSample:
-    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when
-    invalid), valid flag."""
+    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid), valid flag."""
 
     stamp_s: float
     distance_m: float
@@ -188,8 +184,7 @@ def specific_force_frd(nu, nu_dot, rotation, gravity_m_s2: float, r_frd_m=(0.0, 
     """Specific force f = a - g (3,) in m/s^2, FRD, at the body point ``r_frd_m`` (relative to CO).
 
     a = v_dot + w x v + w_dot x r + w x (w x r) (inertial acceleration of the point in body axes, nu and
-    nu_dot (6,) in FRD); g = R^T [0, 0, gravity] with R (3, 3) body -> NED. At rest f = [0, 0, -g] (level).
-    """
+    nu_dot (6,) in FRD); g = R^T [0, 0, gravity] with R (3, 3) body -> NED. At rest f = [0, 0, -g] (level)."""
     nu, nu_dot = np.asarray(nu, dtype=float), np.asarray(nu_dot, dtype=float)
     w, w_dot = nu[3:], nu_dot[3:]
     r = np.asarray(r_frd_m, dtype=float)
@@ -227,8 +222,7 @@ class SensorModel:
     """Base of the device models: rate bookkeeping, a private Generator, noise and dropout helpers.
 
     name: device key (one of :data:`DEVICE_INDEX`). spec: :class:`NoiseSpec`. seed: simulation seed.
-    Subclasses implement ``measure(truth) -> sample``; :meth:`sample` adds the rate and dropout logic.
-    """
+    Subclasses implement ``measure(truth) -> sample``; :meth:`sample` adds the rate and dropout logic."""
 
     def __init__(self, name: str, spec: NoiseSpec, seed: int) -> None:
         if spec.rate_hz <= 0.0:
@@ -401,8 +395,7 @@ class AccelModel(_ImuBase):
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
 
     def measure(self, truth: VehicleTruth) -> AccelSample:
-        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation,
-                                               self.gravity_m_s2))
+        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
         return AccelSample(truth.t_s, self._noisy3(m), DEFAULT_WATER_TEMPERATURE_C)
 
@@ -424,8 +417,7 @@ class MagModel(_ImuBase):
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
         super().__init__("icm20948_mag", "t", config, seed)
-        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t,
-                           DEFAULT_EARTH_FIELD_NED_T)
+        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:
@@ -478,13 +470,11 @@ class AltitudeModel(SensorModel):
 class SensorSuite:
     """All device models of a configuration, sampled by the simulator (module docstring).
 
-    config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and
-    sonar). seed: noise seed (default ``simulation.seed``). devices: names to enable (default all of
-    :data:`DEVICE_INDEX`).
+    config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and sonar). seed:
+    noise seed (default ``simulation.seed``). devices: names to enable (default all of :data:`DEVICE_INDEX`).
 
     ``latest``: device name -> its newest sample. ``next_due_s``: the earliest time any device is due.
-    Raises ``ValueError`` for an unknown device name.
-    """
+    Raises ``ValueError`` for an unknown device name."""
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int | None = None,
                  devices: Sequence[str] | None = None) -> None:
@@ -551,8 +541,7 @@ class SensorSuite:
     def update(self, t_s: float, truth: Callable[[], VehicleTruth]) -> list[tuple[str, Any]]:
         """Sample every device due at ``t_s``; ``truth`` is called (at most once) only if one is due.
 
-        Returns the new ``(device name, sample)`` pairs (dropped samples are absent).
-        """
+        Returns the new ``(device name, sample)`` pairs (dropped samples are absent)."""
         if t_s + 1e-9 < self.next_due_s:
             return []
         snapshot = truth()

@@ -5,20 +5,17 @@ and a :class:`~.sensors.SensorSuite`, all built from one :class:`~hindrax_common
 ``step(pulse_widths_us)`` advances one integration step; identification tests drive it directly, the ROS
 node (:mod:`.node`) wraps it.
 
-Integration: classical 4th-order Runge-Kutta with the fixed step ``simulation.step_s`` (default 5 ms) on the
-state ``[position NED (3), quaternion xyzw (4), nu (6)]``; the quaternion is renormalised after every step.
-Within a step the pulse widths and any external wrench are held; the thruster thrust follows its
-first-order lag exactly (:mod:`.thrusters`), evaluated at the Runge-Kutta stage times. After the step the
-pool's contact constraints are applied (:meth:`.pool.Pool.resolve`), the time advances to ``k * step_s``
-(no accumulated rounding) and the sensors due at that time are sampled. Everything is deterministic for a
-given configuration and seed.
+Integration: classical 4th-order Runge-Kutta with the fixed step ``simulation.step_s`` (default 5 ms) on the state
+``[position NED (3), quaternion xyzw (4), nu (6)]``; the quaternion is renormalised after every step. Within a step the
+pulse widths and any external wrench are held; the thruster thrust follows its first-order lag exactly
+(:mod:`.thrusters`), evaluated at the Runge-Kutta stage times. After the step the pool's contact constraints are applied
+(:meth:`.pool.Pool.resolve`), the time advances to ``k * step_s`` (no accumulated rounding) and the sensors due at that
+time are sampled. Everything is deterministic for a given configuration and seed.
 
 Truth (:mod:`.truth`): the simulator runs on the truth configuration and applies its disturbances
-(:mod:`.disturbances`): the thrust factor per thruster on the curve thrust, the ESC latency
-``esc.output_latency_s`` as a queue of written widths, the extra wrench held over each step, and the
-sensor disturbances (:meth:`.sensors.SensorSuite.apply_disturbances`; the DVL latency reads a
-history of states kept for that long).
-"""
+(:mod:`.disturbances`): the thrust factor per thruster on the curve thrust, the ESC latency ``esc.output_latency_s`` as
+a queue of written widths, the extra wrench held over each step, and the sensor disturbances
+(:meth:`.sensors.SensorSuite.apply_disturbances`; the DVL latency reads a history of states kept for that long)."""
 from __future__ import annotations
 
 import math
@@ -55,9 +52,8 @@ def _wrench6(wrench_frd) -> list[float]:
 
 
 def fill_odometry(odom: Any, position_ned_m, quaternion_xyzw, twist_flu) -> Any:
-    """Set a nav_msgs/msg/Odometry ``odom`` (frame ``odom``, ENU; child ``base_link``) from the body
-    position (3,) NED m, the quaternion (4,) xyzw of FRD in NED and the twist (6,) in base_link
-    FLU."""
+    """Set a nav_msgs/msg/Odometry ``odom`` (frame ``odom``, ENU; child ``base_link``) from the body position (3,) NED
+    m, the quaternion (4,) xyzw of FRD in NED and the twist (6,) in base_link FLU."""
     odom.header.frame_id, odom.child_frame_id = "odom", "base_link"
     p, o = odom.pose.pose.position, odom.pose.pose.orientation
     p.x, p.y, p.z = (float(v) for v in frames.ned_to_enu(position_ned_m))
@@ -89,12 +85,10 @@ class Simulator:
         runs on ``truth.config``; ``config`` is kept as ``vehicle_config`` (what the nodes believe).
 
     Raises ``ValueError`` for a non-positive step or an unknown sensor device, :class:`~.truth.TruthError` for a
-    bad truth file.
-    """
+    bad truth file."""
 
     def __init__(self, config: VehicleConfig, *, seed: int | None = None, step_s: float | None = None,
-                 sensors: bool | Sequence[str] | None = True, pool: bool = True,
-                 truth: Any = None) -> None:
+                 sensors: bool | Sequence[str] | None = True, pool: bool = True, truth: Any = None) -> None:
         if not isinstance(truth, Truth):
             truth = load_truth(config, truth)
         self.truth_model: Truth = truth
@@ -131,11 +125,9 @@ class Simulator:
               quaternion_xyzw: Sequence[float] | None = None, nu: Sequence[float] | None = None) -> None:
         """Start a new run at t = 0: thrusters stopped, contacts and sensor grids reset.
 
-        position_ned_m (3,): body origin in the pool frame (default ``pool.start_position_ned_m``).
-        Orientation: ``quaternion_xyzw`` (4,) or ``rpy_rad`` (3,) Fossen ZYX (default level, heading
-        ``pool.start_heading_rad``). nu (6,): initial body velocity (default 0). Raises ``ValueError`` for
-        wrong shapes or non-finite values.
-        """
+        position_ned_m (3,): body origin in the pool frame (default ``pool.start_position_ned_m``). Orientation:
+        ``quaternion_xyzw`` (4,) or ``rpy_rad`` (3,) Fossen ZYX (default level, heading ``pool.start_heading_rad``). nu
+        (6,): initial body velocity (default 0). Raises ``ValueError`` for wrong shapes or non-finite values."""
         pool = self.config.pool
         pos = np.asarray(pool.start_position_ned_m if position_ned_m is None else position_ned_m, dtype=float)
         if quaternion_xyzw is not None:
@@ -181,14 +173,11 @@ class Simulator:
              armed: bool = True) -> list[tuple[str, Any]]:
         """Advance one integration step ``step_s``.
 
-        pulse_widths_us (n,): wire pulse widths in thruster order (None: keep the last applied ones, which are
-        neutral after a disarmed step).
-        external_wrench_frd (6,): extra wrench [X Y Z K M N] about the body origin (FRD, N, N m) held over the
-        step (None: keep the previous one, initially zero), e.g. a pure force at the CG for tests.
-        armed: False means the ESC outputs are neutral whatever the widths.
-        Returns the new ``(device, sample)`` pairs of this step. Raises :class:`PulseWidthError` (state
-        unchanged) for bad widths and ``ValueError`` for a bad wrench.
-        """
+        pulse_widths_us (n,): wire pulse widths in thruster order (None: keep the last applied ones, which are neutral
+        after a disarmed step). external_wrench_frd (6,): extra wrench [X Y Z K M N] about the body origin (FRD, N, N m)
+        held over the step (None: keep the previous one, initially zero), e.g. a pure force at the CG for tests. armed:
+        False means the ESC outputs are neutral whatever the widths. Returns the new ``(device, sample)`` pairs of this
+        step. Raises :class:`PulseWidthError` (state unchanged) for bad widths and ``ValueError`` for a bad wrench."""
         new_external = None if external_wrench_frd is None else _wrench6(external_wrench_frd)
         thr = self.thrusters
         dist = self.disturbances

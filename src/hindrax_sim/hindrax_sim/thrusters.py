@@ -16,8 +16,7 @@
 * Lag: :class:`hindrax_onboard.vehicle.thrust_lag.ThrustLag` of ``thrusters.time_constant_s``, exact for a command
   held over a step, which the integrator evaluates at its stage times.
 * Not modelled: thrust dependence on advance speed and thruster-hull / thruster-thruster interaction
-  ([Hindrax-Drag] §6; docs/identification.md §3 C6).
-"""
+  ([Hindrax-Drag] §6; docs/identification.md §3 C6)."""
 from __future__ import annotations
 
 import numpy as np
@@ -42,8 +41,7 @@ class Thrusters:
     Attributes: ``names`` (n,), ``n``, ``matrix_co`` (6, n) thrust allocation matrix about the body
     origin, ``curve`` (ThrustCurve), ``time_constant_s``, ``neutral_us``, ``force_n`` (n,) the
     current (lagged) thrust, ``commanded_force_n`` (n,) the thrust the current pulse widths ask
-    for, ``pulse_width_us`` (n,) the current wire pulse widths.
-    """
+    for, ``pulse_width_us`` (n,) the current wire pulse widths."""
 
     def __init__(self, config: VehicleConfig) -> None:
         t = config.thrusters
@@ -71,8 +69,7 @@ class Thrusters:
 
         A width <= 0 means "no pulses" (e.g. a PCA9685 channel that is off): the ESC stops, 0 N. Reversed
         thrusters are mirrored about neutral (module docstring); out-of-range widths saturate at the curve
-        ends. Raises :class:`PulseWidthError` for a wrong length or non-finite values.
-        """
+        ends. Raises :class:`PulseWidthError` for a wrong length or non-finite values."""
         try:
             pw = np.array(pulse_width_us, dtype=float).reshape(-1)
         except (TypeError, ValueError) as exc:

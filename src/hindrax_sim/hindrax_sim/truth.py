@@ -44,8 +44,7 @@ Disturbances (``disturbances:`` section; the physical source of each; all defaul
     (side-lobe returns from walls: a report is lost with probability p (1 - d / distance) within that distance).
 ``imu``: ``gyro_bias_walk_rad_s_sqrt_s``, ``accel_bias_walk_m_s2_sqrt_s``: bias random walk (MEMS bias
     instability; ICM-20948 datasheet §3.1 lists the initial tolerance, the walk is an ASSUMPTION).
-``pressure``: ``drift_pa_per_s`` (temperature drift of the MS5837 after power-up) and ``random_walk_pa_sqrt_s``.
-"""
+``pressure``: ``drift_pa_per_s`` (temperature drift of the MS5837 after power-up) and ``random_walk_pa_sqrt_s``."""
 from __future__ import annotations
 
 import math
@@ -132,10 +131,8 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 class Disturbances:
     """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
 
-    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``,
-    ``inflow``, ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``,
-    ``pressure``.
-    """
+    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``, ``inflow``,
+    ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``, ``pressure``."""
 
     values: Mapping[str, Any] = field(default_factory=dict)
 
@@ -216,8 +213,7 @@ def truth_from_mapping(vehicle: VehicleConfig, doc: Any, source: str = "truth", 
 
     fill_only: only keys the vehicle configuration lacks are taken from ``doc`` (how the default truth is
     applied when no truth file is given, so a configuration that already sets ``simulation.sensors.*``, e.g. a
-    test's, keeps its values). Raises :class:`TruthError` (one line per issue).
-    """
+    test's, keeps its values). Raises :class:`TruthError` (one line per issue)."""
     if doc is None:
         doc = {}
     if isinstance(doc, Mapping) and len(doc) == 1 and isinstance(next(iter(doc.values())), Mapping) \
@@ -248,8 +244,7 @@ def load_truth(vehicle: VehicleConfig, path: str | Path | None = None) -> Truth:
     then the truth file at ``path`` (if any) overrides any key and sets the disturbances. A truth file therefore
     only states what differs from the vehicle file and the default noise.
 
-    Raises :class:`TruthError` for an unreadable file, bad YAML or invalid keys (one line per issue).
-    """
+    Raises :class:`TruthError` for an unreadable file, bad YAML or invalid keys (one line per issue)."""
     default = truth_from_mapping(vehicle, _read(default_truth_path()), str(default_truth_path()), fill_only=True)
     if path is None:
         return default

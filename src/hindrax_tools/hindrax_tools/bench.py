@@ -5,8 +5,7 @@ list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally ``
 measure; tests never time anything (README, "Tests").
 
 Usage: ``python -m hindrax_tools.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline GIT_REF]``
-(``--baseline``: the stack section measures that commit's launch layout too, in the same run).
-"""
+(``--baseline``: the stack section measures that commit's launch layout too, in the same run)."""
 from __future__ import annotations
 
 import argparse
@@ -40,9 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the scripts)")
     parser.add_argument("--out", default="bench-results", help="directory for results.json")
     parser.add_argument("--baseline", default=None, metavar="GIT_REF",
-                        help="the stack section also measures this commit's launch layout in the same run and "
-                             "reports today's CPU over it "
-                             "(hindrax_tools.benchmarks.stack.baseline_launch)")
+                        help="the stack section also measures this commit's launch layout in the same run and reports "
+                             "today's CPU over it (hindrax_tools.benchmarks.stack.baseline_launch)")
     results_doc.add_argument(parser)
     args = parser.parse_args(argv)
     names = [n for n in args.only.split(",") if n] or list(BENCHMARKS)

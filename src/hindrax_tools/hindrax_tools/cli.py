@@ -1,7 +1,6 @@
 """The topside's ``hindrax`` commands: :data:`TOPSIDE`, added to the vehicle's command line
 (:mod:`hindrax_onboard.cli`, which owns the ``hindrax`` script) through the ``hindrax.commands`` entry point of
-setup.py. :data:`COMMANDS` is every command of a topside install; ``python -m hindrax_tools.cli`` runs ``hindrax``.
-"""
+setup.py. :data:`COMMANDS` is every command of a topside install; ``python -m hindrax_tools.cli`` runs ``hindrax``."""
 from __future__ import annotations
 
 import sys

@@ -5,8 +5,7 @@ holds another one: the default folder is new, ``<root>/<input>_YYYY_MM_DD-HH_MM_
 :mod:`hindrax_bringup.recording.bag_dir`, created atomically with ``os.mkdir``), and when that name is taken (two
 runs in the same second) the next free ``_1``, ``_2``, ... is used and one line says so. A folder named with
 ``--out`` must be new or empty, or the command refuses in one line. ``<root>/latest`` is moved (atomically: a new
-symbolic link renamed over the old) only when a result is complete, so it never points at an interrupted run.
-"""
+symbolic link renamed over the old) only when a result is complete, so it never points at an interrupted run."""
 from __future__ import annotations
 
 import datetime as _dt

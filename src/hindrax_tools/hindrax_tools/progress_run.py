@@ -6,8 +6,7 @@ The command's output (stdout and stderr together) passes through line by line; c
 terminal ``LABEL: building <pkgs> (<n> finished)  <s> s``, rewritten every second; in a log the state once per
 change). At the end one line says how long it took; with ``--results-doc`` and ``--record`` a successful run writes
 that time into the measurements document's ``durations`` section
-(:func:`hindrax_tools.results_doc.record_duration`). The exit status is the command's (127 when it cannot start).
-"""
+(:func:`hindrax_tools.results_doc.record_duration`). The exit status is the command's (127 when it cannot start)."""
 from __future__ import annotations
 
 import argparse

@@ -15,8 +15,7 @@ without it nothing is written. The write is atomic (a temporary file, then ``os.
 
 Section ``durations`` (:func:`record_duration`): one row per long command (``make setup``, ``make ros-install``),
 written by the command itself with its seconds and the machine's load; the README quotes them. From a shell: ``python
--m hindrax_tools.results_doc duration --results-doc docs/results.md "make setup (new .venv)" 211``.
-"""
+-m hindrax_tools.results_doc duration --results-doc docs/results.md "make setup (new .venv)" 211``."""
 from __future__ import annotations
 
 import argparse
@@ -54,8 +53,7 @@ def commit() -> str:
     here = Path(__file__).resolve().parent
     try:
         return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=here,
-                              capture_output=True, text=True, timeout=10,
-                              check=False).stdout.strip() or "unknown"
+                              capture_output=True, text=True, timeout=10, check=False).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 
@@ -71,19 +69,17 @@ def write_section(path: str | Path, name: str, title: str, body: str, command: s
                   supersedes_rows: tuple[str, Sequence[str]] | None = None) -> Path:
     """Replace (or append) section ``name`` of the Markdown document ``path``; returns the path.
 
-    path: the document (created with :data:`TITLE` when absent; its folder must exist). name: the
-    section's id, ``[a-z][a-z0-9_-]*`` (e.g. ``bench``, ``scenarios``, ``control``). title: its
-    heading text (``## title``). body: its Markdown (a trailing newline is added when missing).
-    command: the command line that produced it, for the provenance line. supersedes_prefix: every
-    other section whose name starts with it is removed in the same write (``bench-`` for the full
-    benchmark run). supersedes_rows: ``(section, keys)``: the table rows of that section whose first
-    cell is one of ``keys`` are removed in the same write (:func:`supersede_rows`;
-    ``("bench", ["stack"])`` for ``--only stack``).
+    path: the document (created with :data:`TITLE` when absent; its folder must exist). name: the section's id,
+    ``[a-z][a-z0-9_-]*`` (e.g. ``bench``, ``scenarios``, ``control``). title: its heading text (``## title``). body: its
+    Markdown (a trailing newline is added when missing). command: the command line that produced it, for the provenance
+    line. supersedes_prefix: every other section whose name starts with it is removed in the same write (``bench-`` for
+    the full benchmark run). supersedes_rows: ``(section, keys)``: the table rows of that section whose first cell is
+    one of ``keys`` are removed in the same write (:func:`supersede_rows`; ``("bench", ["stack"])`` for
+    ``--only stack``).
 
     Raises :class:`ResultsDocError` for a bad name, or a document holding only one of the section's
     two markers or the end marker before the begin marker (nothing is written then);
-    ``FileNotFoundError`` when the document's folder does not exist.
-    """
+    ``FileNotFoundError`` when the document's folder does not exist."""
     if not _NAME.match(name):
         raise ResultsDocError(f"results section name {name!r}: allowed [a-z][a-z0-9_-]*")
     path = Path(path)

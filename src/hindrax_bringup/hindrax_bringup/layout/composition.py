@@ -28,8 +28,7 @@ Groups (:data:`GROUPS`):
     the same two and the recorder: the pool test's layout with recording on.
 
 ``python -m hindrax_bringup.layout.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
-:data:`NODE_CLASSES` (for measurements; the launch files use the groups).
-"""
+:data:`NODE_CLASSES` (for measurements; the launch files use the groups)."""
 from __future__ import annotations
 
 import sys

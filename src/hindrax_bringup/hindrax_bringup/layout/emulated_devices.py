@@ -13,8 +13,7 @@ udev's ``/dev/hindrax-dvl``), :meth:`stop_i2c` / :meth:`start_i2c` the bus (abse
 The truth is a vehicle holding station in the pool, moving a little so that no driver's stuck-value detection
 trips on bit-identical readings: depth 1.0 m +/- 2 cm, altitude 1.5 m +/- 2 cm (DVL and Ping agree), surge
 velocity +/- 1 cm/s, level attitude, gravity and the Earth's field on the IMU, with periods of a few seconds.
-It is not a simulation (no thrust, no dynamics): the virtual pool is ``hindrax bringup --sim``.
-"""
+It is not a simulation (no thrust, no dynamics): the virtual pool is ``hindrax bringup --sim``."""
 from __future__ import annotations
 
 import abc
@@ -48,10 +47,9 @@ _EARTH_FIELD_T = (2.0e-5, 0.0, 4.0e-5)
 
 
 class DriverEndpoints(abc.ABC):
-    """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch
-    node name -> serial port path) and :attr:`socket_path` (the emulated I2C bus's socket). A
-    context manager that calls :meth:`close`. Shared by :class:`EmulatedDevices` and the live
-    pool's client (:class:`hindrax_sim.live_pool.LivePool`)."""
+    """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch node name -> serial
+    port path) and :attr:`socket_path` (the emulated I2C bus's socket). A context manager that calls :meth:`close`.
+    Shared by :class:`EmulatedDevices` and the live pool's client (:class:`hindrax_sim.live_pool.LivePool`)."""
 
     ports: dict[str, str]
     socket_path: str
@@ -64,9 +62,8 @@ class DriverEndpoints(abc.ABC):
         return []
 
     def env(self, name: str) -> dict[str, str]:
-        """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's
-        socket (:data:`~hindrax_common.transport.socket_i2c.SOCKET_ENV`) for a node on the bus,
-        else {}."""
+        """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's socket
+        (:data:`~hindrax_common.transport.socket_i2c.SOCKET_ENV`) for a node on the bus, else {}."""
         return {SOCKET_ENV: self.socket_path} if name in I2C_DEVICES else {}
 
     @abc.abstractmethod
@@ -134,8 +131,7 @@ class EmulatedDevices(DriverEndpoints):
             if self._server is None:
                 if os.path.exists(self.socket_path):
                     os.unlink(self.socket_path)
-                self._server = I2CSocketServer(self.bus, self.socket_path,
-                                               realtime_priority=HARDWARE_STAND_IN_PRIORITY)
+                self._server = I2CSocketServer(self.bus, self.socket_path, realtime_priority=HARDWARE_STAND_IN_PRIORITY)
 
     def stop_i2c(self) -> None:
         """The I2C bus is gone: opening fails, open connections fail with ENODEV (idempotent)."""

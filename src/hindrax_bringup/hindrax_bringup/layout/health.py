@@ -8,8 +8,7 @@ each name, and the supervisor's ``supervisor/status``.
 Ready means: every node of the launch file is in the graph; every status those nodes publish on ``/diagnostics``
 (:data:`STATUS_OF_NODE`) was received and is OK (a WARN is listed and fails only with ``strict``: a DVL out of the
 water says "connected, no data"); and the supervisor's own status was received and is OK (no latched breach).
-Anything else is listed, one line each, with the status message the node gave.
-"""
+Anything else is listed, one line each, with the status message the node gave."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -10,15 +10,14 @@ names, substitutions, conditions, the ``--ros-args`` a node gets); anything else
 :class:`LaunchFileError`, never ignored.
 
 Supported
-    ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``, ``<node pkg exec name namespace
-    output respawn respawn_delay args launch-prefix exec_name if unless>``
-    holding ``<param from/>``, ``<param name value/>`` and
-    ``<remap from to/>`` and ``<env name value/>``, ``<include file>`` holding ``<arg name value/>``, ``<group>``
-    (with ``if``/``unless``), and ``<set_env name value/>`` (for the nodes after it in its ``<launch>`` or
-    scoped ``<group>``, as ``launch`` does: included files see it, and one set in an included file stays set
-    after the ``<include>``; a node's own ``<env>`` wins);
-    the substitutions ``$(var NAME)``, ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that
-    evaluate to ``true``/``false``/``1``/``0`` (any case), as ``launch.conditions.evaluate_condition_expression``.
+    ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``,
+    ``<node pkg exec name namespace output respawn respawn_delay args launch-prefix exec_name if unless>`` holding
+    ``<param from/>``, ``<param name value/>`` and ``<remap from to/>`` and ``<env name value/>``, ``<include file>``
+    holding ``<arg name value/>``, ``<group>`` (with ``if``/``unless``), and ``<set_env name value/>`` (for the nodes
+    after it in its ``<launch>`` or scoped ``<group>``, as ``launch`` does: included files see it, and one set in an
+    included file stays set after the ``<include>``; a node's own ``<env>`` wins); the substitutions ``$(var NAME)``,
+    ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that evaluate to ``true``/``false``/``1``/``0``
+    (any case), as ``launch.conditions.evaluate_condition_expression``.
 Command of a node (``launch_ros.actions.Node``)
     ``<executable> [args...] --ros-args -r __node:=<name> [-r __ns:=<ns>] --params-file <file> ... -r from:=to``,
     the ``<param name value>`` elements written, as ``launch_ros`` does, to a parameter file keyed ``/**``, with
@@ -35,8 +34,7 @@ Launch prefix
     it (:attr:`NodeProcess.exec_name`) and labels processes by node name or executable.
 Respawn
     ``respawn="true"`` restarts the process whenever it ends while the launch runs, after ``respawn_delay`` s
-    (``launch.actions.ExecuteLocal``: on any exit, not only a failure).
-"""
+    (``launch.actions.ExecuteLocal``: on any exit, not only a failure)."""
 from __future__ import annotations
 
 import contextlib
@@ -77,8 +75,7 @@ class NodeProcess:
     arguments: the ``args`` attribute, split on white space. launch_prefix: the ``launch-prefix`` command, split
     (module docstring). exec_name: the ``exec_name`` attribute (Jazzy's process label) or None.
     respawn / respawn_delay_s: see the module docstring (s). env: (name, value) pairs added to the inherited
-    environment (``<set_env>``, then the node's ``<env>``). source: the launch file that declares the node.
-    """
+    environment (``<set_env>``, then the node's ``<env>``). source: the launch file that declares the node."""
 
     package: str
     executable: str
@@ -141,8 +138,7 @@ def read_launch(path: str | os.PathLike, arguments: Mapping[str, str] | None = N
     (``name:=value`` of the command line, as a mapping), includes followed, conditions applied, in file order.
 
     Raises :class:`LaunchFileError` for an unreadable file, an unsupported element, attribute or substitution, an
-    argument that is not declared or has no value, or a condition that is not a boolean.
-    """
+    argument that is not declared or has no value, or a condition that is not a boolean."""
     return _Reader(find_share).read(Path(path), dict(arguments or {}), top=True)
 
 

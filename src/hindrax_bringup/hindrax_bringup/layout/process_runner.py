@@ -15,8 +15,7 @@ the vehicle runs ``ros2 launch``.
 
 Executables are found as ``ros2 run`` finds them (:func:`installed_command`): ``<prefix>/lib/<package>/<exec>``
 for the package's prefix in the ament index; in a development venv where the package is an editable pip install
-(no ``lib/<package>``), the console script of that name next to the interpreter, if it belongs to the package.
-"""
+(no ``lib/<package>``), the console script of that name next to the interpreter, if it belongs to the package."""
 from __future__ import annotations
 
 import contextlib
@@ -88,14 +87,12 @@ class ProcessRunner:
     """Starts, respawns and stops the processes of a launch file (module docstring).
 
     processes: from :func:`~hindrax_bringup.layout.launch_xml.read_launch`. command: process -> executable argv (default
-    :func:`installed_command`). env: environment of every process (default: this one's), updated by the launch
-    file's (``<set_env>``, ``<env>``: :attr:`NodeProcess.env`), then by ``extra_env``: per-label additions (e.g.
-    an emulated device for one driver). log_dir: output files (default: a temporary directory,
-    :attr:`log_dir`). extra_ros_args: per-label arguments appended after the launch file's (``-p key:=value``
-    overrides, e.g. an emulated port). Use as a context manager or call :meth:`start` / :meth:`stop`.
-    Raises ``LookupError`` from :meth:`start` when an executable cannot be found (nothing is started then), and
-    ``ValueError`` for two processes with the same label.
-    """
+    :func:`installed_command`). env: environment of every process (default: this one's), updated by the launch file's
+    (``<set_env>``, ``<env>``: :attr:`NodeProcess.env`), then by ``extra_env``: per-label additions (e.g. an emulated
+    device for one driver). log_dir: output files (default: a temporary directory, :attr:`log_dir`). extra_ros_args:
+    per-label arguments appended after the launch file's (``-p key:=value`` overrides, e.g. an emulated port). Use as a
+    context manager or call :meth:`start` / :meth:`stop`. Raises ``LookupError`` from :meth:`start` when an executable
+    cannot be found (nothing is started then), and ``ValueError`` for two processes with the same label."""
 
     def __init__(self, processes: Sequence[NodeProcess], *,
                  command: Callable[[NodeProcess], list[str]] = installed_command,
@@ -177,13 +174,11 @@ class ProcessRunner:
         def write(values: Mapping) -> Path:  # <param> runs as a file keyed /**, as launch_ros does
             return write_parameter_file(values, self._params_dir)
 
-        return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write)
-                + self._extra_args.get(p.label, []))
+        return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write) + self._extra_args.get(p.label, []))
 
     def environment(self, p: NodeProcess) -> dict[str, str]:
-        """The environment ``p`` is started with: this runner's, then the launch file's for it
-        (``<set_env>``, ``<env>``: its real-time priority), then this runner's ``extra_env`` for
-        it."""
+        """The environment ``p`` is started with: this runner's, then the launch file's for it (``<set_env>``,
+        ``<env>``: its real-time priority), then this runner's ``extra_env`` for it."""
         return dict(self._env, **dict(p.env), **self._extra_env.get(p.label, {}))
 
     def log(self, label: str) -> str:

@@ -12,5 +12,4 @@ Pure cores (no ROS runtime):
 - :mod:`.make_test_bags`: the small synthetic bags under ``test/data``.
 
 Thin nodes: :mod:`.recorder_node` (``recorder/start``, ``recorder/stop``), :mod:`.player_node`.
-Commands: ``hindrax bag record|play|info|recover``.
-"""
+Commands: ``hindrax bag record|play|info|recover``."""

@@ -34,8 +34,7 @@ def new_bag_dir(output_root: str | os.PathLike, now: _dt.datetime | None = None,
 
     The root is created with its parents when missing. Raises ``OSError`` when the root cannot be created or
     written (permissions, read-only or missing medium), ``FileExistsError`` only when every suffix up to
-    :data:`MAX_SUFFIX` is taken.
-    """
+    :data:`MAX_SUFFIX` is taken."""
     root = Path(output_root)
     root.mkdir(parents=True, exist_ok=True)
     base = bag_dir_name(now, prefix)

@@ -1,13 +1,11 @@
 """``hindrax bag info``: what a bag holds (topics, types, counts, rates, duration, size).
 
-Counts and times come from the MCAP summaries (statistics records), not from metadata.yaml, so the
-figures are right even when metadata.yaml is stale; a file without summary is counted by reading it
-sequentially and reported as truncated. Rates are ``(count - 1) / (last - first log time)`` per topic
-(Hz), i.e. the mean message rate over the topic's own span; a topic with fewer than 2 messages has
-rate 0.
+Counts and times come from the MCAP summaries (statistics records), not from metadata.yaml, so the figures are right
+even when metadata.yaml is stale; a file without summary is counted by reading it sequentially and reported as
+truncated. Rates are ``(count - 1) / (last - first log time)`` per topic (Hz), i.e. the mean message rate over the
+topic's own span; a topic with fewer than 2 messages has rate 0.
 
-Pure (no ROS runtime). Errors: as :class:`hindrax_bringup.recording.reader.BagReader`.
-"""
+Pure (no ROS runtime). Errors: as :class:`hindrax_bringup.recording.reader.BagReader`."""
 from __future__ import annotations
 
 import datetime as _dt

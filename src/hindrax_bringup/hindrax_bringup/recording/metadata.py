@@ -23,8 +23,7 @@ Layout (rosbag2_storage ``yaml.hpp`` / ``metadata_io.cpp``, Jazzy; docs/architec
 The same mapping (without the ``rosbag2_bagfile_information`` key) is what rosbag2's MCAP plugin
 serialises into each file's ``rosbag2`` metadata record (key ``serialized_metadata``).
 
-Pure (PyYAML only). Errors: :class:`MetadataError` (a ``ValueError``) naming the file and the problem.
-"""
+Pure (PyYAML only). Errors: :class:`MetadataError` (a ``ValueError``) naming the file and the problem."""
 from __future__ import annotations
 
 import contextlib

@@ -1,10 +1,8 @@
 """Python message classes from ``pkg/msg/Type`` names (for raw subscriptions and raw publishers).
 
-rclpy needs the generated Python class (its type support) to create a subscription or publisher even
-when only CDR bytes pass through. Types whose package is not installed cannot be subscribed to or
-published; they can still be decoded from a bag's stored ``ros2msg`` schema
-(:meth:`hindrax_bringup.recording.reader.BagReader.decoded`).
-"""
+rclpy needs the generated Python class (its type support) to create a subscription or publisher even when only CDR bytes
+pass through. Types whose package is not installed cannot be subscribed to or published; they can still be decoded from
+a bag's stored ``ros2msg`` schema (:meth:`hindrax_bringup.recording.reader.BagReader.decoded`)."""
 from __future__ import annotations
 
 import importlib
@@ -21,8 +19,7 @@ def message_class(type_name: str) -> Any:
     """The generated class of ``pkg/msg/Type`` (e.g. ``sensor_msgs.msg.Imu``).
 
     Raises :class:`TypeNotInstalledError` with a one-line explanation when it cannot be imported, and
-    ValueError for a malformed name.
-    """
+    ValueError for a malformed name."""
     pkg, name = split_type_name(type_name)
     try:
         module = importlib.import_module(f"{pkg}.msg")
@@ -42,8 +39,7 @@ def from_decoded(cls: Any, decoded: Any) -> Any:
     For a bag recorded before the installed type changed: a field the stored definition lacks keeps the installed
     default (``ThrusterPwm.output_state`` reads ``OUTPUT_UNKNOWN`` in a bag from before it existed), a field the
     installed type lacks is dropped. Nested messages and sequences of messages are converted the same way.
-    Raises what the generated setters raise (TypeError, AssertionError) for a field whose type changed.
-    """
+    Raises what the generated setters raise (TypeError, AssertionError) for a field whose type changed."""
     msg = cls()
     for name, ftype in cls.get_fields_and_field_types().items():
         if not hasattr(decoded, name):

@@ -14,8 +14,7 @@ before each message so that a ``use_sim_time`` consumer never sees a message sta
 With ``loop`` the bag restarts at its origin (the clock jumps back, as with rosbag2).
 
 :func:`play` runs the schedule with injected ``monotonic``/``wait``/``publish`` callables, so tests drive
-it with a simulated clock; the player node passes ``time.monotonic`` and ``threading.Event.wait``.
-"""
+it with a simulated clock; the player node passes ``time.monotonic`` and ``threading.Event.wait``."""
 from __future__ import annotations
 
 import threading
@@ -56,8 +55,7 @@ def play(messages: Callable[[], Iterable[Any]], publish: Callable[[Any], None], 
     rate: playback rate factor (> 0). loop: repeat until ``stop`` is set (or ``max_passes``).
     publish_clock: called with bag time (ns) every ``clock_period_s`` of wall time and before each
         message; None = no clock. monotonic/wait: wall clock (s) and a wait(seconds) function.
-    Returns :class:`PlayStats`. Raises ValueError for rate <= 0 or clock_period_s <= 0.
-    """
+    Returns :class:`PlayStats`. Raises ValueError for rate <= 0 or clock_period_s <= 0."""
     if not rate > 0:
         raise ValueError(f"rate {rate}: must be > 0")
     if publish_clock is not None and not clock_period_s > 0:

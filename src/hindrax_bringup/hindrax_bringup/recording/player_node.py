@@ -30,8 +30,7 @@ empty = all), ``loop`` (false), ``clock`` (false), ``clock_rate_hz`` (100.0),
 
 Run alone: ``python -m hindrax_bringup.recording.player_node --ros-args -p bag:=runs/BAG -p rate:=2.0``.
 Errors: :class:`PlayerError` (one line) for a missing bag, unknown topics, nothing publishable, a withheld topic
-requested without ``safety_topics``, or (with it) an ESC or supervisor on the graph.
-"""
+requested without ``safety_topics``, or (with it) an ESC or supervisor on the graph."""
 from __future__ import annotations
 
 import sys
@@ -270,8 +269,7 @@ class BagPlayerNode(Node):
 def main(args: list[str] | None = None) -> int:
     """Entry point: ``python -m hindrax_bringup.recording.player_node --ros-args -p bag:=PATH ...``.
 
-    Exit 0 when played (or stopped by SIGINT/SIGTERM), 1 with one line on stderr for a :class:`PlayerError`.
-    """
+    Exit 0 when played (or stopped by SIGINT/SIGTERM), 1 with one line on stderr for a :class:`PlayerError`."""
     with RosProcess(args, errors={PlayerError: "player"}) as proc:
         node = proc.own(BagPlayerNode())
         node.wait_for_subscribers()

@@ -12,9 +12,8 @@ durations are ``{sec, nsec}`` with infinity = 2^63-1 ns = {9223372036, 854775807
 
 - The MCAP channel metadata ``offered_qos_profiles`` is the YAML *string* of the list
   (:func:`profiles_to_yaml`); metadata.yaml (version 9) holds the list itself.
-- :func:`subscription_policies` is rosbag2's ``adapt_request_to_offers``: reliable only if every
-  publisher is reliable (a reliable subscription never matches a best-effort publisher), transient
-  local only if every publisher is.
+- :func:`subscription_policies` is rosbag2's ``adapt_request_to_offers``: reliable only if every publisher is reliable
+  (a reliable subscription never matches a best-effort publisher), transient local only if every publisher is.
 - :func:`recorder_policies` is what this project's recorder requests: best effort for every
   volatile topic (why: :func:`hindrax_common.node_support.node_common.sensor_input_qos`), rosbag2's rule for the
   transient-local ones (their history reaches a late reader only when it is reliable).
@@ -22,8 +21,7 @@ durations are ``{sec, nsec}`` with infinity = 2^63-1 ns = {9223372036, 854775807
   all publishers agree on the compatibility-relevant policies (history reset to keep_last 10), else
   the default (reliable, volatile, keep_last 10).
 
-Pure (no rclpy import); :func:`profile_from_rclpy` duck-types an ``rclpy.qos.QoSProfile``.
-"""
+Pure (no rclpy import); :func:`profile_from_rclpy` duck-types an ``rclpy.qos.QoSProfile``."""
 from __future__ import annotations
 
 from typing import Any, Iterable, Mapping
@@ -110,14 +108,12 @@ def _upgrade_profile(p: Mapping[str, Any]) -> dict:
 def subscription_policies(offered: Iterable[Mapping[str, Any]]) -> tuple[str, str]:
     """(reliability, durability) a recorder must request to match every publisher (rosbag2 rule).
 
-    No publishers -> ("reliable", "volatile") (rosbag2's default request).
-    """
+    No publishers -> ("reliable", "volatile") (rosbag2's default request)."""
     offered = list(offered)
     if not offered:
         return "reliable", "volatile"
     reliability = "reliable" if all(p.get("reliability") == "reliable" for p in offered) else "best_effort"
-    durability = ("transient_local" if all(p.get("durability") == "transient_local" for p in offered)
-                  else "volatile")
+    durability = ("transient_local" if all(p.get("durability") == "transient_local" for p in offered) else "volatile")
     return reliability, durability
 
 

@@ -14,8 +14,7 @@ A file without a summary (recorder killed, not yet recovered) is read sequential
 complete record (:func:`hindrax_bringup.recording.recover.iter_file_records`) and flagged in
 :attr:`BagReader.truncated_files`; run ``hindrax bag recover BAG`` to repair it.
 
-Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a readable bag).
-"""
+Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a readable bag)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -77,8 +76,7 @@ def bag_files(path: str | Path) -> list[Path]:
         present = []
     # metadata.yaml may be stale after a crash (written before the last split): add unlisted files
     listed = {f.name for f in present}
-    extra = [f for f in sorted(path.glob("*.mcap"), key=_recover.file_index)
-             if f.name not in listed]
+    extra = [f for f in sorted(path.glob("*.mcap"), key=_recover.file_index) if f.name not in listed]
     files = present + extra
     if not files:
         raise BagError(f"{path}: no .mcap files")
@@ -168,8 +166,7 @@ class BagReader:
         same = msgdefs.matches_installed(ch.type, ch.definition, ch.metadata.get("topic_type_hash"))
         return cls if same else None
 
-    def installed_messages(self, topics: Iterable[str],
-                           lean: bool = False) -> Iterator[tuple[RawMessage, Any]]:
+    def installed_messages(self, topics: Iterable[str], lean: bool = False) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, instance of the installed class) pairs of ``topics`` in log-time order.
 
         Records whose type has the installed layout (:meth:`installed_class`) go through rclpy's C
@@ -179,8 +176,7 @@ class BagReader:
         (:meth:`decoded`) and copied into the installed class field by field (:func:`.msgtypes.from_decoded`:
         a field the bag lacks keeps the installed default). One rule for every reader of old bags.
         Raises :class:`.msgtypes.TypeNotInstalledError` for a type that is not installed, KeyError for a topic
-        not in the bag, :class:`BagError` for a stored definition that does not parse.
-        """
+        not in the bag, :class:`BagError` for a stored definition that does not parse."""
         from rclpy.serialization import deserialize_message
 
         from hindrax_common.cdr.lean_cdr import cdr_decoder
@@ -191,8 +187,7 @@ class BagReader:
         changed = {t: message_class(self.channels[t].type) for t, c in classes.items() if c is None}
         decode = {t: cdr_decoder(c) if lean else (lambda data, c=c: deserialize_message(data, c))
                   for t, c in classes.items() if c is not None}
-        for raw, obj in (self.decoded(wanted) if changed
-                         else ((raw, None) for raw in self.messages(wanted))):
+        for raw, obj in (self.decoded(wanted) if changed else ((raw, None) for raw in self.messages(wanted))):
             dec = decode.get(raw.topic)
             yield raw, dec(raw.data) if dec is not None else from_decoded(changed[raw.topic], obj)
 
@@ -203,8 +198,7 @@ class BagReader:
         for f in self.files:
             yield from self.file_messages(f, wanted, start_ns, end_ns)
 
-    def file_messages(self, f: Path, topics: Iterable[str] | None = None,
-                      start_ns: int | None = None,
+    def file_messages(self, f: Path, topics: Iterable[str] | None = None, start_ns: int | None = None,
                       end_ns: int | None = None) -> Iterator[RawMessage]:
         """:meth:`messages` of one file ``f`` of :attr:`files` (log-time order within the file)."""
         wanted = set(topics) if topics is not None else None
@@ -217,15 +211,13 @@ class BagReader:
                     topics=None if wanted is None else sorted(wanted), log_time_order=True,
                     starting_at=None if start_ns is None else int(start_ns),
                     ending_before=None if end_ns is None else int(end_ns)):
-                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time,
-                                 msg.publish_time, msg.data)
+                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time, msg.data)
 
     def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas
         (``mcap_ros2.decoder.DecoderFactory``, the decoder an ``mcap`` reader uses).
 
-        Raises :class:`BagError` naming the topic when its schema is missing or cannot be parsed.
-        """
+        Raises :class:`BagError` naming the topic when its schema is missing or cannot be parsed."""
         from mcap_ros2.decoder import DecoderFactory
 
         factory = DecoderFactory()
@@ -284,8 +276,7 @@ def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tup
     ``device_name`` equals ``device_name`` are yielded. ``t_ns`` is the message's ``header.stamp`` (the
     time the driver received or sent the bytes, ROS time) in ns, or the bag log time when the stamp is
     zero. Both directions (DIRECTION_DEVICE_TO_HOST / HOST_TO_DEVICE) are yielded; filter on
-    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path.
-    """
+    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path."""
     from rclpy.serialization import deserialize_message
 
     from hindrax_msgs.msg import RawDeviceData

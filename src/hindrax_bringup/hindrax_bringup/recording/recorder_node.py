@@ -8,11 +8,10 @@ Behaviour
   configuration key ``recording.topics`` is used, and without it every topic. The graph is polled every
   ``discovery_period_s`` so topics that appear after the start are recorded too. A topic is subscribed
   to once it has a publisher (its QoS is then known).
-- QoS: each subscription is best effort unless the topic is transient local, where it matches the
-  topic's publishers as rosbag2 does (:func:`~hindrax_bringup.recording.qos.recorder_policies`: the
-  writers then run no reliability protocol for the recorder), keep-last depth ``queue_depth``; the
-  publishers' profiles are stored in the bag (``offered_qos_profiles``). A sample sent before the
-  recorder's reader has matched its writer is not recorded.
+- QoS: each subscription is best effort unless the topic is transient local, where it matches the topic's publishers as
+  rosbag2 does (:func:`~hindrax_bringup.recording.qos.recorder_policies`: the writers then run no reliability protocol
+  for the recorder), keep-last depth ``queue_depth``; the publishers' profiles are stored in the bag
+  (``offered_qos_profiles``). A sample sent before the recorder's reader has matched its writer is not recorded.
 - Data: one subscription callback per message on the node's executor, whatever the clock (the
   vehicle, the virtual pool and the tests take the same path). The subscriptions are raw: the
   callback gets the CDR bytes and they are written unchanged, never converted into a Python message
@@ -32,10 +31,9 @@ Behaviour
   (:class:`~hindrax_bringup.recording.sequence_gaps.SequenceGaps`; a best-effort reader's loss is
   otherwise silent). The info has no publisher gid here, so the count is keyed by topic and a gap
   counts only while the topic has one publisher (``get_publisher_count``, asked on a gap only).
-- Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag,
-  messages written, dropped (the writer's queue) and lost (in transit; WARN when either is above 0),
-  one key per topic (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name``
-  -> samples lost).
+- Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag, messages written,
+  dropped (the writer's queue) and lost (in transit; WARN when either is above 0), one key per topic
+  (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name`` -> samples lost).
 - Disk floor: every ``disk_check_period_s`` (and before a start) the free space of the filesystem the bag
   goes to is compared with ``recording.min_free_disk_mb``; below it the recorder stops cleanly (the bag is
   finished: summary, metadata.yaml), refuses new starts, and reports the reason at level ERROR on
@@ -50,8 +48,7 @@ timestamped directory under ``recording.output_root`` at every start, never an e
 what a crash loses grows by at most this much).
 
 Run alone: ``python -m hindrax_bringup.recording.recorder_node --ros-args --params-file
-ros_ws/config/hindrax.yaml -p autostart:=true``.
-"""
+ros_ws/config/hindrax.yaml -p autostart:=true``."""
 from __future__ import annotations
 
 import functools
@@ -89,8 +86,7 @@ class RecorderNode(VehicleNode):
     """Records selected topics to MCAP bags; see the module docstring for parameters and interfaces.
 
     Raises :class:`hindrax_common.config.ConfigError` when the vehicle configuration is invalid and
-    ValueError for an invalid topic regex given at start-up.
-    """
+    ValueError for an invalid topic regex given at start-up."""
 
     def __init__(self, node_name: str = "recorder", *, statvfs: Any = None, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
@@ -202,8 +198,7 @@ class RecorderNode(VehicleNode):
         """Open a new bag and subscribe to the selected topics. Returns the bag directory.
 
         Raises RuntimeError when already recording, FileExistsError when a named directory holds a bag,
-        OSError when it cannot be created.
-        """
+        OSError when it cannot be created."""
         if self._writer is not None:
             raise RuntimeError(f"already recording to {self._writer.bag_dir}")
         named = output_dir or self._output_dir_param  # else a new directory under the root (bag_dir)
@@ -239,8 +234,7 @@ class RecorderNode(VehicleNode):
         return meta
 
     def _publisher_count(self, topic: str) -> int:
-        """Publishers of ``topic`` matched with the recorder's subscription (0 when not
-        subscribed)."""
+        """Publishers of ``topic`` matched with the recorder's subscription (0 when not subscribed)."""
         sub = self._subs.get(topic)
         return sub.get_publisher_count() if sub is not None else 0
 
@@ -389,8 +383,7 @@ def main(args: list[str] | None = None) -> int:
     """Entry point: ``python -m hindrax_bringup.recording.recorder_node --ros-args ...``.
 
     Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
-    The process spins the EventsExecutor (:mod:`hindrax_common.process.ros_process`).
-    """
+    The process spins the EventsExecutor (:mod:`hindrax_common.process.ros_process`)."""
     with RosProcess(args) as proc:
         try:
             node = RecorderNode()

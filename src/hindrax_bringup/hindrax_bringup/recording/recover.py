@@ -1,20 +1,17 @@
 """Recovering bags whose recorder died (SIGKILL, power loss): rebuild summaries and metadata.yaml.
 
-A killed recorder leaves ``<bag>_<n>.mcap`` without its summary/footer, possibly ending in a partial
-record (or, after a power loss on some file systems, in zero-filled blocks), and a metadata.yaml with
-stale counts. Because the writer fsyncs every finished chunk (:mod:`.writer`), everything but the chunk
-being filled is on disk.
+A killed recorder leaves ``<bag>_<n>.mcap`` without its summary/footer, possibly ending in a partial record (or, after a
+power loss on some file systems, in zero-filled blocks), and a metadata.yaml with stale counts. Because the writer
+fsyncs every finished chunk (:mod:`.writer`), everything but the chunk being filled is on disk.
 
-:func:`iter_file_records` reads a file sequentially with the mcap library's stream reader, one complete
-record at a time: it stops at the first record that runs past the end of the file, has an invalid
-opcode (0x00: zero fill) or is a Footer/DataEnd; chunks are decompressed with CRC validation and a
-corrupt chunk is skipped. :func:`recover_file` rewrites such a file as a complete MCAP (same schemas,
-channels with their metadata, messages, metadata records; new chunk indexes, statistics, summary) via a
-temporary file and an atomic rename; :func:`recover_bag` does it for every file of a bag and rebuilds
-metadata.yaml from the files themselves (topics, types, QoS, hashes, counts, times).
+:func:`iter_file_records` reads a file sequentially with the mcap library's stream reader, one complete record at a
+time: it stops at the first record that runs past the end of the file, has an invalid opcode (0x00: zero fill) or is a
+Footer/DataEnd; chunks are decompressed with CRC validation and a corrupt chunk is skipped. :func:`recover_file`
+rewrites such a file as a complete MCAP (same schemas, channels with their metadata, messages, metadata records; new
+chunk indexes, statistics, summary) via a temporary file and an atomic rename; :func:`recover_bag` does it for every
+file of a bag and rebuilds metadata.yaml from the files themselves (topics, types, QoS, hashes, counts, times).
 
-Errors: ``FileNotFoundError``; :class:`RecoverError` (a ``ValueError``) when a file is not MCAP at all.
-"""
+Errors: ``FileNotFoundError``; :class:`RecoverError` (a ``ValueError``) when a file is not MCAP at all."""
 from __future__ import annotations
 
 import io
@@ -83,9 +80,8 @@ def is_complete(path: str | Path) -> bool:
 
 
 def _raw_records(f, size: int) -> Iterator[tuple[int, int, bytes]]:
-    """(opcode, end offset, header + body) of each complete record of the data section of open file
-    ``f`` (``size`` bytes), stopping at the first invalid opcode (zero fill), Footer/DataEnd or
-    truncated record."""
+    """(opcode, end offset, header + body) of each complete record of the data section of open file ``f`` (``size``
+    bytes), stopping at the first invalid opcode (zero fill), Footer/DataEnd or truncated record."""
     pos = len(MAGIC)
     while pos + 9 <= size:
         f.seek(pos)
@@ -110,8 +106,7 @@ def iter_file_records(path: str | Path, stats: FileRecovery | None = None) -> It
     """Complete records of the data section of an MCAP file, tolerant of truncation (see module doc).
 
     Chunks are expanded into their Schema/Channel/Message records. Summary records are not yielded.
-    ``stats`` (optional) receives chunk counts and the number of trailing bytes not read.
-    """
+    ``stats`` (optional) receives chunk counts and the number of trailing bytes not read."""
     path = Path(path)
     size = path.stat().st_size
     with open(path, "rb") as f:
@@ -167,8 +162,7 @@ def recover_file(path: str | Path, keep_original: bool = False) -> FileRecovery:
     """Rewrite a truncated MCAP file as a complete one in place (atomic rename).
 
     keep_original: keep the damaged file as ``<name>.truncated``; a complete file is left as it is.
-    Returns a :class:`FileRecovery`. Raises FileNotFoundError, :class:`RecoverError`.
-    """
+    Returns a :class:`FileRecovery`. Raises FileNotFoundError, :class:`RecoverError`."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
@@ -243,8 +237,7 @@ def _topic_info(ch: Channel, type_name: str) -> TopicInfo:
         qos = profiles_from_yaml(ch.metadata.get("offered_qos_profiles", ""))
     except Exception:  # noqa: BLE001 - unreadable QoS is recorded as none
         qos = []
-    return TopicInfo(ch.topic, type_name, qos, ch.metadata.get("topic_type_hash", ""), 0,
-                     ch.message_encoding or "cdr")
+    return TopicInfo(ch.topic, type_name, qos, ch.metadata.get("topic_type_hash", ""), 0, ch.message_encoding or "cdr")
 
 
 def metadata_from_files(files: list[Path]) -> BagMetadata:
@@ -279,8 +272,7 @@ def recover_bag(bag_path: str | Path, keep_original: bool = False) -> tuple[BagM
     """Recover every ``*.mcap`` of a bag directory (or one file) and rewrite metadata.yaml.
 
     Files are taken from the directory itself (metadata.yaml may be stale or missing), in ``_<n>``
-    order. Returns (new metadata, per-file results). Raises FileNotFoundError, :class:`RecoverError`.
-    """
+    order. Returns (new metadata, per-file results). Raises FileNotFoundError, :class:`RecoverError`."""
     bag_path = Path(bag_path)
     if not bag_path.exists():
         raise FileNotFoundError(f"{bag_path}: no such bag")

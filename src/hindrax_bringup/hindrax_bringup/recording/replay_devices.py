@@ -6,33 +6,28 @@ drivers)". A bag recorded by the stack holds every byte and register transaction
 This module serves them again to *fresh, unmodified* driver nodes through the same transports the simulator
 uses, so the real parsing code runs on the recorded stream:
 
-- :class:`SerialReplayDevice` (a :class:`~hindrax_common.transport.pty_device.ByteStreamEmulator`, served on a
-  pty by :class:`~hindrax_common.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in
-  order, each at the step of the replay clock that reaches its recorded receive time
-  (``paced=True``) or all at once (``paced=False``). Host->device bytes are ignored (the recorded
-  replies are in the device->host stream already).
-- :class:`I2CReplayDevice` (one per I2C address on an
-  :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`): answers each read transaction with the
-  next recorded read data *of that register* (the register pointer is the first byte of the preceding
-  write, as on the wire), and accepts writes, comparing each with the next recorded write of the address
-  (:attr:`I2CReplayDevice.write_mismatches`). When a register's recorded reads are used up, reads NACK
-  (``OSError`` errno 121, as an absent device): the driver counts an I2C failure and publishes nothing,
-  so a replay never invents data.
+- :class:`SerialReplayDevice` (a :class:`~hindrax_common.transport.pty_device.ByteStreamEmulator`, served on a pty by
+  :class:`~hindrax_common.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in order, each at the
+  step of the replay clock that reaches its recorded receive time (``paced=True``) or all at once (``paced=False``).
+  Host->device bytes are ignored (the recorded replies are in the device->host stream already).
+- :class:`I2CReplayDevice` (one per I2C address on an :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus`):
+  answers each read transaction with the next recorded read data *of that register* (the register pointer is the first
+  byte of the preceding write, as on the wire), and accepts writes, comparing each with the next recorded write of the
+  address (:attr:`I2CReplayDevice.write_mismatches`). When a register's recorded reads are used up, reads NACK
+  (``OSError`` errno 121, as an absent device): the driver counts an I2C failure and publishes nothing, so a replay
+  never invents data.
 - :class:`ReplayHardware`: all of it for one bag (``dvl75`` and ``ping1d`` on ptys served by the
   caller, every recorded I2C device on one bus).
 - :class:`DriverReplay`: the driver nodes (DVL-75, Ping1D, MS5837, ICM-20948, ESC) on that hardware with
-  ``use_sim_time``, a ``/clock`` publisher stepping through the recorded ``/clock`` values (or, without
-  them, a 100 Hz grid over the recorded span), and a probe collecting every parsed message; it runs until
-  every recorded device->host byte and every recorded I2C read has been consumed. The serial
-  devices run in lock-step with that clock, as in the simulator that records such bags: at each
-  step, every driver's clock already there, the chunks due are written and each driver reads and
-  handles them in the harness's thread (``SerialTransport.pump``) before time moves on, so every
-  chunk is received at its recorded time whatever the load (a rule on receive times, such as the
-  DVL node's "no ``$DVPDL`` for 1 s", sees the recorded gaps).
+  ``use_sim_time``, a ``/clock`` publisher stepping through the recorded ``/clock`` values (or, without them, a 100 Hz
+  grid over the recorded span), and a probe collecting every parsed message; it runs until every recorded device->host
+  byte and every recorded I2C read has been consumed. The serial devices run in lock-step with that clock, as in the
+  simulator that records such bags: at each step, every driver's clock already there, the chunks due are written and
+  each driver reads and handles them in the harness's thread (``SerialTransport.pump``) before time moves on, so every
+  chunk is received at its recorded time whatever the load (a rule on receive times, such as the DVL node's "no
+  ``$DVPDL`` for 1 s", sees the recorded gaps).
 
-What "the same" means after a replay: :func:`compare_parsed` (checked by
-``test/test_bag_replay_drivers.py``).
-"""
+What "the same" means after a replay: :func:`compare_parsed` (checked by ``test/test_bag_replay_drivers.py``)."""
 from __future__ import annotations
 
 import collections
@@ -64,16 +59,14 @@ from .msgtypes import message_class
 from .reader import BagReader, iter_raw_device_data
 
 __all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
-           "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed",
-           "strip_stamp"]
+           "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed", "strip_stamp"]
 
 #: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_common.base.devices.DEVICES`), with the device
 #: whose raw data they are parsed from.
 PARSED_TOPICS: dict[str, str] = {t: d.name for d in device_table.DEVICES for t in d.topics}
 #: Topics of the I2C drivers, stamped with the ROS time of a read their own timers make: not
 #: lock-stepped with the replay (compare_parsed).
-I2C_STAMPED = frozenset(t for d in device_table.DEVICES if d.transport == device_table.I2C
-                        for t in d.topics)
+I2C_STAMPED = frozenset(t for d in device_table.DEVICES if d.transport == device_table.I2C for t in d.topics)
 
 _NACK = errno.EREMOTEIO  # 121, what i2c-dev returns for an unanswered address
 
@@ -104,8 +97,7 @@ def i2c_transactions(items: Iterable[tuple[int, Any]]) -> dict[int, I2CTransacti
     """Group ``iter_raw_device_data`` output of an I2C device by 7-bit address (see :class:`I2CTransactions`).
 
     The driver tap records a write as (register, payload) and ``write_byte(value)`` as (value, b"")
-    (:class:`~hindrax_common.transport.i2c.I2CDevice`), so the wire bytes are ``[register] + payload``.
-    """
+    (:class:`~hindrax_common.transport.i2c.I2CDevice`), so the wire bytes are ``[register] + payload``."""
     out: dict[int, I2CTransactions] = {}
     for _t, m in items:
         if m.transport != RawDeviceData.TRANSPORT_I2C:
@@ -126,8 +118,7 @@ class SerialReplayDevice:
         chunks: ``(t_ns, data)`` device->host chunks in recorded order (ROS time of receipt, ns).
         paced: emit a chunk only once ``poll(t_s)`` reaches its time; False: emit everything at the first poll.
     Attributes:
-        total_bytes: device->host bytes recorded in all.
-    """
+        total_bytes: device->host bytes recorded in all."""
 
     def __init__(self, chunks: Iterable[tuple[int, bytes]], paced: bool = True) -> None:
         self._chunks = collections.deque((int(t), bytes(d)) for t, d in chunks)
@@ -161,8 +152,7 @@ class I2CReplayDevice:
     Args:
         transactions: the recorded traffic of this address (:func:`i2c_transactions`).
     Attributes:
-        write_mismatches: list of (index, recorded, replayed); writes past the recording: ignored.
-    """
+        write_mismatches: list of (index, recorded, replayed); writes past the recording: ignored."""
 
     def __init__(self, transactions: I2CTransactions) -> None:
         self._lock = threading.RLock()
@@ -229,12 +219,10 @@ class ReplayHardware:
             in the bag).
         paced: see :class:`SerialReplayDevice`.
     Attributes:
-        serial (name -> SerialReplayDevice), ptys (name -> PtyDevice without a thread: served by
-        :class:`DriverReplay`), ports (name -> pty path), i2c (address -> I2CReplayDevice),
-        i2c_device_of (address -> device name), i2c_bus.
+        serial (name -> SerialReplayDevice), ptys (name -> PtyDevice without a thread: served by :class:`DriverReplay`),
+        ports (name -> pty path), i2c (address -> I2CReplayDevice), i2c_device_of (address -> device name), i2c_bus.
     Raises:
-        FileNotFoundError / BagError: bad bag path.
-    """
+        FileNotFoundError / BagError: bad bag path."""
 
     def __init__(self, bag_path: str | Path, devices: Iterable[str] | None = None, paced: bool = True) -> None:
         self.serial: dict[str, SerialReplayDevice] = {}
@@ -316,14 +304,12 @@ def _equal(a: Any, b: Any) -> bool:
 def compare_parsed(recorded: dict[str, list[Any]], replayed: dict[str, list[Any]]) -> list[str]:
     """Differences between recorded and replayed parsed messages, one line each ([] = the same).
 
-    Rule: for every topic of :data:`PARSED_TOPICS` present in ``recorded``, the same number of messages, and
-    message k of the replay equals message k of the recording field by field (NaN == NaN, exact
-    float equality otherwise: the same bytes go through the same code),
-    ``header.stamp`` included on the serial devices' topics: their bytes are served in lock-step
-    with the replay clock (module docstring), so each chunk is received at its recorded time and
-    the DVL's device-time stamps (``tu - dtu/2`` plus the offset estimate min(receive time - tu))
-    are the recorded ones too. Excluded on :data:`I2C_STAMPED` topics.
-    """
+    Rule: for every topic of :data:`PARSED_TOPICS` present in ``recorded``, the same number of messages, and message k
+    of the replay equals message k of the recording field by field (NaN == NaN, exact float equality otherwise: the same
+    bytes go through the same code), ``header.stamp`` included on the serial devices' topics: their bytes are served in
+    lock-step with the replay clock (module docstring), so each chunk is received at its recorded time and the DVL's
+    device-time stamps (``tu - dtu/2`` plus the offset estimate min(receive time - tu)) are the recorded ones too.
+    Excluded on :data:`I2C_STAMPED` topics."""
     problems: list[str] = []
     for topic in sorted(set(recorded) & set(PARSED_TOPICS)):
         a, b = recorded[topic], replayed.get(topic, [])
@@ -348,8 +334,7 @@ class DriverReplay:
         clock_period_s: step of the replay clock where the bag has no ``/clock``, s.
     Attributes:
         hardware, nodes (name -> node), probe, received (topic -> list of messages), published (topic ->
-        count, every publisher of the driver nodes), timeline_ns (the /clock values replayed).
-    """
+        count, every publisher of the driver nodes), timeline_ns (the /clock values replayed)."""
 
     def __init__(self, bag_path: str | Path, config_path: str | Path, context: Any, overrides: dict | None = None,
                  clock_period_s: float = 0.01) -> None:
@@ -439,8 +424,7 @@ class DriverReplay:
         serial drivers read every byte due), continue ``extra_s`` of ROS time at the last step's period until
         everything recorded is consumed, then wait until the probe has every published parsed message.
 
-        Raises TimeoutError (naming what was not reached) after ``timeout_s`` of wall time per wait.
-        """
+        Raises TimeoutError (naming what was not reached) after ``timeout_s`` of wall time per wait."""
         serial_nodes = [self.nodes[n] for n in self.hardware.serial if n in self.nodes]
         _spin_until(self.executor, lambda: all(n.transport.connected for n in serial_nodes), timeout_s,
                     "serial drivers connected to the replay ptys")

@@ -1,8 +1,7 @@
 """Which topics a recording takes: an explicit list, a regular expression, or everything.
 
 Pure. :class:`TopicSelection` is what the recorder node evaluates against the ROS graph on every poll,
-so topics that appear after the recording started are picked up (docs/architecture.md §7).
-"""
+so topics that appear after the recording started are picked up (docs/architecture.md §7)."""
 from __future__ import annotations
 
 import re
@@ -23,13 +22,11 @@ def is_hidden(topic: str) -> bool:
 class TopicSelection:
     """Topics to record.
 
-    topics: explicit names (a leading "/" is added when missing). regex: Python regular expression
-    matched with ``re.search`` against full topic names (in addition to ``topics``). all_topics: every
-    non-hidden topic. exclude_regex: topics never recorded.
-    Empty topics + empty regex + all_topics False selects nothing.
+    topics: explicit names (a leading "/" is added when missing). regex: Python regular expression matched with
+    ``re.search`` against full topic names (in addition to ``topics``). all_topics: every non-hidden topic.
+    exclude_regex: topics never recorded. Empty topics + empty regex + all_topics False selects nothing.
 
-    Raises ValueError (one line) for an invalid regular expression.
-    """
+    Raises ValueError (one line) for an invalid regular expression."""
 
     topics: tuple[str, ...] = ()
     regex: str = ""

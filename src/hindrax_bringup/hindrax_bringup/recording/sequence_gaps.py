@@ -1,12 +1,10 @@
 """Samples lost between writers and a reader, from gaps in their publication sequence numbers.
 
-A DDS writer numbers its samples 1, 2, 3, ... (DDS 1.4 §8.3.5.4 ``SequenceNumber_t``, RTPS 2.5
-§8.2.2; the rmw message info's ``publication_sequence_number``, rmw ``rmw_message_info_t``, rclpy's
-callback ``MessageInfo`` dict) and a reader gets each writer's samples in that order, each at most
-once. A sample that never reaches the reader (a best-effort reader's full socket buffer, a keep-last
-history overwritten before the take) leaves a gap: the next sample's number exceeds the last one's
-by more than 1. Pure: no ROS.
-"""
+A DDS writer numbers its samples 1, 2, 3, ... (DDS 1.4 §8.3.5.4 ``SequenceNumber_t``, RTPS 2.5 §8.2.2; the rmw message
+info's ``publication_sequence_number``, rmw ``rmw_message_info_t``, rclpy's callback ``MessageInfo`` dict) and a reader
+gets each writer's samples in that order, each at most once. A sample that never reaches the reader (a best-effort
+reader's full socket buffer, a keep-last history overwritten before the take) leaves a gap: the next sample's number
+exceeds the last one's by more than 1. Pure: no ROS."""
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable
@@ -23,12 +21,10 @@ class SequenceGaps:
     how many writers publish under that key, asked only when a gap shows: a gap is counted only when
     it is 1, since several writers' interleaved numbers make gaps that are no loss (default: 1).
 
-    Rules per writer: the first sample sets the baseline (a reader that joins late does not count
-    what came before it); a number 1 above the last is in order; more than 1 above, the difference
-    less 1 is lost; the same number again is a duplicate (not counted); a smaller number is a new
-    incarnation of the writer (a restarted process numbers from 1 again; one writer's samples never
-    arrive out of order), a new baseline, no loss.
-    """
+    Rules per writer: the first sample sets the baseline (a reader that joins late does not count what came before it);
+    a number 1 above the last is in order; more than 1 above, the difference less 1 is lost; the same number again is a
+    duplicate (not counted); a smaller number is a new incarnation of the writer (a restarted process numbers from
+    1 again; one writer's samples never arrive out of order), a new baseline, no loss."""
 
     __slots__ = ("_last", "_lost", "_writer_count")
 
@@ -38,10 +34,9 @@ class SequenceGaps:
         self._writer_count = writer_count
 
     def observe(self, writer: Hashable, seq: int) -> int:
-        """Take one received sample's sequence number ``seq`` (int, >= 1) from ``writer``; returns
-        the samples lost just before it (0 unless a gap shows). A number the rmw does not give
-        (None, not an int, or :data:`SEQUENCE_NUMBER_UNSUPPORTED`) counts nothing and raises
-        nothing."""
+        """Take one received sample's sequence number ``seq`` (int, >= 1) from ``writer``; returns the samples lost just
+        before it (0 unless a gap shows). A number the rmw does not give (None, not an int, or
+        :data:`SEQUENCE_NUMBER_UNSUPPORTED`) counts nothing and raises nothing."""
         if not isinstance(seq, int) or seq == SEQUENCE_NUMBER_UNSUPPORTED:
             return 0
         last = self._last.get(writer)

@@ -26,8 +26,7 @@ Not thread-safe (neither is ``mcap.writer.Writer``): use it from one thread only
 :class:`hindrax_bringup.recording.writer_thread.ThreadedBagWriter`.
 
 Errors: ``FileExistsError`` (bag directory already holds a bag), ``KeyError`` (write to an unknown topic),
-``ValueError`` (bad options), ``RuntimeError`` (write after close), ``OSError`` from the file system.
-"""
+``ValueError`` (bad options), ``RuntimeError`` (write after close), ``OSError`` from the file system."""
 from __future__ import annotations
 
 import os
@@ -62,8 +61,7 @@ class WriterOptions:
     split_duration_s: start a new file after this much log time, s (0 = never).
     flush_interval_s: close and fsync the open chunk once its oldest message is this old, s (0 = only
         when the chunk is full).
-    fsync: call os.fsync after each chunk (disable only for benchmarks of the format itself).
-    """
+    fsync: call os.fsync after each chunk (disable only for benchmarks of the format itself)."""
 
     compression: str = "zstd"
     chunk_size_bytes: int = 1024 * 1024
@@ -83,8 +81,7 @@ class WriterOptions:
     @classmethod
     def from_section(cls, recording: RecordingSection) -> "WriterOptions":
         """From the validated ``recording.*`` section (``VehicleConfig.recording``)."""
-        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s",
-                "flush_interval_s")
+        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s", "flush_interval_s")
         return cls(**{k: getattr(recording, k) for k in keys})
 
 
@@ -119,8 +116,7 @@ class BagWriter:
 
     Usage: ``add_topic`` for each topic (before or between writes), ``write`` messages in receive order,
     ``close`` (also on exceptions: use it as a context manager). Times are ns since the epoch in the
-    clock the caller records with (ROS time; sim time when ``use_sim_time``).
-    """
+    clock the caller records with (ROS time; sim time when ``use_sim_time``)."""
 
     def __init__(self, bag_dir: str | Path, options: WriterOptions | None = None,
                  monotonic: Callable[[], float] = time.monotonic) -> None:
@@ -168,8 +164,7 @@ class BagWriter:
         the publishers' profiles (:mod:`.qos` dicts). definition/type_hash: given explicitly for types whose
         interface files are not installed; otherwise looked up (:mod:`.msgdefs`). A missing definition
         is recorded as an empty schema with a warning (readers then cannot decode that topic).
-        Registering an existing topic again is a no-op returning the existing info.
-        """
+        Registering an existing topic again is a no-op returning the existing info."""
         self._check_open()
         if name in self._topics:
             return self._topics[name].info
@@ -196,8 +191,7 @@ class BagWriter:
         """Append one serialized message (CDR bytes, unchanged) to ``topic`` at ``log_time_ns``.
 
         May close a chunk (then flush + fsync) or start a new file (split). Raises KeyError for a topic
-        not registered with :meth:`add_topic`.
-        """
+        not registered with :meth:`add_topic`."""
         self._check_open()
         t = self._topics[topic]
         f = self._file
@@ -309,8 +303,7 @@ class BagWriter:
 
         Summary (schemas and channels repeated, one chunk index per chunk, statistics, offsets, footer),
         the open chunk's message indexes (16 bytes per message) and the rosbag2 metadata record (about
-        1 kB per topic with its QoS YAML, 150 bytes per file listed).
-        """
+        1 kB per topic with its QoS YAML, 150 bytes per file listed)."""
         n_topics = max(1, len(self._topics))
         chunk_index = 80 + 10 * n_topics
         return (f.record_bytes + (f.chunks + 1) * chunk_index + 16 * (self._pending_bytes // 32 + 1)

@@ -1,23 +1,20 @@
 """One writer thread in front of a :class:`~hindrax_bringup.recording.writer.BagWriter`.
 
-``mcap.writer.Writer`` is not thread-safe and a chunk close (compression + fsync) can take milliseconds
-to tens of milliseconds on an SD card, so the recorder node's subscription callbacks only enqueue
-``(topic, log_time_ns, data)`` and this thread owns the BagWriter: it writes in arrival
-order, closes the open chunk when ``flush_interval_s`` has passed (crash safety, see :mod:`.writer`)
-and finishes the bag on :meth:`ThreadedBagWriter.close`.
+``mcap.writer.Writer`` is not thread-safe and a chunk close (compression + fsync) can take milliseconds to tens of
+milliseconds on an SD card, so the recorder node's subscription callbacks only enqueue ``(topic, log_time_ns, data)``
+and this thread owns the BagWriter: it writes in arrival order, closes the open chunk when ``flush_interval_s`` has
+passed (crash safety, see :mod:`.writer`) and finishes the bag on :meth:`ThreadedBagWriter.close`.
 
 Hand-off: the producers append to a ``collections.deque`` (an atomic append, no lock, no wake-up) and the
 writer thread drains it every ``drain_period_s`` (and at once on :meth:`~ThreadedBagWriter.close`):
 no wake-up per message, as a ``queue.Queue`` would cost. What a crash loses grows by at most
 ``drain_period_s`` of messages.
 
-Back-pressure: the queue holds at most ``max_queue`` messages; beyond that (disk stalled) messages are
-counted in :attr:`ThreadedBagWriter.dropped` instead of growing memory without bound. A file-system
-error in the thread (disk full) is kept in :attr:`ThreadedBagWriter.error`; later messages are
-counted as dropped and :meth:`close` re-raises it.
+Back-pressure: the queue holds at most ``max_queue`` messages; beyond that (disk stalled) messages are counted in
+:attr:`ThreadedBagWriter.dropped` instead of growing memory without bound. A file-system error in the thread (disk full)
+is kept in :attr:`ThreadedBagWriter.error`; later messages are counted as dropped and :meth:`close` re-raises it.
 
-Pure (threads and a deque only; no ROS).
-"""
+Pure (threads and a deque only; no ROS)."""
 from __future__ import annotations
 
 import collections
@@ -36,8 +33,7 @@ class ThreadedBagWriter:
 
     bag_dir, options: as :class:`BagWriter` (the directory is created here, in the caller's thread, so
     a bad path fails at once). max_queue: bound of the message queue (messages). drain_period_s: how often the
-    writer thread takes what was queued, s (module docstring).
-    """
+    writer thread takes what was queued, s (module docstring)."""
 
     def __init__(self, bag_dir: str | Path, options: WriterOptions | None = None, max_queue: int = 100_000,
                  drain_period_s: float = 0.05) -> None:
@@ -57,8 +53,7 @@ class ThreadedBagWriter:
         self._thread.start()
 
     # -- producer side (any thread) ---------------------------------------------------------------
-    def add_topic(self, name: str, type_name: str,
-                  offered_qos_profiles: Iterable[Mapping[str, Any]] = ()) -> None:
+    def add_topic(self, name: str, type_name: str, offered_qos_profiles: Iterable[Mapping[str, Any]] = ()) -> None:
         """Queue a topic registration (see :meth:`BagWriter.add_topic`); ordered before later writes."""
         self._queue.append(("topic", name, type_name, [dict(p) for p in offered_qos_profiles]))
 
@@ -88,8 +83,7 @@ class ThreadedBagWriter:
     def close(self, timeout_s: float = 30.0) -> BagMetadata:
         """Write everything queued, finish the bag and stop the thread; returns the final metadata.
 
-        Raises the writer thread's error if it failed, TimeoutError if it did not finish in time.
-        """
+        Raises the writer thread's error if it failed, TimeoutError if it did not finish in time."""
         if not self._closed:
             self._closed = True
             self._queue.append((_STOP,))

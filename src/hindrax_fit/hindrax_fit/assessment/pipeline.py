@@ -4,8 +4,7 @@
 The commands parse their arguments and call these: ``hindrax ident fit`` (:func:`fit_bags` or, for a campaign bag,
 :func:`identify_bag`), ``hindrax ident bag`` (:func:`identify_bag`, :func:`write_campaign_outputs`), ``hindrax run``
 (:func:`identify_bag` with the identification node's calibration, :func:`.report.write_outputs`).
-Reads and fits run with the collector off (:func:`without_collector`); docs/identification.md §7.
-"""
+Reads and fits run with the collector off (:func:`without_collector`); docs/identification.md §7."""
 from __future__ import annotations
 
 import contextlib
@@ -29,8 +28,7 @@ from .report import write_fit_outputs, write_outputs
 from .results import build_document, reference_sections
 
 __all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options",
-           "write_any_outputs", "write_campaign_outputs", "without_collector",
-           "OverlappedFits"]
+           "write_any_outputs", "write_campaign_outputs", "without_collector", "OverlappedFits"]
 
 
 @contextlib.contextmanager
@@ -58,8 +56,7 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
 
 
 @without_collector()
-def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
-             opts: FitOptions = FitOptions()) -> FitResult:
+def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()) -> FitResult:
     """:func:`fit_bags` of bags already read (:func:`..bag_input.reader.read_any_topics` of the
     training bags and the ``holdout`` bags, named in the design)."""
     core = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
@@ -74,8 +71,7 @@ def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
 
 @without_collector()
 def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None,
-                 fitted: dict | None = None):
+                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None, fitted: dict | None = None):
     """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag: :func:`..bag_input.reader.read_campaign`,
     then :func:`..fit.campaign_fit.identify_all_with_errors` with the fit core's options ``opts`` (None: the
     defaults). The fits see the thrust-model force times the ``calibration`` scales (None:
@@ -135,17 +131,15 @@ def _overlap_worker(conn, bag_dir: Path, cfg: VehicleConfig) -> None:
 class OverlappedFits:
     """Fits of a campaign bag's DOFs made while the campaign writes it.
 
-    A spawned process (started with the campaign, so its imports cost no wall time; forking an
-    rclpy process is unsafe) fits each DOF (:func:`..fit.campaign_fit.fit_dofs`) on the bag as
-    written once :meth:`done` names it; :meth:`result` returns those fits for
-    ``identify_bag(..., fitted=)``, which then gives what it gives alone (a ready DOF's fit on a
+    A spawned process (started with the campaign, so its imports cost no wall time; forking an rclpy process is unsafe)
+    fits each DOF (:func:`..fit.campaign_fit.fit_dofs`) on the bag as written once :meth:`done` names it; :meth:`result`
+    returns those fits for ``identify_bag(..., fitted=)``, which then gives what it gives alone (a ready DOF's fit on a
     prefix is the whole bag's). Without a calibration. :meth:`close` ends the process."""
 
     def __init__(self, bag_dir: str | Path, cfg: VehicleConfig) -> None:
         ctx = multiprocessing.get_context("spawn")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_overlap_worker, args=(child, Path(bag_dir), cfg),
-                                 daemon=True)
+        self._proc = ctx.Process(target=_overlap_worker, args=(child, Path(bag_dir), cfg), daemon=True)
         self._proc.start()
         child.close()
         self.error = ""

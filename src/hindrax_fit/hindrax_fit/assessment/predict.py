@@ -1,21 +1,19 @@
 """Open-loop predictions of an identified model on bags, written so that anyone can score them (``hindrax ident
 predict``).
 
-The model is an identification.yaml of ``hindrax ident fit`` (:func:`.results.build_document`): per DOF its
-chosen ``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the
-Coriolis term, the other fitted DOFs' inertias. The bags are read as ``hindrax ident fit`` reads them
+The model is an identification.yaml of ``hindrax ident fit`` (:func:`.results.build_document`): per DOF its chosen
+``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the Coriolis
+term, the other fitted DOFs' inertias. The bags are read as ``hindrax ident fit`` reads them
 (:func:`..bag_input.any_topics.preprocess_bag`, :func:`..bag_input.any_topics.dof_records`: force held on the 0.05 s
-grid, velocity samples at their own times, body FRD) and every DOF of the model is simulated open loop from the
-recorded force (:func:`..fit.fit_core.simulate`), re-initialised at the start of each segment from the measured
-velocity there (the Savitzky-Golay-smoothed measurement, 0.5 s window, the same initial state as the tool's
-validation).
+grid, velocity samples at their own times, body FRD) and every DOF of the model is simulated open loop from the recorded
+force (:func:`..fit.fit_core.simulate`), re-initialised at the start of each segment from the measured velocity there
+(the Savitzky-Golay-smoothed measurement, 0.5 s window, the same initial state as the tool's validation).
 
 Segments:
 
-* ``segment_s`` given: boundaries every ``segment_s`` seconds from the first instant where force and velocity both
-  exist (the bag's first continuous chunk), whatever the DOF does; a gap in the data ends a segment and the next
-  starts where the data resume; pieces shorter than 10 grid steps (0.5 s) or with fewer than 3 measurements are not
-  predicted;
+* ``segment_s`` given: boundaries every ``segment_s`` seconds from the first instant where force and velocity both exist
+  (the bag's first continuous chunk), whatever the DOF does; a gap in the data ends a segment and the next starts where
+  the data resume; pieces shorter than 10 grid steps (0.5 s) or with fewer than 3 measurements are not predicted;
 * ``segment_s`` None: the tool's own rule, the one of its holdout validation (:func:`..fit.fit_any.fit_records`):
   segments of :data:`..fit.fit_core.VALIDATION_S` from each continuous chunk's start, a last part kept when at least
   half a segment long.
@@ -27,8 +25,7 @@ prediction, ``nrmse_zero`` with 0.
 
 CSV per bag and DOF (:func:`write_csv`): a first line ``# ...`` stating the DOF, the velocity, its unit, the body
 frame (FRD about base_link) and the time origin; then ``t_s,segment,measured,predicted``; one row per velocity
-measurement of the DOF in the continuous data; ``segment`` -1 and ``predicted`` empty where nothing is predicted.
-"""
+measurement of the DOF in the continuous data; ``segment`` -1 and ``predicted`` empty where nothing is predicted."""
 from __future__ import annotations
 
 import math
@@ -44,8 +41,7 @@ from ..fit import fit_core
 from ..bag_input.any_topics import FitInputError, FitOptions, TopicChoice, dof_records, preprocess_bag
 from .results import IdentificationFileError, model_spec, validate
 
-__all__ = ["ModelError", "DofModel", "load_model", "Prediction", "predict_bag", "score", "write_csv",
-           "VELOCITY_NAMES"]
+__all__ = ["ModelError", "DofModel", "load_model", "Prediction", "predict_bag", "score", "write_csv", "VELOCITY_NAMES"]
 
 #: SNAME velocity name and unit per DOF (body FRD)
 VELOCITY_NAMES = {"surge": ("u", "m/s"), "sway": ("v", "m/s"), "heave": ("w", "m/s"), "roll": ("p", "rad/s"),

@@ -6,17 +6,15 @@ Plots per DOF:
   tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
   smoothed velocity, the steady-window means of [Hindrax-Drag]'s method, and the fitted curve
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
-* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band (where the RLS has
-  a noise estimate; the title says how many parameters have one) and the
-  reported (offline) value.
+* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band (where the RLS has a
+  noise estimate; the title says how many parameters have one) and the reported (offline) value.
 
 For a fit of bags of any topics (``hindrax ident fit``, :func:`write_fit_outputs`): per fitted DOF, the validation
 segments laid end to end (the holdout bags when given, else the cross-validation folds), measured velocity, the
 model's open-loop prediction from each segment's measured initial velocity, and the held initial value (what
 ``nrmse_hold`` measures); the same measured against predicted over the record time; the autocorrelation of the
 validation residuals (pairs within a segment, :func:`residual_acf`) with the 95 % band of white residuals; and, with a
-vehicle file, every parameter with its 95 % interval against the vehicle file's value.
-"""
+vehicle file, every parameter with its 95 % interval against the vehicle file's value."""
 from __future__ import annotations
 
 import html
@@ -170,8 +168,7 @@ def _table(headers: Sequence[str], rows: Iterable[Iterable[Any]]) -> str:
 
 
 def _advice_table(advice: Iterable[tuple[str, Mapping]]) -> str:
-    """What data would fix the suspect parameters (:func:`.verdicts.data_advice`), a row per (label,
-    advice)."""
+    """What data would fix the suspect parameters (:func:`.verdicts.data_advice`), a row per (label, advice)."""
     heads = ("parameter", "runs", "manoeuvre", "speeds", "pool time, min", "in the data, s", "why")
     return _table(heads, ((label, f"{a.get('runs', '-')} {a.get('run_kind', '')}", a["manoeuvre"],
                            "{:g}-{:g} {}".format(*a["speed_range"]), a.get("minutes", "-"),
@@ -217,14 +214,12 @@ def references_html(document: Mapping) -> str:
         else:
             head = (f"{name} mean of both directions", "-", "-", _USES_MEAN.get(name, ""))
         verdict = "curve off" if abs(z) > 1.96 else "curve agrees"
-        srow.append((head[0], _fmt(v), _fmt(sd, 2), *head[1:], f"{100 * off:+.1f} %", _fmt(z, 3),
-                     verdict))
+        srow.append((head[0], _fmt(v), _fmt(sd, 2), *head[1:], f"{100 * off:+.1f} %", _fmt(z, 3), verdict))
     if srow:
-        parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
-                     "scale s (true thrust / curve thrust, per thruster group and rotation direction) from its prior "
-                     "and the calibration steps; the "
-                     "self-propelled values without the calibration would be off by 1/s - 1; z = (s - 1) / std "
-                     "(|z| > 1.96: the thrust curve disagrees with the known forces)</p>" + _table(
+        parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each scale "
+                     "s (true thrust / curve thrust, per thruster group and rotation direction) from its prior and the "
+                     "calibration steps; the self-propelled values without the calibration would be off by 1/s - 1; "
+                     "z = (s - 1) / std (|z| > 1.96: the thrust curve disagrees with the known forces)</p>" + _table(
                          ("scale", "value", "std", "prior", "steps", "DOFs", "uncalibrated error",
                           "z", "verdict"), srow))
     frow = []
@@ -256,8 +251,7 @@ def references_html(document: Mapping) -> str:
                 lo, hi = (par.get("ci95") or [math.nan, math.nan])[:2]
                 ratio = p / par["value"] if (p is not None and par["value"]) else math.nan
                 inside = "-" if p is None else ("inside" if lo <= p <= hi else "outside")
-                prow.append((dof, n, _fmt(par["value"]), f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(p),
-                             _fmt(ratio, 3), inside))
+                prow.append((dof, n, _fmt(par["value"]), f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(p), _fmt(ratio, 3), inside))
     if prow:
         parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] App. A.1/A.2)</h3><p>rough "
                      "estimates (the thesis reports differences of tens of percent against panel codes and CFD); "
@@ -314,9 +308,8 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
             adv = [(n, e["advice"]) for n, e in a["parameters"].items() if e.get("advice")]
             if adv:
                 parts.append(_advice_table(adv))
-        parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
-                     f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "
-                     f"{html.escape(r.steady_note)}</p>")
+        parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time {r.pool_time_s:.0f} s; "
+                     f"RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: {html.escape(r.steady_note)}</p>")
         fv = out / f"{dof}_force_velocity.png"
         _force_velocity_plot(r, fv)
         parts.append(f"<img src='{fv.name}' alt='{dof} force vs velocity'>")
@@ -331,8 +324,7 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
 
 
 def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | Path | None, note: str,
-                  source: str = "bag", seed: int | None = None, calibration: dict | None = None,
-                  sections=None) -> Path:
+                  source: str = "bag", seed: int | None = None, calibration: dict | None = None, sections=None) -> Path:
     """identification.yaml (provenance names the bag, when there is one) and report/index.html in ``out``; returns
     the yaml path.
 
@@ -364,13 +356,10 @@ def _plot(r, path: Path, h: float) -> None:
     for i in range(min(m, 12)):  # at most 12 segments: 2 minutes
         t = (i * L + np.arange(L)) * h
         ax.plot(t, meas[i], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
-        ax.plot(t, pred[i], "C1-", lw=1.2,
-                label="predicted (open loop from the segment start)" if i == 0 else None)
-        ax.plot(t, np.full(L, meas[i, 0]), "C2:", lw=1,
-                label="held initial value" if i == 0 else None)
+        ax.plot(t, pred[i], "C1-", lw=1.2, label="predicted (open loop from the segment start)" if i == 0 else None)
+        ax.plot(t, np.full(L, meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
-    _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data",
-                        path)
+    _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data", path)
 
 
 def _save_velocity_plot(fig, ax, dof: str, xlabel: str, title: str, path: Path) -> None:
@@ -504,10 +493,9 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
     def candidates(e: Mapping) -> str:
         return "; ".join(f"{c['terms']}: {c['cv_nrmse']:.3f}" if c.get("cv_nrmse") is not None
                          else c["terms"] for c in e.get("model_selection", []))
-    parts.append("<p>std: the cluster-robust (sandwich) covariance with contiguous blocks of "
-                 "segments as clusters, at least the model-based one; 95 % intervals Student t "
-                 "with clusters - 1 degrees of freedom (docs/identification.md §7).</p>"
-                 "<h2>Model and timing</h2>" + _table(
+    parts.append("<p>std: the cluster-robust (sandwich) covariance with contiguous blocks of segments as clusters, at "
+                 "least the model-based one; 95 % intervals Student t with clusters - 1 degrees of freedom "
+                 "(docs/identification.md §7).</p><h2>Model and timing</h2>" + _table(
                      ("DOF", "model (chosen by cross-validation)", "candidates: CV nrmse",
                       "delay, s", "lag, s", "clusters"),
                      ((dof, e.get("model", "-"), candidates(e), f"{e['timing']['delay_s']:.3f}",
@@ -515,8 +503,7 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
                       for dof, e in dofs.items())))
     parts.append("<p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in dofs.items()
                                      for line in training_lines(e.get("training"))) + "</p>")
-    advice = [(f"{dof} {a['parameter']}", a) for dof, e in dofs.items()
-              for a in e.get("advice", [])]
+    advice = [(f"{dof} {a['parameter']}", a) for dof, e in dofs.items() for a in e.get("advice", [])]
     if advice:
         parts.append("<h2>What data would fix the suspect parameters</h2>" + _advice_table(advice))
     if not doc.get("config_ready", True):
@@ -525,14 +512,12 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
         parts.append(f"<p><b>{html.escape(dof)}</b>: {html.escape(e['status'])} ({html.escape(e['reason'])})</p>")
     parts.append("<h2>Validation</h2>" + _table(
         ("DOF", "data", "nrmse", "nrmse_hold", "nrmse_zero", "samples"),
-        ((dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")),
-          v["samples"])
+        ((dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")), v["samples"])
          for dof, r in res.dofs.items() for key, v in r.validation.items()
          if isinstance(v, dict) and "nrmse" in v)))
-    parts.append("<p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, "
-                 "v_pred simulated open loop from the recorded force and re-initialised from the "
-                 "measured velocity at the start of each segment; nrmse_hold: velocity held at the "
-                 "segment's initial value; nrmse_zero: 0.</p>")
+    parts.append("<p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred simulated open "
+                 "loop from the recorded force and re-initialised from the measured velocity at the start of each "
+                 "segment; nrmse_hold: velocity held at the segment's initial value; nrmse_zero: 0.</p>")
     for dof, r in res.dofs.items():
         if r.status == "fitted" and r.plot:
             png = rep / f"{dof}_validation.png"

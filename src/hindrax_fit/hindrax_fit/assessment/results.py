@@ -37,8 +37,7 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
 Values are positive Fossen/SNAME coefficients in SI (as the configuration, ros_ws/config/hindrax.yaml).
 
 :func:`to_config_overrides` maps the file onto ``hydrodynamics.*`` configuration keys, so
-``load_config(path, overrides=...)`` (and hence the simulator) can use the identified model.
-"""
+``load_config(path, overrides=...)`` (and hence the simulator) can use the identified model."""
 from __future__ import annotations
 
 import dataclasses
@@ -158,8 +157,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     :func:`~..fit.calibration.apply_thrust_calibration`), the thrust scales are estimated jointly with the fits
     (:func:`~..fit.calibration.joint_estimate`, in place, skipped for DOFs already assessed); each parameter that had a
     prior shows it as ``prior: [mean, std]`` beside its value, the document gains ``joint`` (the scales' posterior)
-    and, with a calibration, ``calibration`` (:func:`~..fit.calibration.calibration_section`).
-    """
+    and, with a calibration, ``calibration`` (:func:`~..fit.calibration.calibration_section`)."""
     joint = joint_estimate(identifications, cfg, calibration)
     assessments = apply_verdicts(identifications, cfg)
     priors = prior_entries(cfg)
@@ -369,8 +367,7 @@ def to_config_overrides(document: Mapping) -> dict[str, float]:
     geometry). Negative damping estimates (unphysical; the schema requires >= 0) are clipped to 0.
     Raises :class:`IdentificationFileError` (a ValueError, one line) for a file that is not config-ready: one of
     ``hindrax ident fit`` without ``--config`` (``config_ready: false``, or an ``inertia`` without ``added_mass``:
-    without the vehicle file only the rigid + added inertia is known), or one that fails :func:`validate`.
-    """
+    without the vehicle file only the rigid + added inertia is known), or one that fails :func:`validate`."""
     if isinstance(document, Mapping) and isinstance(document.get("dofs"), Mapping):
         bare = [d for d, e in document["dofs"].items() if isinstance(e, Mapping) and "inertia" in e
                 and "added_mass" not in e]
@@ -618,8 +615,7 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
             e["training"] = c.training
         e["timing"] = {"delay_s": c.timing.delay_s, "lag_s": c.timing.lag_s, "source": c.timing.source}
         if c.timing.bound_s is not None:
-            e["timing"].update(searched_up_to_s=c.timing.bound_s, bound=c.timing.bound_why,
-                               at_edge=c.timing.at_edge)
+            e["timing"].update(searched_up_to_s=c.timing.bound_s, bound=c.timing.bound_why, at_edge=c.timing.at_edge)
             if c.timing.at_edge:
                 e["timing"]["note"] = c.timing.edge_note
         e["interval"] = {"method": "cluster-robust (sandwich) covariance, contiguous blocks of segments as "
@@ -657,13 +653,11 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
 
 
 # ------------------------------------------------------------------------------------------------ references
-def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restoring_std: float,
-                       progress) -> dict:
+def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restoring_std: float, progress) -> dict:
     """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
-    (:func:`~..fit.calibration.decay_inertia`; :func:`~.verdicts.apply_reference_verdicts`
-    compares it with the self-propelled one). The restoring stiffness: the record's inclining
-    step, else ``restoring_n_m_per_rad`` (``restoring_std``), else the vehicle file's m g BG;
-    ``progress(text)`` says why a DOF has no estimate."""
+    (:func:`~..fit.calibration.decay_inertia`; :func:`~.verdicts.apply_reference_verdicts` compares it with the
+    self-propelled one). The restoring stiffness: the record's inclining step, else ``restoring_n_m_per_rad``
+    (``restoring_std``), else the vehicle file's m g BG; ``progress(text)`` says why a DOF has no estimate."""
     # strictly increasing gyro stamps (the identification node moves samples that arrive after their tick to the tick
     # time, executive.ordered_samples, so its log can repeat a stamp); the in-process log is unchanged by this
     gyro, last = [], -math.inf
@@ -701,6 +695,5 @@ def reference_sections(doc: dict, record, cfg, restoring_n_m_per_rad: float | No
         doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
                                 for kk, vv in v.items()} for k, v in record.inclining.items()}
     if getattr(record, "decays", None):
-        doc["free_decay"] = free_decay_section(record, cfg, restoring_n_m_per_rad, restoring_std,
-                                               progress)
+        doc["free_decay"] = free_decay_section(record, cfg, restoring_n_m_per_rad, restoring_std, progress)
         apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std

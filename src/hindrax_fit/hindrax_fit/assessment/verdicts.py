@@ -26,22 +26,20 @@ and
      buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide when the
      difference is more than :data:`BIAS_MIN_REL` of the damping force at the typical speed, else the bias alone (a
      small bias outside its interval is a miss whatever its size).
-   * ``methods``: the steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
-     quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not
-     explain the transients and the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The
-     equation-error fit is not used: its inertia is biased low by the noise of the differentiated velocity even when
-     nothing is wrong.)
+   * ``methods``: the steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported quadratic damping by more
+     than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not explain the transients and
+     the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
+     its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)
    * ``direction``: the steady-window misfits (relative to the model force) of the two directions of motion differ
      by more than :data:`DIRECTION_MAX` and beyond their scatter (z > 4) (heave: up/down; others: forward/backward),
      a level-to-level inconsistency. DOF-wide.
    * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
-     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file
-     does not have, a late DVL). DOF-wide.
-     A measured position (heave's depth) is judged by the independence of its residuals from the input instead
-     (:data:`INDEPENDENCE_Z`, :func:`~..fit.fit_core.input_correlation`): its residual is the double integral of
-     every force the model does not have, so a few tenths of a newton of disturbance make consecutive depth samples
-     correlated (0.86 on the README's pool day, whose intervals all hold the truth) whatever the model; for an
-     output-error model the residuals' colour is the disturbance's, and the dynamics are judged by whether the
+     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file does
+     not have, a late DVL). DOF-wide. A measured position (heave's depth) is judged by the independence of its residuals
+     from the input instead (:data:`INDEPENDENCE_Z`, :func:`~..fit.fit_core.input_correlation`): its residual is the
+     double integral of every force the model does not have, so a few tenths of a newton of disturbance make consecutive
+     depth samples correlated (0.86 on the README's pool day, whose intervals all hold the truth) whatever the model;
+     for an output-error model the residuals' colour is the disturbance's, and the dynamics are judged by whether the
      residuals follow the input ([Ljung1999] §16.6).
    * ``thrust`` (across DOFs, :func:`apply_verdicts`): heave's bias is the force that holds the vehicle at depth,
      the net buoyancy (rho V - m) g known from the vehicle's mass and volume. When the identified heave bias
@@ -57,8 +55,7 @@ and
      test, independent of the thrust curve) differs from the self-propelled inertia by more than
      :data:`REFERENCE_Z_MAX` combined standard deviations (docs/identification.md §6.4).
 
-All quantities SI, the parameters and units of :func:`~..fit.dof_model.parameter_names`.
-"""
+All quantities SI, the parameters and units of :func:`~..fit.dof_model.parameter_names`."""
 from __future__ import annotations
 
 import math
@@ -77,16 +74,14 @@ from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, pers
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts",
            "WHITENESS_MAX", "INDEPENDENCE_Z", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "FitEvidence", "core_signals", "core_evidence", "model_selection",
-           "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
-           "with_added_mass", "assess_dof",
+           "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess", "with_added_mass", "assess_dof",
            "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET",
            "POOL_DAY_S", "RUN_KINDS"]
 
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.2
 #: Largest z of a measured position's residual-input cross-correlation a trusted fit may leave
-#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual
-#: test draws it.
+#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual test draws it.
 INDEPENDENCE_Z = 2.58
 #: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
 METHODS_MAX = 0.05
@@ -103,21 +98,19 @@ class FitEvidence:
     dof; names (p,) the fit's parameters (:func:`~..fit.dof_model.parameter_names`, or the fit core's chosen terms);
     theta (p,) their values (after the empirical priors, :mod:`..fit.posterior`); cov (p, p) their covariance without
     the thrust-curve term (the fit core's cluster-robust covariance after the priors; with ``thrust_in_covariance`` the
-    calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom
-    (the fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
-    acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`);
-    lower_bounds, upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None;
-    fold_theta (K, p) the cross-validation folds' estimates or None; cv_nrmse: the chosen model's cross-validated
-    prediction nrmse or None;
+    calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom (the
+    fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
+    acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`); lower_bounds,
+    upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None; fold_theta (K, p) the
+    cross-validation folds' estimates or None; cv_nrmse: the chosen model's cross-validated prediction nrmse or None;
     residual_rho: lag-1 autocorrelation of consecutive output-error residuals or None; input_corr: the residuals'
-    correlation with the input (:func:`~..fit.fit_core.input_correlation`, a measured position) or None; steady
-    {name: (value, std)} of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity,
-    mean force)] of the steady windows; expected_bias: the constant force expected (0; heave the configured net
-    buoyancy, N) or None when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when
-    ``thrust_in_covariance``; cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as
-    ``cv_nrmse`` or None (no comparison); persistence_margin: the relative margin the model must beat it by
-    (:func:`~..fit.fit_core.persistence`).
-    """
+    correlation with the input (:func:`~..fit.fit_core.input_correlation`, a measured position) or None; steady {name:
+    (value, std)} of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity, mean force)] of
+    the steady windows; expected_bias: the constant force expected (0; heave the configured net buoyancy, N) or None
+    when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when ``thrust_in_covariance``;
+    cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as ``cv_nrmse`` or None (no
+    comparison); persistence_margin: the relative margin the model must beat it by
+    (:func:`~..fit.fit_core.persistence`)."""
 
     dof: str
     names: list
@@ -158,17 +151,15 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
 
     The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit``
     (:func:`.results.assessment`). ``rel`` = [negative, positive] 1-sigma relative thrust uncertainty
-    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``.
-    The checks of the module docstring run when their evidence is there (the campaign reader gives
-    the steady windows), and also: cross-validated nrmse at or above :data:`NRMSE_MAX` (DOF-wide);
-    with ``cv_nrmse_hold`` the model must beat holding the velocity
-    (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
-    :data:`~..fit.fit_core.NO_MODEL_VERDICT`; per parameter, on a bound or fold estimates spread by
-    more than 3 fit std. A suspect parameter (a reason of its own or of the DOF) gets ``advice`` (:func:`data_advice`).
+    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``. The checks of the
+    module docstring run when their evidence is there (the campaign reader gives the steady windows), and also:
+    cross-validated nrmse at or above :data:`NRMSE_MAX` (DOF-wide); with ``cv_nrmse_hold`` the model must beat holding
+    the velocity (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
+    :data:`~..fit.fit_core.NO_MODEL_VERDICT`; per parameter, on a bound or fold estimates spread by more than 3 fit std.
+    A suspect parameter (a reason of its own or of the DOF) gets ``advice`` (:func:`data_advice`).
 
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
-    (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
-    """
+    (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}."""
     names = list(ev.names)
     theta = np.asarray(ev.theta, dtype=float)
     cov_fit = np.asarray(ev.cov, dtype=float)
@@ -339,13 +330,12 @@ def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 
 
 def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
-    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives,
-    for :func:`assess_dof` and :func:`~.results.assessment`: the optimiser's bounds and fold
-    estimates of ``names`` (default the core's own; heave's ``*_positive``/``*_negative`` map onto
-    the one pair, absent ones get no bound and no fold estimates), the cross-validated nrmse,
-    holding the velocity's and the margin (:func:`~..fit.fit_core.persistence`), and
-    :func:`core_signals`. Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse,
-    cv_nrmse_hold, persistence_margin, velocity, acceleration, force, h}."""
+    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives, for
+    :func:`assess_dof` and :func:`~.results.assessment`: the optimiser's bounds and fold estimates of ``names`` (default
+    the core's own; heave's ``*_positive``/``*_negative`` map onto the one pair, absent ones get no bound and no fold
+    estimates), the cross-validated nrmse, holding the velocity's and the margin (:func:`~..fit.fit_core.persistence`),
+    and :func:`core_signals`. Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold,
+    persistence_margin, velocity, acceleration, force, h}."""
     core_names = list(core.names)
     idx = core_index(core_names if names is None else list(names), core_names)
     lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
@@ -498,8 +488,7 @@ def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float
 REFERENCE_Z_MAX = 1.96
 
 
-def free_decay_reason(dof: str, self_propelled: tuple[float, float],
-                      free_decay: tuple[float, float]) -> str | None:
+def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay: tuple[float, float]) -> str | None:
     """The reason text when the free-decay inertia (value, std; kg m^2) contradicts the self-propelled one
     (value, std): |I_sp - I_fd| > :data:`REFERENCE_Z_MAX` sqrt(std_sp^2 + std_fd^2); None when they
     agree. Raises
@@ -512,8 +501,7 @@ def free_decay_reason(dof: str, self_propelled: tuple[float, float],
     if abs(z) <= REFERENCE_Z_MAX:
         return None
     return (f"{dof} inertia {v:.4g} kg m^2 (self-propelled) differs from the free decay's {vf:.4g} +- {sf:.2g} kg m^2 "
-            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): "
-            f"the thrust curve (or the model) is off in {dof}")
+            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): the thrust curve (or the model) is off in {dof}")
 
 
 def apply_reference_verdicts(document: dict) -> dict:
@@ -585,20 +573,17 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     """What data would make the 95 % half-width of one parameter ``ADVICE_TARGET`` of its value, in the units a
     pool engineer plans in: runs of a named kind (:data:`RUN_KINDS`), a speed range, minutes.
 
-    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the
-    ticks (``h`` s) of the fitted segments. The variance of an estimate falls as 1 / (seconds of the
-    manoeuvre that informs it), so ``seconds_more = T (w / w_target)^2 - T`` with T the seconds of
-    that manoeuvre in the data (at least :data:`ADVICE_MIN_S`); the manoeuvre per parameter
-    (docs/identification.md §4, R1, R2, R15) is the branch's ``used`` mask below. The time is
-    rounded up to whole runs, at least one, never above :data:`POOL_DAY_S`: when more of the same
-    would take longer (or the data hold none of it while the interval is wide), the advice names
-    the kind of run that would fix it (``feasible`` False, the branch's ``alt``),
-    :data:`ALTERNATIVE_RUNS` runs of it. A parameter at a bound gets as much again of its manoeuvre;
-    one whose interval is already narrow (another reason) gets a repetition, which tells a real
-    effect from chance. ``scale``: the magnitude the half-width is judged against when not the value
-    (a bias and a linear damping: the damping force at the typical speed, :func:`assess`). Returns
-    {dof, manoeuvre, run_kind, runs, run_s, minutes, speed_range (low, high, unit),
-    seconds_in_data, seconds_more, feasible, why}."""
+    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the ticks (``h`` s) of
+    the fitted segments. The variance of an estimate falls as 1 / (seconds of the manoeuvre that informs it), so
+    ``seconds_more = T (w / w_target)^2 - T`` with T the seconds of that manoeuvre in the data (at least
+    :data:`ADVICE_MIN_S`); the manoeuvre per parameter (docs/identification.md §4, R1, R2, R15) is the branch's ``used``
+    mask below. The time is rounded up to whole runs, at least one, never above :data:`POOL_DAY_S`: when more of the
+    same would take longer (or the data hold none of it while the interval is wide), the advice names the kind of run
+    that would fix it (``feasible`` False, the branch's ``alt``), :data:`ALTERNATIVE_RUNS` runs of it. A parameter at a
+    bound gets as much again of its manoeuvre; one whose interval is already narrow (another reason) gets a repetition,
+    which tells a real effect from chance. ``scale``: the magnitude the half-width is judged against when not the value
+    (a bias and a linear damping: the damping force at the typical speed, :func:`assess`). Returns {dof, manoeuvre,
+    run_kind, runs, run_s, minutes, speed_range (low, high, unit), seconds_in_data, seconds_more, feasible, why}."""
     v = np.asarray(velocity, dtype=float)
     a = np.asarray(acceleration, dtype=float)
     f = np.asarray(force, dtype=float)

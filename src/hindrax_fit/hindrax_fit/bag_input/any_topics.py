@@ -31,8 +31,7 @@ velocity samples kept at their own times, interpolated onto the grid only for th
 
 A DOF whose force or velocity standard deviation is below :data:`EXCITATION_MIN` is "not excited" (reported with
 both numbers). Errors: :class:`FitInputError` (one line: the topic, the type found, the types accepted;
-disagreeing frame ids; how much data is needed).
-"""
+disagreeing frame ids; how much data is needed)."""
 from __future__ import annotations
 
 import math
@@ -398,11 +397,10 @@ _SUB = 10
 
 def _grid_stretches(pre: Preprocessed, grid_s: float, step_mean: bool = False,
                     lag_s: float | None = None) -> list[GridStretch]:
-    """Chunks on the uniform grid. Force: without ``step_mean`` its value at each grid time t_j;
-    with it, its mean over [t_j, t_j + grid_s) from ``_SUB`` sub-samples, the value the output-error
-    simulation holds over the step (the value at t_j would apply a change inside the step half a
-    step late on average, read by the fit as a smaller inertia). With a thruster lag (``lag_s``,
-    default ``pre.lag_s``) the force is filtered on the sub-grid."""
+    """Chunks on the uniform grid. Force: without ``step_mean`` its value at each grid time t_j; with it, its mean over
+    [t_j, t_j + grid_s) from ``_SUB`` sub-samples, the value the output-error simulation holds over the step (the value
+    at t_j would apply a change inside the step half a step late on average, read by the fit as a smaller inertia). With
+    a thruster lag (``lag_s``, default ``pre.lag_s``) the force is filtered on the sub-grid."""
     lag_s = pre.lag_s if lag_s is None else lag_s
     ft, fv = pre.force_times, pre.force_values
     sub = _SUB if step_mean else 1
@@ -552,16 +550,14 @@ def excitation(pres: Sequence[Preprocessed], dof: str) -> dict:
 # ------------------------------------------------------------------------------------------------ to the core
 def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions, moving: Sequence[str] = (),
                 force_from: Sequence[str] | None = None) -> dict[str, fit_core.DofRecord]:
-    """One :class:`..fit.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags (module
-    docstring, "Preprocessing"): per continuous stretch the force held over each grid step, the
-    velocity samples, the smoothed velocity and its derivative, the restoring regressor (roll,
-    pitch), the Coriolis products, and the other ``moving`` DOFs' velocities and commanded forces
-    (``force_from`` when given) as coupling candidates. A ThrusterPwm force keeps its known lag
-    (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
+    """One :class:`..fit.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags (module docstring,
+    "Preprocessing"): per continuous stretch the force held over each grid step, the velocity samples, the smoothed
+    velocity and its derivative, the restoring regressor (roll, pitch), the Coriolis products, and the other ``moving``
+    DOFs' velocities and commanded forces (``force_from`` when given) as coupling candidates. A ThrusterPwm force keeps
+    its known lag (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
     out: dict[str, fit_core.DofRecord] = {}
     h = opts.grid_s
-    # the force's mean over each grid step, no lag: the fit core applies delay and lag
-    # (docs/identification.md §7)
+    # the force's mean over each grid step, no lag: the fit core applies delay and lag (docs/identification.md §7)
     stretches_of = [_grid_stretches(p, opts.grid_s, step_mean=True, lag_s=0.0) for p in pres]
     for dof in dofs:
         k = DOFS.index(dof)

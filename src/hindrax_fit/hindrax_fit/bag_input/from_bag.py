@@ -1,10 +1,9 @@
 """The campaign bag reader: rebuild the campaign record (:class:`~.campaign_record.CampaignRecord`) from a bag.
 
-``hindrax ident bag BAG [--out DIR] [--config FILE]``
-(:mod:`hindrax_tools.commands.ident_bag`), and ``hindrax ident fit`` on a bag with the
-campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
-:func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and
-``hindrax run`` (docs/identification.md §7).
+``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_tools.commands.ident_bag`), and
+``hindrax ident fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
+:func:`~..assessment.pipeline.identify_bag`: the same analysis as the in-process campaign and ``hindrax run``
+(docs/identification.md §7).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
@@ -15,15 +14,13 @@ accelerometer biases), ``identification/estimates`` (the online RLS history, for
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
 the record's ``calibration``, ``inclining`` and ``decays``).
 
-Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10
-ms, the simulator's /clock period): the status is held from its stamps and the ESC widths from their
-stamps plus ``esc.output_latency_s`` (zero-order hold, as the ESC output; a force 10 ms ahead of the
-true thrust puts the heave bias 2 N and the downward quadratic damping 90 % off), and every sensor
-stamp is rounded to the grid (<= grid_s / 2 moved), because the output-error fit compares the model
-with samples at grid instants. Sensor stamps are the drivers' times of validity (the DVL's device
-time, the MS5837's conversion midpoint), which is what the fit needs. Raises
-:class:`BagContentError` (one line) when the bag lacks what is needed.
-"""
+Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms, the simulator's
+/clock period): the status is held from its stamps and the ESC widths from their stamps plus ``esc.output_latency_s``
+(zero-order hold, as the ESC output; a force 10 ms ahead of the true thrust puts the heave bias 2 N and the downward
+quadratic damping 90 % off), and every sensor stamp is rounded to the grid (<= grid_s / 2 moved), because the
+output-error fit compares the model with samples at grid instants. Sensor stamps are the drivers' times of validity (the
+DVL's device time, the MS5837's conversion midpoint), which is what the fit needs. Raises :class:`BagContentError` (one
+line) when the bag lacks what is needed."""
 from __future__ import annotations
 
 import math
@@ -63,8 +60,7 @@ class BagContentError(ValueError):
 class OnlineHistory:
     """Stand-in for :class:`~..online.estimators.OnlineDofEstimator` built from recorded HydroEstimate messages.
 
-    ``history`` {t, theta, std, excitation} and :meth:`result` as the live estimator provides them.
-    """
+    ``history`` {t, theta, std, excitation} and :meth:`result` as the live estimator provides them."""
 
     def __init__(self, dof: str) -> None:
         self.dof = dof
@@ -103,8 +99,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     """CampaignRecord from (topic, message) pairs (any order; rclpy or bag-decoded messages).
 
     Raises :class:`BagContentError` without ESC widths, status or an identification run, or with an
-    ``identification/calibration`` status missing a value.
-    """
+    ``identification/calibration`` status missing a value."""
     mount_t = mounting_rotation(cfg.sensors.icm20948.mounting_rpy_rad).T
     samples: list = []
     pwm: list = []
@@ -234,8 +229,7 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     """:func:`record_from_messages` over the topics of a bag (:class:`~hindrax_bringup.recording.reader.BagReader`).
 
     Raises :class:`~hindrax_bringup.recording.reader.BagError` for an unreadable bag and
-    :class:`BagContentError` when a needed topic is missing.
-    """
+    :class:`BagContentError` when a needed topic is missing."""
     reader = BagReader(bag_path)
     present = set(reader.topics)
     missing = [tp for tp in CAMPAIGN_TOPICS if tp not in present and "/" + tp not in present]

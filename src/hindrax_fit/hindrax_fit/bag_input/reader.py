@@ -8,8 +8,7 @@ One interface, one adapter per kind of bag:
 * any topics (:func:`read_any_topics`): force and velocity found by message type (:mod:`.any_topics`), preprocessed
   onto one grid, excitation measured, one record per excited DOF of those asked for.
 
-:func:`reads_as_campaign` chooses between them. :mod:`..assessment.pipeline` reads, fits (:mod:`..fit`) and writes.
-"""
+:func:`reads_as_campaign` chooses between them. :mod:`..assessment.pipeline` reads, fits (:mod:`..fit`) and writes."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -14,8 +14,7 @@ moves with each scale and :func:`joint_estimate` estimates the scales with every
 
 ASSUMPTION when only one group was measured: the other group's thrusters get the same two scales (``common_*``; a
 common cause such as the battery voltage, docs/devices.md §5.3). The RLS comparison values in ``record.online``
-stay in curve units.
-"""
+stay in curve units."""
 from __future__ import annotations
 
 import dataclasses
@@ -71,14 +70,12 @@ def scale_prior_stds(cfg) -> dict[str, float]:
 
 @dataclasses.dataclass
 class ScaleModel:
-    """The calibration steps as linear Gaussian measurements of the thrust scales
-    (docs/identification.md §6.2).
+    """The calibration steps as linear Gaussian measurements of the thrust scales (docs/identification.md §6.2).
 
     names: scale parameters (``<group>_<direction>`` or ``common_<direction>``); nuisance: the constants R (the
     vertical group's ``net_buoyancy_n``, a free one per horizontal step); rows: (coefficients (n_names,), nuisance
     index or -1, right-hand side, std, step key) of ``sum_k c_k s_k - R = rhs``; prior: (n_names, 2) mean and std of
-    each scale; nuisance_prior: {nuisance index: (mean, std)} (the weighed net buoyancy).
-    """
+    each scale; nuisance_prior: {nuisance index: (mean, std)} (the weighed net buoyancy)."""
 
     names: list
     nuisance: list
@@ -127,12 +124,11 @@ def _entry(calibration: Mapping[str, Any], key: str) -> Mapping | None:
 def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel | None:
     """The :class:`ScaleModel` of the calibration steps' results (``record.calibration``: keys of
     :data:`KNOWN_FORCE_AXES`), None without any. A result with its holds' forward and reverse parts
-    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2);
-    an older result with only its single scale (``value``, ``std``) measures the mean of the group's
-    two directions. Priors from ``cfg`` (:func:`scale_prior_stds`; the weighed net buoyancy
-    (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without ``cfg`` the default thrust
-    uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a zero
-    std."""
+    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (docs/identification.md §6.2); an older result
+    with only its single scale (``value``, ``std``) measures the mean of the group's two directions. Priors from ``cfg``
+    (:func:`scale_prior_stds`; the weighed net buoyancy (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without
+    ``cfg`` the default thrust uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or a
+    zero std."""
     cal = calibration or {}
     entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
     if not entries:
@@ -376,8 +372,7 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
     Returns {total_inertia_kg_m2, total_inertia_kg_m2_std (fit and C's std combined), total_inertia_kg_m2_std_fit,
     added_inertia_kg_m2 (None without the rigid inertia), linear_damping_kg_m2_s, quadratic_damping_kg_m2 (with
     _std), stiffness_n_m_per_rad, window_s}. Raises ``KeyError`` when the DOF has no recorded decay and
-    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the fit fails.
-    """
+    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the fit fails."""
     t0, t1 = record.decays[dof]
     k = {"roll": 0, "pitch": 1}[dof]
     rows = [(s, r[k]) for s, r in record.sensors["gyro"] if t0 <= s <= t1 and math.isfinite(r[k])]
@@ -438,8 +433,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     leaves the priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of
     identification.yaml: {scales: {name: {value, std, prior: [1, u], measurements: [{step, value, std}], dofs}},
     group_means: {group: {value, std}}, net_buoyancy_n (with a per-hold vertical calibration), prior_std_rel,
-    method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
-    """
+    method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0."""
     prior_std_rel = prior_std_rel_of(cfg, prior_std_rel)
     model = scale_model(calibration, cfg)
     ns = len(model.names) if model else 0

@@ -1,19 +1,16 @@
-"""The campaign front-end of the fit core: a :class:`~..bag_input.campaign_record.CampaignRecord`
-read into one :class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as
-:class:`~.dof_model.DofIdentification`.
+"""The campaign front-end of the fit core: a :class:`~..bag_input.campaign_record.CampaignRecord` read into one
+:class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.dof_model.DofIdentification`.
 
-``hindrax run``, ``hindrax ident bag``, ``hindrax ident fit`` on a bag with the campaign's topics
-and the in-process campaign identify with :func:`identify_all_with_errors`, with the same
-:class:`~.fit_core.CoreOptions` as ``hindrax ident fit``. What the campaign knows that an arbitrary
-bag does not (docs/identification.md §7, "The campaign's topics"): the DOF windows (one chunk each,
-the thrust-model force of the widths the ESC wrote), the sensors conditioned by RTS smoothers
-(:func:`_smooth_on_ticks`), the gyro bias left after the still window
-(:func:`rate_bias_against_angle`), the design (``DofRecord.terms``, ``DofRecord.all_segments``) and
-the roll/pitch restoring regressor s(eta) ([NTNU-Thesis] eq. 2.23) from the DVL attitude fused with
-the gyro (:func:`_smoothed_roll_pitch`).
+``hindrax run``, ``hindrax ident bag``, ``hindrax ident fit`` on a bag with the campaign's topics and the in-process
+campaign identify with :func:`identify_all_with_errors`, with the same :class:`~.fit_core.CoreOptions` as
+``hindrax ident fit``. What the campaign knows that an arbitrary bag does not (docs/identification.md §7, "The
+campaign's topics"): the DOF windows (one chunk each, the thrust-model force of the widths the ESC wrote), the sensors
+conditioned by RTS smoothers (:func:`_smooth_on_ticks`), the gyro bias left after the still window
+(:func:`rate_bias_against_angle`), the design (``DofRecord.terms``, ``DofRecord.all_segments``) and the roll/pitch
+restoring regressor s(eta) ([NTNU-Thesis] eq. 2.23) from the DVL attitude fused with the gyro
+(:func:`_smoothed_roll_pitch`).
 
-All quantities SI, body FRD; times in s of the record's clock.
-"""
+All quantities SI, body FRD; times in s of the record's clock."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -33,8 +30,7 @@ from hindrax_onboard.identification.model.dof_model import (DofIdentification, c
                         truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "fit_dofs", "identification_of", "identify_all_with_errors",
-           "identify_dof"]
+           "dof_records", "fit_dofs", "identification_of", "identify_all_with_errors", "identify_dof"]
 
 
 @dataclass
@@ -58,8 +54,7 @@ def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord
     """The fit core's record of ``dof`` from a campaign record (module docstring) and its conditioned signals.
 
     Raises :class:`~hindrax_onboard.estimation.least_squares.EstimationError` when the DOF has no window of at least
-    50 ticks or fewer than 20 sensor samples in it.
-    """
+    50 ticks or fewer than 20 sensor samples in it."""
     k = DOFS.index(dof)
     sl = record.dof_slice(dof)
     t = record.t_s[sl]
@@ -113,12 +108,10 @@ def dof_records(record, cfg: VehicleConfig, dofs=DOFS) -> tuple[dict, dict, dict
     return recs, sigs, errors
 
 
-def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None
-                      ) -> DofIdentification:
-    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the
-    reported values, covariance and intervals, unchanged) on the campaign reader's signals ``sig``
-    (:class:`CampaignSignals`), with the comparisons of :mod:`.dof_model` beside it (``online``: the
-    online RLS estimator or its recorded history, or None).
+def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None) -> DofIdentification:
+    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the reported values,
+    covariance and intervals, unchanged) on the campaign reader's signals ``sig`` (:class:`CampaignSignals`), with the
+    comparisons of :mod:`.dof_model` beside it (``online``: the online RLS estimator or its recorded history, or None).
 
     The values are in :func:`parameter_names` order: a damping term the chosen model leaves out is 0 with std 0,
     heave's one pair for both directions (chosen by cross-validation) gives both directions the same value; the
@@ -177,19 +170,17 @@ def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, si
 
 def fit_dofs(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions(),
              dofs=DOFS) -> tuple[dict, dict]:
-    """({dof: (DofResult, CampaignSignals)}, {dof: error message}) of the DOFs of ``dofs`` run in
-    ``record``: the campaign reader (:func:`dof_records`) and the fit core
-    (:func:`~.fit_core.identify_dofs`; ``opts`` default the defaults of ``hindrax ident fit``),
-    docs/identification.md §7. A DOF's result depends on the record to the end of its window
-    only (each sensor log to a sample past it): a bag still being written gives it too."""
+    """({dof: (DofResult, CampaignSignals)}, {dof: error message}) of the DOFs of ``dofs`` run in ``record``: the
+    campaign reader (:func:`dof_records`) and the fit core (:func:`~.fit_core.identify_dofs`; ``opts`` default the
+    defaults of ``hindrax ident fit``), docs/identification.md §7. A DOF's result depends on the record to the end of
+    its window only (each sensor log to a sample past it): a bag still being written gives it too."""
     recs, sigs, errors = dof_records(record, cfg, dofs)
     results, errs = fit_core.identify_dofs(recs, opts)
     errors.update(errs)
     return {d: (results[d], sigs[d]) for d in results}, errors
 
 
-def identify_all_with_errors(record, cfg: VehicleConfig,
-                             opts: fit_core.CoreOptions = fit_core.CoreOptions(),
+def identify_all_with_errors(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions(),
                              fitted: dict | None = None) -> tuple[dict, dict]:
     """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``:
     :func:`fit_dofs` of the DOFs not in ``fitted`` (results of :func:`fit_dofs` already made, on
@@ -253,8 +244,7 @@ def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured: str, jerk_psd: float, st
     z = np.full(keys.size, np.nan)
     z[np.searchsorted(keys, key_meas)] = z_meas
     if aid is None:
-        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd,
-                                          measurement_std=std)
+        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd, measurement_std=std)
     else:
         a = np.full(keys.size, np.nan)
         if isinstance(aid, AccelerometerAid):
@@ -288,10 +278,9 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
 
 
 def _attitude_and_euler_rates(record, t: np.ndarray):
-    """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the
-    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~...vehicle.state.euler_rates`) at
-    the attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
-    samples."""
+    """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the attitude log
+    and the gyro's body rates turned into Euler-angle rates (:func:`~...vehicle.state.euler_rates`) at the attitude
+    interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude samples."""
     t0, t1 = t[0] - 2.0, t[-1]
     ta, rpy = _log_matrix(record.sensors["attitude"], t0, t1)
     tg, w = _log_matrix(record.sensors.get("gyro", []), t0, t1)

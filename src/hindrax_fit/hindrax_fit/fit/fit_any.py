@@ -1,12 +1,10 @@
 """The fit of bags of any topics: the fit core over the records of the any-topics reader, validated.
 
-The reading is :func:`..bag_input.reader.read_any_topics`; everything after it is the fit core
-shared with the campaign (:mod:`.fit_core`, docs/identification.md §7). Several bags are fitted
-jointly (their segments pooled; clusters never span two bags). The verdicts and identification.yaml
-are :mod:`..assessment.results`' (:func:`..assessment.results.build_document`). Validation: the
-core's cross-validation and ``holdout`` bags, both measured by :func:`.fit_core.validation_measures`
-(``nrmse``, ``nrmse_hold``, ``nrmse_zero``).
-"""
+The reading is :func:`..bag_input.reader.read_any_topics`; everything after it is the fit core shared with the campaign
+(:mod:`.fit_core`, docs/identification.md §7). Several bags are fitted jointly (their segments pooled; clusters never
+span two bags). The verdicts and identification.yaml are :mod:`..assessment.results`'
+(:func:`..assessment.results.build_document`). Validation: the core's cross-validation and ``holdout`` bags, both
+measured by :func:`.fit_core.validation_measures` (``nrmse``, ``nrmse_hold``, ``nrmse_zero``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -24,9 +22,8 @@ __all__ = ["DofFit", "FitResult", "fit_records"]
 @dataclass
 class DofFit:
     """One DOF: status "fitted" | "not excited" | "failed"; excitation numbers; the core's result
-    (:class:`.fit_core.DofResult`: names, theta, std, ci95, chosen terms, candidates, timing, intervals);
-    validation {cross_validation, holdout}; plot arrays of the validation data for the report; reason when not
-    fitted."""
+    (:class:`.fit_core.DofResult`: names, theta, std, ci95, chosen terms, candidates, timing, intervals); validation
+    {cross_validation, holdout}; plot arrays of the validation data for the report; reason when not fitted."""
 
     dof: str
     status: str

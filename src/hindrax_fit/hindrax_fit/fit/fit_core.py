@@ -8,8 +8,7 @@ output-error fit (:func:`fit_terms`), model terms by cross-validation (:func:`se
 :func:`persistence`, :func:`coupling_consistent`) and intervals (:func:`cluster_covariance`).
 
 All quantities SI; forces N (N m for rotations), velocities m/s (rad/s); body FRD. Raises
-:class:`~hindrax_onboard.estimation.least_squares.EstimationError` when a DOF has too little usable data.
-"""
+:class:`~hindrax_onboard.estimation.least_squares.EstimationError` when a DOF has too little usable data."""
 from __future__ import annotations
 
 import math
@@ -32,8 +31,7 @@ __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUST
            "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
            "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN",
            "NO_MODEL_VERDICT", "resolvable_delay", "with_edge", "NESTED", "not_below_nested",
-           "input_correlation", "INPUT_CORRELATION_LAG_S", "coupling_consistent", "refit_coupling",
-           "COUPLING_RTOL"]
+           "input_correlation", "INPUT_CORRELATION_LAG_S", "coupling_consistent", "refit_coupling", "COUPLING_RTOL"]
 
 #: (force std, velocity std) within a segment below which it does not move the DOF: translational (N, m/s),
 #: rotational (N m, rad/s)
@@ -144,15 +142,14 @@ class DofRecord:
 
 @dataclass(frozen=True)
 class Terms:
-    """The model's terms (their physics: docs/identification.md §7 steps 4 and 8): damping
-    ``"linear"``, ``"quadratic"`` or ``"both"``; by_direction: heave's damping per sign of w;
-    coriolis: the Coriolis and centripetal force of the other DOFs' inertias subtracted from the
-    input; cross: free coefficients on the other moving DOFs' velocities; reverse_gain: the force of
-    negative commands times a free gain; cross_force: the other DOFs' commanded forces times free
-    coefficients, with this DOF's delay and lag; run_bias: a constant force per run (bag), effects
-    coding around the mean ``bias`` (``bias_run_<k>`` for runs 1..R-1, run R the negative of their
-    sum, a run not fitted gets the mean); saturation: the commanded force plus a free gain times
-    :attr:`Chunk.shortfall`, with this DOF's delay and lag (1: the vehicle file's thrust limits)."""
+    """The model's terms (their physics: docs/identification.md §7 steps 4 and 8): damping ``"linear"``, ``"quadratic"``
+    or ``"both"``; by_direction: heave's damping per sign of w; coriolis: the Coriolis and centripetal force of the
+    other DOFs' inertias subtracted from the input; cross: free coefficients on the other moving DOFs' velocities;
+    reverse_gain: the force of negative commands times a free gain; cross_force: the other DOFs' commanded forces times
+    free coefficients, with this DOF's delay and lag; run_bias: a constant force per run (bag), effects coding around
+    the mean ``bias`` (``bias_run_<k>`` for runs 1..R-1, run R the negative of their sum, a run not fitted gets the
+    mean); saturation: the commanded force plus a free gain times :attr:`Chunk.shortfall`, with this DOF's delay and lag
+    (1: the vehicle file's thrust limits)."""
 
     damping: str = "both"
     by_direction: bool = False
@@ -451,8 +448,7 @@ def _kinds(layout: list) -> list[str]:
 
 def _column_params(layout: list) -> list[int]:
     """Indices of the parameters multiplying the time-dependent columns :attr:`SegmentData.cols`."""
-    return [i for i, k in enumerate(_kinds(layout))
-            if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
+    return [i for i, k in enumerate(_kinds(layout)) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
 
 
 def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None = None,
@@ -670,8 +666,7 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     r = sol.fun
     w = (1.0 + (r / f_scale) ** 2) ** -0.5 if robust else np.ones_like(r)
     th, v0 = split(sol.x)
-    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac,
-                      float(f_scale))
+    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac, float(f_scale))
 
 
 # ------------------------------------------------------------------------------------------------ covariance
@@ -817,12 +812,11 @@ BANDWIDTH_POWER = 0.9
 
 
 def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S) -> tuple[float, str]:
-    """The largest input delay + lag (s) the record can resolve, and what set it
-    (docs/identification.md §7 step 7): the smallest of ``max_delay_s`` (the option),
-    :data:`DELAY_SEGMENT_FRACTION` of the training segment and a quarter period of the excitation
-    bandwidth, below which :data:`BANDWIDTH_POWER` of the detrended velocity's power lies (Welch
-    periodogram of each chunk, pooled): there a delay trades against the dynamics' own phase lag
-    (at most 90 degrees). Never below two grid steps (the sample rate's resolution)."""
+    """The largest input delay + lag (s) the record can resolve, and what set it (docs/identification.md §7 step 7): the
+    smallest of ``max_delay_s`` (the option), :data:`DELAY_SEGMENT_FRACTION` of the training segment and a quarter
+    period of the excitation bandwidth, below which :data:`BANDWIDTH_POWER` of the detrended velocity's power lies
+    (Welch periodogram of each chunk, pooled): there a delay trades against the dynamics' own phase lag (at most
+    90 degrees). Never below two grid steps (the sample rate's resolution)."""
     h = rec.h
     limits = [(float(max_delay_s), f"option max_delay_s {max_delay_s:g} s"),
               (DELAY_SEGMENT_FRACTION * segment_s,
@@ -883,10 +877,8 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     for a in range(0, len(points), GRID_BATCH):
         batch = points[a:a + GRID_BATCH]
         tms = [Timing(d, lag, "estimated") for d, lag in batch]
-        sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
-               for tm in tms]
-        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s, excited_only=False)
-                                    for tm in tms]
+        sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts)) for tm in tms]
+        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s, excited_only=False) for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
         start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
         smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
@@ -898,13 +890,12 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
 
 
 def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
-    """The input delay and first-order thrust lag of a commanded wrench with the smallest
-    cross-validated simulation error of the 1-DOF model (docs/identification.md §7 step 1;
-    :func:`_timing_scores`): a coarse grid (delay every :data:`DELAY_STEP_S`, lags :data:`LAGS_S`,
-    delay + lag within :func:`resolvable_delay`), then :data:`FINE_DELAYS_S` around its best delay
-    with the best lag and the lags halfway to its neighbours. ``curve``: [(delay, lag, cv mse)] of
-    every point. A thrust-model force keeps its known timing (``rec.lag_s``, no delay). Raises
-    :class:`EstimationError` when no segment moves the DOF."""
+    """The input delay and first-order thrust lag of a commanded wrench with the smallest cross-validated simulation
+    error of the 1-DOF model (docs/identification.md §7 step 1; :func:`_timing_scores`): a coarse grid (delay every
+    :data:`DELAY_STEP_S`, lags :data:`LAGS_S`, delay + lag within :func:`resolvable_delay`), then :data:`FINE_DELAYS_S`
+    around its best delay with the best lag and the lags halfway to its neighbours. ``curve``: [(delay, lag, cv mse)] of
+    every point. A thrust-model force keeps its known timing (``rec.lag_s``, no delay). Raises :class:`EstimationError`
+    when no segment moves the DOF."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
     bound, why = resolvable_delay(rec, opts.max_delay_s, opts.segment_s)
@@ -1117,8 +1108,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     sd = build_segments(rec, terms, timing, opts.segment_s, inertia,
                         excited_only=_excited_only(rec, opts) if excited_only is None else excited_only)
     sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=False)
-    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names,
-                              rec.run_count)
+    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names, rec.run_count)
     start = _equation_error_start(sd, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:
         start = theta0
@@ -1130,8 +1120,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     # without folds: no fold estimates, no score, and the reason in the notes (make_folds)
     th, sse, nn, sst, notes = _cv(sd, sv, folds, rec.dof, layout, fit, opts.robust, free_v0)
     cv = _cv_summary(sv, folds, sse, nn, sst)
-    return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, list(folds.notes) + notes,
-                     free_v0)
+    return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, list(folds.notes) + notes, free_v0)
 
 
 def persistence(cv: dict, margin: float = PERSISTENCE_MARGIN) -> dict:
@@ -1333,8 +1322,7 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
                      else None, training)
 
 
-def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None
-                 ) -> DofResult:
+def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None) -> DofResult:
     """Timing, terms by cross-validation (or ``opts.terms``), fit and intervals of one DOF (module docstring).
     ``inertia`` (6,): the other DOFs' inertias for the Coriolis candidate (NaN: unknown). Raises
     :class:`EstimationError`."""
@@ -1357,9 +1345,8 @@ def inertia_vector(results: dict) -> np.ndarray:
 
 
 def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dict, dict]:
-    """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the
-    others' inertias (from a first fit of every DOF; :func:`coupling_consistent`).
-    Returns ({dof: DofResult}, {dof: error message})."""
+    """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the others' inertias (from
+    a first fit of every DOF; :func:`coupling_consistent`). Returns ({dof: DofResult}, {dof: error message})."""
     timings, errors, first = {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
@@ -1427,10 +1414,9 @@ def _inertia_moved(used: np.ndarray, stated: np.ndarray, dof: str) -> bool:
 
 def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing,
                    opts: CoreOptions, inertia: np.ndarray) -> tuple[Candidate, list]:
-    """``chosen`` (with the Coriolis force) fitted and cross-validated again with the other DOFs'
-    inertias ``inertia`` (6,), replacing it among ``tried``; then :func:`not_below_nested` against
-    the nested 1-DOF model (no Coriolis force). A refit that fails: the nested model (or ``chosen``
-    without one). Returns (the model, the candidates)."""
+    """``chosen`` (with the Coriolis force) fitted and cross-validated again with the other DOFs' inertias ``inertia``
+    (6,), replacing it among ``tried``; then :func:`not_below_nested` against the nested 1-DOF model (no Coriolis
+    force). A refit that fails: the nested model (or ``chosen`` without one). Returns (the model, the candidates)."""
     rest = [t for t in tried if t is not chosen]
     try:
         c = _candidate(rec, chosen.terms, timing, opts, inertia, {}, chosen.fit.theta)
@@ -1440,8 +1426,7 @@ def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timin
     return not_below_nested(c, rest + [c]), rest + [c]
 
 
-def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict,
-                        opts: CoreOptions) -> dict:
+def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict, opts: CoreOptions) -> dict:
     """Score every chosen model with the inertias it is predicted with (docs/identification.md
     §7 step 4): selection fits a DOF's Coriolis force with preliminary inertias of the other DOFs
     (``used``: {dof: (6,)}); until they agree with the stated ones (:data:`COUPLING_RTOL`, at most
@@ -1450,12 +1435,10 @@ def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict,
     used = dict(used)
     for _ in range(COUPLING_PASSES):
         stated = inertia_vector(chosen)
-        stale = [d for d, c in chosen.items()
-                 if c.terms.coriolis and _inertia_moved(used[d], stated, d)]
+        stale = [d for d, c in chosen.items() if c.terms.coriolis and _inertia_moved(used[d], stated, d)]
         if not stale:
             break
         for d in stale:
-            chosen[d], tried[d] = refit_coupling(records[d], chosen[d], tried[d], timings[d], opts,
-                                                 stated)
+            chosen[d], tried[d] = refit_coupling(records[d], chosen[d], tried[d], timings[d], opts, stated)
             used[d] = stated
     return used

@@ -12,8 +12,7 @@ timings costs a few simulations of the whole data set rather than G x K fits one
 Shapes: U (3, G, m, L) the input force at the start, middle and end of each of L ticks of m segments for G grid
 points; v0 (m,) initial velocities; samples (s_seg, s_j, s_a, s_z) (n,) each measurement's segment, tick, fraction
 of the tick and value; masks (K, m) the segments each fold fits (or predicts); theta (G, K, p) [M, k_q, k_l, b]
-(roll, pitch: and the restoring stiffness). Pure numpy; SI units (N or N m, m/s or rad/s).
-"""
+(roll, pitch: and the restoring stiffness). Pure numpy; SI units (N or N m, m/s or rad/s)."""
 from __future__ import annotations
 
 import numpy as np

@@ -11,8 +11,7 @@ supervisor tripped, the guard silent...) or no answer prints the reason on stder
 
 ``reset`` calls the gateway's ``/<name>/reset`` (signed, like ``arm``) or, on the vehicle, ``supervisor/reset``
 (std_srvs/Trigger), and prints what it cleared: ``<name>: cleared: <the trip's reason>`` or ``<name>: was not
-tripped``.
-"""
+tripped``."""
 from __future__ import annotations
 
 import argparse

@@ -3,8 +3,7 @@
 A command raises :class:`CommandError` for a problem it found (bad input, invalid configuration): the
 ``hindrax`` entry point (:func:`hindrax_onboard.cli.main`) prints its one-line message on stderr and
 exits 1. Only the standard library is imported here at module level, so defining a command's arguments
-stays cheap (``hindrax --help`` imports no command module at all, :mod:`hindrax_onboard.cli`).
-"""
+stays cheap (``hindrax --help`` imports no command module at all, :mod:`hindrax_onboard.cli`)."""
 from __future__ import annotations
 
 import argparse
@@ -39,8 +38,7 @@ def load_vehicle(path: str | None = None) -> Any:
     ``ros_ws/config/hindrax.yaml``).
 
     Raises :class:`CommandError` ``"invalid configuration: <key, value, allowed range>"`` when the file does
-    not load or validate (:class:`~hindrax_common.config.ConfigError`).
-    """
+    not load or validate (:class:`~hindrax_common.config.ConfigError`)."""
     from hindrax_common.config import ConfigError, default_config_path, load_config
 
     try:
@@ -53,8 +51,7 @@ def _round_trip_yaml() -> Any:
     """A ruamel.yaml round-trip loader/dumper that reproduces the shipped vehicle file byte for byte.
 
     Lines are never wrapped (flow collections stay on their line), ``null`` is written as ``null``, and a float
-    set by a command as :func:`yaml_float` writes it. Floats read from the file keep their text.
-    """
+    set by a command as :func:`yaml_float` writes it. Floats read from the file keep their text."""
     from ruamel.yaml import YAML
     from ruamel.yaml.representer import RoundTripRepresenter
 
@@ -75,8 +72,7 @@ def yaml_float(value: float) -> str:
     """``value`` with 10 significant digits in a form YAML 1.1 (PyYAML) reads back as a float.
 
     YAML 1.1's float pattern needs a decimal point: ``-4e-07`` or ``1500`` would load as a string or an int,
-    so the mantissa always carries one (``-4.0e-07``, ``1500.0``).
-    """
+    so the mantissa always carries one (``-4.0e-07``, ``1500.0``)."""
     text = f"{float(value):.10g}"
     mantissa, sep, exponent = text.partition("e")
     if "." not in mantissa and mantissa.lstrip("-").isdigit():
@@ -90,13 +86,11 @@ def update_vehicle_file(path: str | Path, values: Mapping[str, Any],
     keeping every comment, the key order and every other value; then validate the file and restore the
     original text if it no longer validates.
 
-    values: {dotted key below ``ros__parameters`` (e.g. ``"esc.oscillator_hz"``): its new value (bool, int,
-    float, str or a list of them; a list is written in flow style, ``[1.0, 2.0]``)}.
-    new_keys: {dotted key of ``values`` that may be absent: (sibling key it is inserted after, end-of-line
-    comment)}; any other key must already be in the file.
+    values: {dotted key below ``ros__parameters`` (e.g. ``"esc.oscillator_hz"``): its new value (bool, int, float, str
+    or a list of them; a list is written in flow style, ``[1.0, 2.0]``)}. new_keys: {dotted key of ``values`` that may
+    be absent: (sibling key it is inserted after, end-of-line comment)}; any other key must already be in the file.
     Raises ValueError when a key (or its section) is missing (the file is not written),
-    :class:`~hindrax_common.config.ConfigError` when the result does not validate (the file is restored).
-    """
+    :class:`~hindrax_common.config.ConfigError` when the result does not validate (the file is restored)."""
     from ruamel.yaml.comments import CommentedMap, CommentedSeq
 
     from hindrax_common.config import ConfigError, load_config

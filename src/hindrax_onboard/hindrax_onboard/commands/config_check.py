@@ -1,8 +1,7 @@
 """``hindrax config check FILE``: validate a vehicle configuration before a pool test.
 
 Prints each error as one line (key, value, allowed range) on stdout and exits 1, or prints a short
-summary of the vehicle and exits 0. Validation rules: :mod:`hindrax_common.config`.
-"""
+summary of the vehicle and exits 0. Validation rules: :mod:`hindrax_common.config`."""
 from __future__ import annotations
 
 import argparse

@@ -13,8 +13,7 @@ object (assumed and calibrated oscillator, prescale, counts, the pulse width the
 board's id, the date, the reading) in the configuration file (comments
 kept, validated, the original restored if the result is invalid). A reading that gives an oscillator outside the
 part's 23-27 MHz (``esc.oscillator_hz``'s range) is refused, written or not: it is a wrong reading. Arithmetic:
-:func:`hindrax_drivers.pca9685.protocol.oscillator_from_measurement`.
-"""
+:func:`hindrax_drivers.pca9685.protocol.oscillator_from_measurement`."""
 from __future__ import annotations
 
 import argparse

@@ -9,8 +9,7 @@ each node's ``/diagnostics`` status OK, ``supervisor/status`` OK, and no second 
 (a second vehicle). It returns as soon as everything is seen OK.
 When no node of the vehicle is seen at all, one line says so and names the ROS domain and discovery it looked on.
 
-The operator's check before a dive, and the Docker image's HEALTHCHECK (``--quiet``: the verdict line only).
-"""
+The operator's check before a dive, and the Docker image's HEALTHCHECK (``--quiet``: the verdict line only)."""
 from __future__ import annotations
 
 import argparse

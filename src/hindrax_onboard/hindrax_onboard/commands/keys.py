@@ -5,8 +5,7 @@ Run on the vehicle: writes a new random 32-byte key to ``<keys dir>/<name>.key``
 where it is and where the topside copy goes: the same path on the operator's PC, mode 0600. The gateway checks every
 operator request against it (docs/architecture.md §8.2, :mod:`hindrax_bringup.gateway.operator_signing`); the
 ``hindrax`` command signs with it. An existing key is kept unless ``--force`` (a new key must be copied to the topside
-again). Exit 1 with one line when the key exists or the vehicle file is invalid.
-"""
+again). Exit 1 with one line when the key exists or the vehicle file is invalid."""
 from __future__ import annotations
 
 import argparse

@@ -11,8 +11,7 @@ permissions per enclave), the internal enclaves' permissions for the internal do
 domain; then the vehicle's governance (:func:`hindrax_bringup.gateway.sros2_policy.governance`: participants without a
 certificate may call the e-stop on the topside, nothing else) replaces sros2's default one, signed with the keystore's
 permissions CA. Needs sros2 (``ros-jazzy-sros2`` from apt, on the Pi); without it, exit 1 with one line saying so.
-Exit 1 with one line for an invalid vehicle file or launch file.
-"""
+Exit 1 with one line for an invalid vehicle file or launch file."""
 from __future__ import annotations
 
 import argparse

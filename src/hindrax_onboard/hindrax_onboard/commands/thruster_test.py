@@ -10,8 +10,7 @@ forces on ``thrusters/test_forces`` (hindrax_msgs/ThrusterForces; the allocation
 the only one the ESC accepts) for ``--step-s`` seconds per thruster with 0 N in between, then disarms (also on
 Ctrl-C or any error). It runs on the vehicle itself (``thrusters/*`` never cross its gateway,
 docs/architecture.md §8.2), on the vehicle named by ``--vehicle NAME`` or the only one its graph shows; it refuses
-with one line on the topside, or when it sees no vehicle or several.
-"""
+with one line on the topside, or when it sees no vehicle or several."""
 from __future__ import annotations
 
 import argparse

@@ -4,8 +4,7 @@ The pip wheels of the venv carry rclpy but not ``ros2 topic``; the README's pool
 (``/<name>/supervisor/status``: ``disarm_cause``) with this. The topic's type is the one the graph shows (waited for up
 to ``--timeout`` s); each message prints as YAML (field order of the message definition), ``---`` after each, as
 ``ros2 topic echo`` does. Subscribed best effort, volatile: it hears reliable and best-effort publishers alike.
-Exit 0 after ``--count`` messages (0: until Ctrl-C), 1 when the topic or a message does not come within the timeout.
-"""
+Exit 0 after ``--count`` messages (0: until Ctrl-C), 1 when the topic or a message does not come within the timeout."""
 from __future__ import annotations
 
 import argparse

@@ -9,8 +9,7 @@ when another server answers one of the vehicle's services (an eavesdropper, issu
 
 On the topside an operator's request is signed (:mod:`hindrax_bringup.gateway.operator_signing`) with the vehicle's key,
 ``<keys dir>/<name>.key`` (``hindrax keys``), when this PC has it; without it the gateway refuses the request and
-says where the key goes. The e-stop is never signed.
-"""
+says where the key goes. The e-stop is never signed."""
 from __future__ import annotations
 
 import argparse

@@ -13,10 +13,9 @@ docs/control.md §2 (its items 1-6 give the reasons and the numbers):
   k_p = w_c^2, k_d = 2 zeta w_c, k_i = w_c k_p / 10 (velocity holds k_v = w_c, k_i = w_c k_v / 10),
   at the bandwidth w_c = w (1 - 1.96 sigma) that the inertia's relative 1-sigma sigma allows (not
   below w / 2, :func:`design_gains`);
-* **saturation and anti-windup**: each wrench component clipped to ``hold_fraction`` of the axis'
-  authority per direction; conditional integration ([AstromHagglund2006] Ch. 3) stops while the
-  output is clipped or the allocation reported the axis short (:meth:`Controller.note_allocation`)
-  in the direction of the error.
+* **saturation and anti-windup**: each wrench component clipped to ``hold_fraction`` of the axis' authority per
+  direction; conditional integration ([AstromHagglund2006] Ch. 3) stops while the output is clipped or the allocation
+  reported the axis short (:meth:`Controller.note_allocation`) in the direction of the error.
 
 Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis
 as Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range over a local floor plane
@@ -28,8 +27,7 @@ maintained Python library implements marine model-based PID with reference feedf
 :class:`~hindrax_onboard.estimation.kalman.LinearKalman`, filterpy's predict/update equations without scipy (that
 module's docstring).
 
-Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north.
-"""
+Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north."""
 from __future__ import annotations
 
 import math
@@ -85,8 +83,7 @@ class ControlSettings:
     rate_hz: control rate (the node's timer). *_bandwidth_rad_s: target bandwidth w of the depth (and altitude),
     heading, roll/pitch and surge/sway velocity holds. damping_ratio: zeta of the reference models and the PID.
     hold_fraction: fraction of each axis' authority the holds may use. max_depth_rate_m_s, max_yaw_rate_rad_s: rate
-    limits of the reference models. sensor_timeout_s: the node stops when the depth or attitude is older than this.
-    """
+    limits of the reference models. sensor_timeout_s: the node stops when the depth or attitude is older than this."""
 
     rate_hz: float = 50.0
     depth_bandwidth_rad_s: float = 2.0
@@ -139,8 +136,7 @@ class AxisGains:
             g = f"Kv {m * self.kp:.3g} N s/m, Ki {m * self.ki:.3g} N/m"
         else:
             f, x = ("N m", "rad") if rot else ("N", "m")
-            g = (f"Kp {m * self.kp:.3g} {f}/{x}, Kd {m * self.kd:.3g} {f} s/{x}, "
-                 f"Ki {m * self.ki:.3g} {f}/({x} s)")
+            g = (f"Kp {m * self.kp:.3g} {f}/{x}, Kd {m * self.kd:.3g} {f} s/{x}, Ki {m * self.ki:.3g} {f}/({x} s)")
         low = "" if self.factor >= 1.0 else (f", lowered x{self.factor:.2f} by the inertia's "
                                              f"{100 * self.rel_std:.1f} % std")
         return (f"{self.dof}: {g} at {self.w:.2f} rad/s (target {self.w_target:.2f}{low}); inertia {m:.4g} "
@@ -316,11 +312,10 @@ class FloorEstimator:
     horizontal position (NED z, m) and its gradient (g_n, g_e) (depth change per metre north and east); a linear
     Kalman filter (:class:`~hindrax_onboard.estimation.kalman.LinearKalman`).
 
-    Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement
-    z_f + g_n dN + g_e dE (:meth:`update_point`); between points the state advances as
-    z_f += g . v dt (:meth:`predict_to`). The slope walks in time and per metre travelled
-    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`). Without any range for :data:`FLOOR_TIMEOUT_S` the
-    floor is held (``stale``)."""
+    Each range is a floor point at a horizontal offset (dN, dE) from the body origin, a measurement z_f + g_n dN + g_e
+    dE (:meth:`update_point`); between points the state advances as z_f += g . v dt (:meth:`predict_to`). The slope
+    walks in time and per metre travelled (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`). Without any range for
+    :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
 
     def __init__(self) -> None:
         self.kf = LinearKalman(3)
@@ -408,8 +403,7 @@ class Controller:
 
     Setpoints (attributes; NaN = not held): ``depth_m``; ``altitude_m`` (finite: altitude mode, when ranges arrive);
     ``heading_rad``; ``velocity_frd_m_s`` (2,) surge, sway; ``attitude_rad`` (2,) roll, pitch. :meth:`wrench` returns
-    the body FRD wrench (6,) for one tick. Raises ``ValueError`` for an authority of the wrong shape or not > 0.
-    """
+    the body FRD wrench (6,) for one tick. Raises ``ValueError`` for an authority of the wrong shape or not > 0."""
 
     def __init__(self, model: ControlModel, authority, settings: ControlSettings | None = None,
                  ping_position_frd_m: Sequence[float] = (0.0, 0.0, 0.0),

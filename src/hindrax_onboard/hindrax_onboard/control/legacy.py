@@ -4,8 +4,7 @@
 a-priori rigid + added inertia, k_p = I w_n^2, k_d = 2 zeta w_n I (zeta = 1), the derivative on the measured rate (not
 on the error), a depth integral 0.5 m w_n^3 clipped to +-0.5 m s, the net-buoyancy feed-forward, a proportional
 velocity hold -1.5 w_n m (v - v_sp), no damping feedforward and no reference model. Same interface as
-:class:`~hindrax_onboard.control.maneuvers.HoldController`, so both can drive the same loop.
-"""
+:class:`~hindrax_onboard.control.maneuvers.HoldController`, so both can drive the same loop."""
 from __future__ import annotations
 
 import math

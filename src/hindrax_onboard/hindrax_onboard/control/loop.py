@@ -1,18 +1,16 @@
 """Sensor samples in, wrench out: the campaign's conditioning around a hold (docs/control.md §5).
 
-:class:`HoldLoop` owns a :class:`~hindrax_onboard.vehicle.state.SensorState` (depth of the body origin
-from the MS5837 with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
-:class:`~hindrax_onboard.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused
-with the vertical acceleration), exactly as the identification executive does, and hands them to a
-hold (:class:`~hindrax_onboard.control.maneuvers.HoldController` or
-:class:`~hindrax_onboard.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it
-the samples of the driver topics (:mod:`hindrax_onboard.vehicle.signals`), the evaluation
-(:mod:`hindrax_sim.control_evaluate`) those of the in-process simulator. Pure, no ROS.
+:class:`HoldLoop` owns a :class:`~hindrax_onboard.vehicle.state.SensorState` (depth of the body origin from the MS5837
+with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
+:class:`~hindrax_onboard.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused with the vertical
+acceleration), exactly as the identification executive does, and hands them to a hold
+(:class:`~hindrax_onboard.control.maneuvers.HoldController` or :class:`~hindrax_onboard.control.legacy.LegacyPDHold`).
+The controller node (:mod:`.node`) feeds it the samples of the driver topics (:mod:`hindrax_onboard.vehicle.signals`),
+the evaluation (:mod:`hindrax_sim.control_evaluate`) those of the in-process simulator. Pure, no ROS.
 
 Memory: the controller runs for hours, so the state's sample logs (``SensorState.log``, which the
 identification executive keeps whole for its campaign record) are cut here to the last
-:data:`LOG_HORIZON_S` seconds after every batch: the holds read only recent samples.
-"""
+:data:`LOG_HORIZON_S` seconds after every batch: the holds read only recent samples."""
 from __future__ import annotations
 
 import bisect

@@ -16,8 +16,7 @@ simulator's truth):
   model-based law of :mod:`hindrax_onboard.control.law` with the vehicle file's model (or an identified one); the
   former PD/PI law is :class:`hindrax_onboard.control.legacy.LegacyPDHold`.
 
-Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`.
-"""
+Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`."""
 from __future__ import annotations
 
 import math
@@ -48,8 +47,7 @@ def dof_authority(core: AllocationCore, dof: str) -> tuple[float, float]:
 
     The allocator is asked for a very large pure wrench along the FRD axis; with uniform scaling it
     returns the largest feasible multiple, whose achieved component (thrust curves at the quantised pulse
-    widths, times the thrust allocation matrix) is the authority. Raises ``KeyError`` for an unknown DOF.
-    """
+    widths, times the thrust allocation matrix) is the authority. Raises ``KeyError`` for an unknown DOF."""
     i = DOF_INDEX[dof]
     out = []
     for sign in (1.0, -1.0):
@@ -64,8 +62,7 @@ def level_ladder(cfg: VehicleConfig, authority: float, levels: int | None = None
     """Constant levels (N or N m), evenly spaced fractions of ``authority`` ([Hindrax-Drag] §4).
 
     Fractions from ``identification.level_fraction_min`` to ``level_fraction_max``;
-    ``levels`` defaults to ``identification.levels_per_dof``. Raises ``ValueError`` for levels < 1.
-    """
+    ``levels`` defaults to ``identification.levels_per_dof``. Raises ``ValueError`` for levels < 1."""
     n = int(cfg.identification.levels_per_dof if levels is None else levels)
     if n < 1:
         raise ValueError(f"levels must be >= 1, got {levels}")
@@ -86,8 +83,7 @@ def tilt_test_angle_rad(cfg: VehicleConfig, dof: str) -> float:
 class PoolBox:
     """Allowed region of the body origin (NED, m): x in [x_min, x_max], y in [y_min, y_max], z in [z_min, z_max].
 
-    :meth:`from_config` builds it from ``pool.*``, ``limits.*`` and the vehicle size (module docstring).
-    """
+    :meth:`from_config` builds it from ``pool.*``, ``limits.*`` and the vehicle size (module docstring)."""
 
     x_min: float
     x_max: float
@@ -141,10 +137,9 @@ class HoldController:
     (:func:`dof_authority`). natural_frequency_rad_s: target bandwidth w of the position holds; the velocity holds use
     ``velocity_gain`` w. hold_fraction: share of each axis' authority the holds may use. model: the
     :class:`~hindrax_onboard.control.model.ControlModel` (default: the vehicle file's, the campaign's model before any
-    identification exists). reference_accel: DOF -> acceleration limit of the reference models (default: from the
-    model, :class:`~hindrax_onboard.control.law.Controller`). settings: a
-    :class:`~hindrax_onboard.control.law.ControlSettings` replacing the bandwidths and hold fraction above (the
-    controller node's ``control.*``).
+    identification exists). reference_accel: DOF -> acceleration limit of the reference models (default: from the model,
+    :class:`~hindrax_onboard.control.law.Controller`). settings: a :class:`~hindrax_onboard.control.law.ControlSettings`
+    replacing the bandwidths and hold fraction above (the controller node's ``control.*``).
 
     ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not in ``free``: depth (Z) to
     ``depth_setpoint_m`` on ``depth_estimate_m`` and ``depth_rate_m_s`` (which the caller sets from a
@@ -152,8 +147,7 @@ class HoldController:
     ``altitude_setpoint_m`` is finite, the Ping1D altitude; roll/pitch to ``attitude_setpoint_rad``; heading to
     ``heading_setpoint_rad``; surge/sway body velocity to ``velocity_setpoint_m_s``. A DOF in ``free`` gets 0 and, held
     again, starts from its measured state. ``net_buoyancy_n`` is the model's.
-    ``note_allocation(requested_frd, achieved_frd)`` passes the allocation's result for the anti-windup.
-    """
+    ``note_allocation(requested_frd, achieved_frd)`` passes the allocation's result for the anti-windup."""
 
     def __init__(self, cfg: VehicleConfig, authority, natural_frequency_rad_s: float = 2.0,
                  hold_fraction: float = 0.6, model: ControlModel | None = None, velocity_gain: float = 1.5,
@@ -186,8 +180,7 @@ class HoldController:
     def note_allocation(self, requested_frd, achieved_frd) -> None:
         """Anti-windup from the thrust allocation's result.
 
-        As :meth:`~hindrax_onboard.control.law.Controller.note_allocation`.
-        """
+        As :meth:`~hindrax_onboard.control.law.Controller.note_allocation`."""
         self.core.note_allocation(requested_frd, achieved_frd)
 
     def control_input(self, st: SensorState, t_s: float | None = None) -> ControlInput:

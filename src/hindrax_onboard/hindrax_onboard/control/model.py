@@ -6,17 +6,14 @@ the vehicle still (heave: the net buoyancy B - W, FRD down; feedforward) and, fo
 the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources
 (docs/control.md §4 gives the rules and why):
 
-* :func:`model_from_config` - the vehicle file (``hydrodynamics.*``, mass, volume, geometry), with
-  the declared thrust-curve uncertainty as the inertia's (a lower bound: the file states none for
-  its added masses).
-* :func:`load_model` - ``identification.yaml``
-  (:mod:`hindrax_fit.assessment.results`), read by this small tolerant loader
-  (``provenance.vehicle_parameters`` or ``provenance.configuration_sha256``,
-  ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and ``joint.scales``; other keys are
-  ignored). Values are in commanded-thrust units: a calibrated file's are divided by the thrust
-  scale of their group. A ``suspect`` parameter, a value that is not a finite number, or a negative
-  inertia or damping falls back to the vehicle file's, except for the reasons of
-  :data:`CONTROL_IRRELEVANT_REASONS`; a heave bias no thrust scale explains
+* :func:`model_from_config` - the vehicle file (``hydrodynamics.*``, mass, volume, geometry), with the declared
+  thrust-curve uncertainty as the inertia's (a lower bound: the file states none for its added masses).
+* :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_fit.assessment.results`), read by this small tolerant
+  loader (``provenance.vehicle_parameters`` or ``provenance.configuration_sha256``,
+  ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and ``joint.scales``; other keys are ignored). Values are
+  in commanded-thrust units: a calibrated file's are divided by the thrust scale of their group. A ``suspect``
+  parameter, a value that is not a finite number, or a negative inertia or damping falls back to the vehicle file's,
+  except for the reasons of :data:`CONTROL_IRRELEVANT_REASONS`; a heave bias no thrust scale explains
   (:func:`unexplained_bias`) makes the bias and damping fall back. Each value carries its source
   (:attr:`AxisModel.sources`).
 
@@ -24,8 +21,7 @@ the restoring coefficient z_g W - z_b B (moment = restoring sin(angle); feedforw
 or an identification of another vehicle (matched by :mod:`hindrax_onboard.vehicle.vehicle_match`) raise
 :class:`ModelFileError` (one line).
 
-Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards.
-"""
+Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards."""
 from __future__ import annotations
 
 import math
@@ -67,8 +63,7 @@ class AxisModel:
     linear_damping_positive / _negative (kg/s or kg m^2/s), quadratic_damping_positive / _negative (kg/m or kg m^2),
     chosen by the sign of the velocity (heave: positive = down). bias: the constant force or moment holding the
     vehicle still (heave: B - W, N, FRD; others 0 from the vehicle file). restoring: z_g W - z_b B (N m; roll and pitch,
-    0 otherwise). sources: parameter name -> where the value came from.
-    """
+    0 otherwise). sources: parameter name -> where the value came from."""
 
     dof: str
     inertia: float
@@ -210,8 +205,7 @@ def load_model(path: str | Path, cfg: VehicleConfig) -> ControlModel:
     Raises :class:`ModelFileError` (one line) for a file that cannot be read, is not an identification or belongs
     to another vehicle. DOFs the file does not hold, and parameters that are missing, unusable or suspect (for
     control), keep the vehicle file's value, each with its reason in :attr:`AxisModel.sources` (and the DOFs in
-    :attr:`ControlModel.notes`).
-    """
+    :attr:`ControlModel.notes`)."""
     base = model_from_config(cfg)
     p = Path(path)
 

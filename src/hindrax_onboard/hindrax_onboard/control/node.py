@@ -23,8 +23,7 @@ CPU (docs/control.md §3 items 6-7): the tick runs at ``control.rate_hz`` only w
 
 Parameters: the vehicle configuration (``control.*``) and ``model_file`` (string, read-only, default
 "": identification.yaml to take the model from, "" = the vehicle file); a file that cannot be used
-stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place.
-"""
+stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place."""
 from __future__ import annotations
 
 import math
@@ -68,9 +67,8 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
 STATUS_PERIOD_S = 0.5
 #: period of ``odom`` and the ``odom -> base_link`` transform on ``/tf`` (s): 10 Hz, enough for a 3D view
 ODOM_PERIOD_S = 0.1
-#: while disabled, one ``imu/data_raw`` message in this many is conditioned (51 Hz -> 10 Hz: the
-#: odometry's rate); the others are taken as bytes and dropped undecoded. Enabled, every one is
-#: (module docstring, "CPU")
+#: while disabled, one ``imu/data_raw`` message in this many is conditioned (51 Hz -> 10 Hz: the odometry's rate); the
+#: others are taken as bytes and dropped undecoded. Enabled, every one is (module docstring, "CPU")
 IDLE_IMU_EVERY = 5
 #: tick period (s) while an identification goal runs: the tick then only takes the goal's phase
 #: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams are

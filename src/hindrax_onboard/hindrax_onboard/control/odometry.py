@@ -5,8 +5,7 @@ dead-reckoned horizontal position from the DVL velocity and heading, the depth o
 the DVL velocity and the gyro rates) is turned into what a ROS tool (Foxglove's 3D panel, RViz) expects: the pose
 of ``base_link`` (FLU, REP-103) in ``odom`` (ENU, REP-105; origin at the pool start position of the vehicle file,
 continuous, drifting with the dead reckoning), and the twist in ``base_link``. Frames: docs/architecture.md §3;
-conversions: :mod:`hindrax_common.base.frames`. Pure, no ROS.
-"""
+conversions: :mod:`hindrax_common.base.frames`. Pure, no ROS."""
 from __future__ import annotations
 
 from dataclasses import dataclass

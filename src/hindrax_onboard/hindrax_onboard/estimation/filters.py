@@ -27,8 +27,7 @@ grows roughly as (jerk_psd / measurement_std^2)^(1/6) for position and ^(1/4) fo
 measurements. ``measurement_std`` is the sensor noise standard deviation in the measured unit.
 
 The offline smoother uses filterpy's ``KalmanFilter``; the online filter steps with :class:`~.kalman.LinearKalman`
-(why: that module's docstring). This module builds F, Q, H, R and handles time stamps and missing data.
-"""
+(why: that module's docstring). This module builds F, Q, H, R and handles time stamps and missing data."""
 
 from __future__ import annotations
 
@@ -52,8 +51,7 @@ def transition_matrix(dt_s: float) -> np.ndarray:
 
 def process_noise(dt_s: float, jerk_psd: float) -> np.ndarray:
     """(3, 3) discrete process noise Q(dt) for continuous white jerk of PSD ``jerk_psd`` (module docstring; equal to
-    ``filterpy.common.Q_continuous_white_noise(3, dt, jerk_psd)``, [Bar-Shalom2001] §6.2.3); zeros for dt = 0.
-    """
+    ``filterpy.common.Q_continuous_white_noise(3, dt, jerk_psd)``, [Bar-Shalom2001] §6.2.3); zeros for dt = 0."""
     dt = float(dt_s)
     if dt == 0.0:
         return np.zeros((3, 3))
@@ -74,8 +72,7 @@ def _check_settings(measured: str, jerk_psd: float, measurement_std: float) -> N
         raise EstimationError(f"measurement_std must be > 0, got {measurement_std}")
 
 
-def _initial_state(measured: str, z0: float, measurement_std: float,
-                   initial_velocity_std: float,
+def _initial_state(measured: str, z0: float, measurement_std: float, initial_velocity_std: float,
                    initial_acceleration_std: float) -> Tuple[np.ndarray, np.ndarray]:
     if measured == "position":
         x0 = np.array([z0, 0.0, 0.0])
@@ -105,8 +102,7 @@ class KinematicKalmanFilter:
     the first valid measurement every estimate is NaN.
 
     Raises:
-        EstimationError: invalid settings; :meth:`step` raises on time going backwards.
-    """
+        EstimationError: invalid settings; :meth:`step` raises on time going backwards."""
 
     def __init__(self, measured: str = "position", jerk_psd: float = 1.0,
                  measurement_std: float = 0.01, initial_velocity_std: float = 1.0,
@@ -143,12 +139,10 @@ class KinematicKalmanFilter:
             z: measurement in the measured unit, or NaN/None when missing.
 
         Returns:
-            (position, velocity, acceleration) estimates at ``t_s`` (NaN before the first
-            valid measurement).
+            (position, velocity, acceleration) estimates at ``t_s`` (NaN before the first valid measurement).
 
         Raises:
-            EstimationError: non-finite ``t_s`` or time going backwards.
-        """
+            EstimationError: non-finite ``t_s`` or time going backwards."""
         t = float(t_s)
         if not np.isfinite(t):
             raise EstimationError(f"t_s must be finite, got {t_s}")
@@ -211,8 +205,7 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
         velocity mode ``pos`` is the integrated velocity, 0 at the first valid sample.
 
     Raises:
-        EstimationError: bad shapes, non-increasing time, infinite values, no valid sample.
-    """
+        EstimationError: bad shapes, non-increasing time, infinite values, no valid sample."""
     _check_settings(measured, jerk_psd, measurement_std)
     t = check_time_vector(t_s, "t_s", min_samples=2)
     zz = as_float_array(z, "z", 1, allow_nan=True)

@@ -9,9 +9,8 @@ equation; docs/identification.md §2.2) give the added mass, damping, C_M, KC an
 
 Signal processing (our choices; [Hindrax-AM] only says "double integration" in MATLAB):
 
-* Release: the first sample whose |a - median(a)| exceeds :data:`RELEASE_THRESHOLD` (0.5) times
-  the largest deviation (at release the acceleration jumps to its largest value, -omega_n^2 A).
-  The record is analysed from there on.
+* Release: the first sample whose |a - median(a)| exceeds :data:`RELEASE_THRESHOLD` (0.5) times the largest deviation
+  (at release the acceleration jumps to its largest value, -omega_n^2 A). The record is analysed from there on.
 * Displacement (:func:`displacement_from_acceleration`): the accelerometer bias is the
   (trapezoid-weighted) mean of the acceleration over the analysed record (exact when it starts
   and ends at rest, because the velocity change is then zero); velocity = cumulative
@@ -36,8 +35,7 @@ Signal processing (our choices; [Hindrax-AM] only says "double integration" in M
 * omega_d from the spacing of the interior extrema (peaks and troughs, release excluded, times
   refined by parabolic interpolation): least-squares slope of t_k against k is T_d / 2.
 * Cross-check: a damped sinusoid plus bias, a = exp(-s t) (C1 cos w t + C2 sin w t) + b, is fitted
-  to the acceleration by ``scipy.optimize.curve_fit`` (``omega_d_fit_rad_s``, ``zeta_fit``).
-"""
+  to the acceleration by ``scipy.optimize.curve_fit`` (``omega_d_fit_rad_s``, ``zeta_fit``)."""
 
 from __future__ import annotations
 
@@ -79,8 +77,7 @@ def log_decrement(peak_amplitudes) -> float:
         peak_amplitudes: (n + 1,) successive same-sign peak amplitudes (> 0), one period apart.
 
     Raises:
-        EstimationError: fewer than 2 peaks or non-positive amplitudes.
-    """
+        EstimationError: fewer than 2 peaks or non-positive amplitudes."""
     x = as_float_array(peak_amplitudes, "peak_amplitudes", 1)
     if x.size < 2:
         raise EstimationError("need at least 2 peaks for a log decrement")
@@ -113,8 +110,7 @@ def added_mass_simplified(stiffness_n_per_m: float, omega_rad_s: float, mass_kg:
     """m_ad = k_eq / omega^2 - m_b in kg ([Hindrax-AM] eq. 7, damping omitted).
 
     ``omega_rad_s`` is the measured oscillation frequency taken as omega_n (damping neglected);
-    [Hindrax-AM] Tables 3-5 (sixth column) evaluate it with the measured omega_d.
-    """
+    [Hindrax-AM] Tables 3-5 (sixth column) evaluate it with the measured omega_d."""
     k = positive(stiffness_n_per_m, "stiffness_n_per_m")
     w = positive(omega_rad_s, "omega_rad_s")
     return k / w**2 - positive(mass_kg, "mass_kg")
@@ -173,8 +169,7 @@ def displacement_from_acceleration(t_s, acceleration_m_s2, highpass_hz: Optional
         (displacement_m, velocity_m_s), each (n,).
 
     Raises:
-        EstimationError: bad shapes, NaN, non-increasing time, fewer than 8 samples, bad cut-off.
-    """
+        EstimationError: bad shapes, NaN, non-increasing time, fewer than 8 samples, bad cut-off."""
     from scipy import integrate  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
     t = check_time_vector(t_s, "t_s", min_samples=8)
@@ -200,8 +195,7 @@ def find_release_index(acceleration_m_s2, release_threshold: float = 0.5) -> int
     """Index of the release: first |a - median(a)| > release_threshold * max |a - median(a)|.
 
     Raises:
-        EstimationError: threshold outside (0, 1] or a constant signal.
-    """
+        EstimationError: threshold outside (0, 1] or a constant signal."""
     a = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
     if not (0.0 < release_threshold <= 1.0):
         raise EstimationError(f"release_threshold must be in (0, 1], got {release_threshold}")
@@ -271,8 +265,7 @@ class FreeDecayResult:
     ``t_s``, ``acceleration_m_s2``, ``displacement_m``, ``velocity_m_s``, ``envelope_m``
     (x_0 exp(-zeta omega_n (t - t_0)), the decay envelope through the first peak, positive;
     the displacement keeps its sign, its first peak has the sign of the release), ``peaks``
-    (indices into these arrays of the peaks used), ``peak_times_s`` and ``peak_amplitudes_m``.
-    """
+    (indices into these arrays of the peaks used), ``peak_times_s`` and ``peak_amplitudes_m``."""
 
     omega_d_rad_s: float
     zeta: float
@@ -367,8 +360,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
 
     Raises:
         EstimationError: bad input, no oscillation, fewer than one full period above the noise,
-            or an over-damped/unphysical result (zeta >= 1).
-    """
+            or an over-damped/unphysical result (zeta >= 1)."""
     from scipy import signal  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
     t = check_time_vector(t_s, "t_s", min_samples=16)
@@ -476,8 +468,7 @@ class QuadraticDecayFit:
     ``output`` (one of :data:`DECAY_OUTPUTS`); ``t0_s`` (time of the first analysed sample);
     ``covariance`` ((6, 6), order M, b1, b2, x0, v0, bias: s^2 (J^T J)^-1 with the residual variance
     s^2, i.e. white residuals assumed - the std are optimistic when the residuals are coloured);
-    ``fitted`` ((n,) the model output at the record's times).
-    """
+    ``fitted`` ((n,) the model output at the record's times)."""
 
     total_inertia: float
     total_inertia_std: float
@@ -503,8 +494,7 @@ def _decay_rhs(M: float, b1: float, b2: float, k: float):
     """Right-hand side of the state + sensitivity system (see :func:`_simulate_decay`).
 
     Plain Python floats on purpose: the system is tiny and numpy's per-call overhead would
-    dominate the integration time.
-    """
+    dominate the integration time."""
     inv_m = 1.0 / M
 
     def rhs(_t, z):
@@ -529,8 +519,7 @@ def _simulate_decay(tt: np.ndarray, theta: np.ndarray, k: float, output: str):
     about 1e-7 of the amplitude, far below any sensor noise).
 
     theta = (M, b1, b2, x0, v0, bias); tt: (n,) times from 0. Returns (y, J): the model output
-    (n,) and its Jacobian (n, 6) with respect to theta.
-    """
+    (n,) and its Jacobian (n, 6) with respect to theta."""
     from scipy import integrate  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
     M, b1, b2, x0, v0, bias = (float(p) for p in theta)
@@ -562,8 +551,7 @@ def _simulate_decay(tt: np.ndarray, theta: np.ndarray, k: float, output: str):
 
 
 def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[float] = None,
-                             output: str = "acceleration",
-                             initial_total_inertia: Optional[float] = None,
+                             output: str = "acceleration", initial_total_inertia: Optional[float] = None,
                              initial_linear_damping: Optional[float] = None) -> QuadraticDecayFit:
     """Fit M x'' + b1 x' + b2 |x'| x' + k x = 0 to a whole free-decay record (output error).
 
@@ -594,8 +582,7 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
 
     Raises:
         EstimationError: bad input (shapes, NaN, time, k <= 0, unknown output), fewer than 32
-            samples, no oscillation, or a failed integration/fit.
-    """
+            samples, no oscillation, or a failed integration/fit."""
     from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
     if output not in DECAY_OUTPUTS:
@@ -679,8 +666,7 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
     Fits :func:`fit_quadratic_free_decay` to the acceleration from the release found by the linear analysis ``res``
     (its ``release_index``), started from its added mass (eq. 5) and damping (eq. 6). Returns
     ``linear_damping_n_s_per_m``, ``quadratic_damping_n_s2_per_m2``, the ODE fit's ``added_mass_ode_kg`` (rigid mass
-    ``res.mass_kg`` subtracted), each with its ``_std``, and ``ode_rms_residual_m_s2``.
-    """
+    ``res.mass_kg`` subtracted), each with its ``_std``, and ``ode_rms_residual_m_s2``."""
     t = np.asarray(t_s, dtype=float)[res.release_index:]
     a = np.asarray(acceleration_m_s2, dtype=float)[res.release_index:]
     fit = fit_quadratic_free_decay(t, a, res.stiffness_n_per_m, rigid_inertia=res.mass_kg, output="acceleration",
@@ -702,8 +688,7 @@ class IncliningResult:
 
     ``restoring_n_m_per_rad`` (C, N m/rad) and its ``_std`` (NaN with only two points); ``offset_n_m`` (the moment
     that holds the vehicle's own static list, from the intercept); ``bg_m`` (C / (m g), when the vehicle mass was
-    given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass); ``n_points``; ``residual_rms_n_m``.
-    """
+    given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass); ``n_points``; ``residual_rms_n_m``."""
 
     restoring_n_m_per_rad: float
     restoring_n_m_per_rad_std: float
@@ -740,8 +725,7 @@ def restoring_from_inclining(arm_m, tilt_rad, test_mass_kg: float, test_volume_m
         vehicle_mass_kg: optional, for BG.
 
     Raises:
-        EstimationError: bad shapes, fewer than 2 points, all arms equal, non-positive weight in water.
-    """
+        EstimationError: bad shapes, fewer than 2 points, all arms equal, non-positive weight in water."""
     d = as_float_array(arm_m, "arm_m", 1)
     phi = as_float_array(tilt_rad, "tilt_rad", 1)
     check_same_length(arm_m=d, tilt_rad=phi)

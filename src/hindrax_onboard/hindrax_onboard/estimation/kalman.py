@@ -6,8 +6,7 @@ Used by the filters that run in the node processes, sample by sample; the offlin
 ``batch_filter`` and ``rts_smoother``. Why our own step for the online filters: importing ``filterpy.kalman`` pulls
 in ``scipy.stats``, ``scipy.sparse`` and ``scipy.linalg`` (tens of MB per process) for the two equations below.
 
-Shapes: state x (n, 1), covariance P (n, n); F, Q (n, n); measurement z (m, 1), H (m, n), R (m, m).
-"""
+Shapes: state x (n, 1), covariance P (n, n); F, Q (n, n); measurement z (m, 1), H (m, n), R (m, m)."""
 from __future__ import annotations
 
 import numpy as np

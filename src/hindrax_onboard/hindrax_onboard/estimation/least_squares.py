@@ -2,28 +2,23 @@
 
 This module is the offline estimation core of the identification package:
 
-* :func:`fit_linear_model` is the ordinary least-squares estimator of [Hindrax-Drag] eq. 6,
-  theta = (X^T X)^-1 X^T Y, with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the
-  unbiased residual variance sigma^2 = S / (n - p) of eq. 8 (Beck and Arnold 1977; also
-  docs/identification.md §1.D "Ordinary LS covariance").
+* :func:`fit_linear_model` is the ordinary least-squares estimator of [Hindrax-Drag] eq. 6, theta = (X^T X)^-1 X^T Y,
+  with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the unbiased residual variance sigma^2 = S / (n - p) of
+  eq. 8 (Beck and Arnold 1977; also docs/identification.md §1.D "Ordinary LS covariance").
 * :func:`fit_drag` fits [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, to steady-state samples.
-  [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
-  ("the absolute value symbol is to conserve the velocity sign"), so that one model covers
-  both signs of the velocity.
+  [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state ("the absolute
+  value symbol is to conserve the velocity sign"), so that one model covers both signs of the velocity.
 
-Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a
-rank diagnosis we can turn into a clear error; we use an SVD of the regressor with its columns
-scaled to unit norm (numerically equivalent to lstsq; regressors of very different magnitudes,
-such as P^3 and 1 of a thruster curve, then trigger no false rank deficiency) and build the
-covariance from the same SVD, mapped back exactly to the original columns.
+Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a rank diagnosis we can
+turn into a clear error; we use an SVD of the regressor with its columns scaled to unit norm (numerically equivalent to
+lstsq; regressors of very different magnitudes, such as P^3 and 1 of a thruster curve, then trigger no false rank
+deficiency) and build the covariance from the same SVD, mapped back exactly to the original columns.
 
 The module also hosts :class:`EstimationError` and the small input-validation helpers shared
 by the other estimation modules (one place, no copy-paste).
 
-Conventions: SI units; forces in N (moments in N m), velocities in m/s (rad/s), accelerations
-in m/s^2 (rad/s^2). Damping and inertia are reported as positive numbers (Fossen/SNAME,
-docs/architecture.md §3).
-"""
+Conventions: SI units; forces in N (moments in N m), velocities in m/s (rad/s), accelerations in m/s^2 (rad/s^2).
+Damping and inertia are reported as positive numbers (Fossen/SNAME, docs/architecture.md §3)."""
 
 from __future__ import annotations
 
@@ -39,8 +34,7 @@ class EstimationError(ValueError):
     """Bad input to an estimation routine (shape, NaN, too few samples, rank deficiency).
 
     Subclass of ``ValueError`` so callers can catch either. Raised by every module of
-    ``hindrax_onboard.estimation`` for bad data; the message names the offending argument.
-    """
+    ``hindrax_onboard.estimation`` for bad data; the message names the offending argument."""
 
 
 # Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
@@ -102,8 +96,7 @@ class LsResult:
         residuals: (n,) y - X theta.
         n: number of samples.
         p: number of parameters.
-        names: optional parameter names (length p), used by :meth:`index`.
-    """
+        names: optional parameter names (length p), used by :meth:`index`."""
 
     theta: np.ndarray
     std: np.ndarray
@@ -154,8 +147,7 @@ class DragFit:
     """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
 
     Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
-    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m).
-    """
+    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m)."""
 
     ls: LsResult
 
@@ -163,8 +155,7 @@ class DragFit:
     quadratic_damping_std = _Param("Standard deviation of k_q ([Hindrax-Drag] eq. 7).")
     linear_damping = _Param("Linear damping k_l of [Hindrax-Drag] eq. 2 (Table 3 second column).")
     linear_damping_std = _Param("Standard deviation of k_l.")
-    bias = _Param("Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net "
-                   "buoyancy in heave).")
+    bias = _Param("Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net buoyancy in heave).")
     bias_std = _Param("Standard deviation of b.")
 
     def predict(self, velocity) -> np.ndarray:
@@ -190,8 +181,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
 
     Raises:
         EstimationError (a ValueError): wrong shapes, NaN/inf, n <= p (eq. 8 needs n - p > 0),
-            an all-zero column, or a rank-deficient X (the message gives the rank).
-    """
+            an all-zero column, or a rank-deficient X (the message gives the rank)."""
     X = as_float_array(X, "X", 2)
     y = as_float_array(y, "y", 1)
     n, p = X.shape
@@ -249,8 +239,7 @@ def fit_drag(velocity, force) -> DragFit:
         :class:`DragFit` (values and standard deviations of k_q, k_l, b).
 
     Raises:
-        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. one velocity).
-    """
+        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. one velocity)."""
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)
     check_same_length(velocity=v, force=f)

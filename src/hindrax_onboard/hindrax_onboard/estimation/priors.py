@@ -34,8 +34,7 @@ Coordinates: L along x (length), W along y (width), H along z (height); projecte
 area / bounding rectangle (Table 3.1).
 
 Units of the results (SI, diagonal, positive): added mass kg (1-3), kg m^2 (4-6); linear damping kg/s (1-3),
-kg m^2/s (4-6); quadratic damping kg/m (1-3), kg m^2 (4-6).
-"""
+kg m^2/s (4-6); quadratic damping kg/m (1-3), kg m^2 (4-6)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -131,8 +130,7 @@ class Geometry:
     length_m (x), width_m (y), height_m (z): > 0, m. fluid_density_kg_m3: > 0. frontal_area_m2 (normal to x),
     side_area_m2 (normal to y), top_area_m2 (normal to z): projected areas, > 0, m^2; each at most its
     bounding rectangle is not enforced (the thesis's own inputs exceed it for some vehicles).
-    Raises :class:`EstimationError` on a non-positive or non-finite value.
-    """
+    Raises :class:`EstimationError` on a non-positive or non-finite value."""
 
     length_m: float
     width_m: float
@@ -217,8 +215,7 @@ def linear_damping_priors(quadratic: Sequence[float] | np.ndarray, restoring_n_m
 
     Roll and pitch 2 zeta (I + A) sqrt(C / (I + A)) (:data:`ZETA_ROLL_PITCH`); surge, sway, heave
     :data:`LINEAR_TO_QUADRATIC_TRANSLATION` times the quadratic term;
-    yaw BQ66 BL55 / BQ55. Without a restoring coefficient or rigid inertias, roll, pitch and yaw are None.
-    """
+    yaw BQ66 BL55 / BQ55. Without a restoring coefficient or rigid inertias, roll, pitch and yaw are None."""
     bq = [float(x) for x in quadratic]
     ratio, zeta = LINEAR_TO_QUADRATIC_TRANSLATION, ZETA_ROLL_PITCH
     bl: list = [ratio * bq[0], ratio * bq[1], ratio * bq[2], None, None, None]
@@ -239,8 +236,7 @@ class PriorInputs:
     bg_m: vertical distance from the CG up to the CB, m (> 0 for a stable vehicle).
     roll_inertia_kg_m2 / pitch_inertia_kg_m2: rigid I44 / I55 (default: prism formulas from mass_kg).
     roll_added_kg_m2 / pitch_added_kg_m2: A44 / A55 (default: the App. A.1 estimates).
-    restoring_n_m_per_rad: C (default: m g BG). gravity_m_s2: g (default 9.81).
-    """
+    restoring_n_m_per_rad: C (default: m g BG). gravity_m_s2: g (default 9.81)."""
 
     mass_kg: Optional[float] = None
     bg_m: Optional[float] = None
@@ -256,8 +252,7 @@ def empirical_priors(g: Geometry, rigid: PriorInputs = PriorInputs()) -> dict[st
     """The three 6-element prior vectors with their inputs, as one JSON-friendly dict.
 
     Returns ``{"added_mass": [6], "linear_damping": [6] (None where it cannot be computed), "quadratic_damping": [6],
-    "units": UNITS, "inputs": {...}, "notes": [...]}``. Raises :class:`EstimationError` on invalid inputs.
-    """
+    "units": UNITS, "inputs": {...}, "notes": [...]}``. Raises :class:`EstimationError` on invalid inputs."""
     notes: list = []
     A = added_mass_priors(g, notes)
     BQ = quadratic_damping_priors(g, notes)
@@ -304,8 +299,7 @@ def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m
     Uses vehicle.length_m/width_m/height_m, environment.water_density_kg_m3, vehicle.mass_kg,
     vehicle.inertia_kg_m2 (roll, pitch), environment.gravity_m_s2 and BG = z_CG - z_CB from
     vehicle.centre_of_gravity_frd_m / centre_of_buoyancy_frd_m (FRD, z down). The vehicle file has no
-    projected areas: a missing area is the full bounding rectangle (solid prism, Cp = 1), noted in ``notes``.
-    """
+    projected areas: a missing area is the full bounding rectangle (solid prism, Cp = 1), noted in ``notes``."""
     v = cfg.vehicle
     L, W, H = float(v.length_m), float(v.width_m), float(v.height_m)
     rect = {"frontal": W * H, "side": L * H, "top": L * W}
@@ -315,8 +309,7 @@ def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m
     inertia = list(v.inertia_kg_m2)
     zg = float(v.centre_of_gravity_frd_m[2])
     zb = float(v.centre_of_buoyancy_frd_m[2])
-    out = empirical_priors(g, PriorInputs(mass_kg=float(v.mass_kg), bg_m=zg - zb,
-                                          roll_inertia_kg_m2=float(inertia[0]),
+    out = empirical_priors(g, PriorInputs(mass_kg=float(v.mass_kg), bg_m=zg - zb, roll_inertia_kg_m2=float(inertia[0]),
                                           pitch_inertia_kg_m2=float(inertia[1]),
                                           gravity_m_s2=float(cfg.environment.gravity_m_s2)))
     missing = [k for k, v in given.items() if v is None]

@@ -59,16 +59,13 @@ docs/identification.md §1.D):
   constrained minimiser of the forgetting-weighted cost (Goodwin and Sin 1984, "Adaptive Filtering
   Prediction and Control", ch. 3), by an active set (p <= 6). The recursion keeps the
   unconstrained estimate; :meth:`at_bound` says which parameters sit on their bound.
-* ``change_threshold``: when the mean of the normalised a-priori error
-  ``e^2 / (sigma2_hat (1 + phi^T P phi))`` (chi-square with 1 degree of freedom for a correct model)
-  over ``change_samples`` consecutive samples exceeds it, the covariance is reset
-  (:meth:`reset_covariance`) and the residual statistics restart (:attr:`changes_detected`).
+* ``change_threshold``: when the mean of the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
+  (chi-square with 1 degree of freedom for a correct model) over ``change_samples`` consecutive samples exceeds it, the
+  covariance is reset (:meth:`reset_covariance`) and the residual statistics restart (:attr:`changes_detected`).
 * :meth:`published_std`: the std where the estimate has converged (std <= rel_tol |theta| + abs_tol,
   enough samples, excitation above ``min_excitation``), NaN ("not converged") elsewhere.
 
-Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for
-50-100 Hz per DOF.
-"""
+Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for 50-100 Hz per DOF."""
 
 from __future__ import annotations
 
@@ -104,11 +101,9 @@ class RecursiveLeastSquares:
         change_samples: window of the change detector (samples).
 
     Raises:
-        EstimationError: invalid sizes or values.
-    """
+        EstimationError: invalid sizes or values."""
 
-    def __init__(self, n_params: int, forgetting: float = 0.995,
-                 initial_covariance=1e3, initial_theta=None,
+    def __init__(self, n_params: int, forgetting: float = 0.995, initial_covariance=1e3, initial_theta=None,
                  max_covariance: Optional[float] = None, directional: bool = False,
                  min_excitation: float = 0.0, lower_bounds=None,
                  change_threshold: Optional[float] = None, change_samples: int = 50):
@@ -196,8 +191,7 @@ class RecursiveLeastSquares:
             y: observation (finite), e.g. force in N.
 
         Raises:
-            EstimationError: wrong size or non-finite input (the state is left unchanged).
-        """
+            EstimationError: wrong size or non-finite input (the state is left unchanged)."""
         phi = np.asarray(phi, dtype=float)
         if phi.shape != (self._p,):
             raise EstimationError(f"phi must have shape ({self._p},), got {phi.shape}")
@@ -354,8 +348,7 @@ class RecursiveLeastSquares:
     def covariance(self) -> np.ndarray:
         """(p, p) calibrated parameter covariance sigma2_hat * P Q P (module docstring).
 
-        NaN-filled until enough samples for a noise estimate (dof > 0.5).
-        """
+        NaN-filled until enough samples for a noise estimate (dof > 0.5)."""
         s2 = self.sigma2
         if not np.isfinite(s2):
             return np.full((self._p, self._p), np.nan)
@@ -373,8 +366,7 @@ class RecursiveLeastSquares:
     def excitation(self) -> float:
         """Smallest eigenvalue of R / N_eff (units of phi^2); 0 before any sample.
 
-        R = sum lambda^(k-j) phi phi^T: near zero when a parameter direction is not excited.
-        """
+        R = sum lambda^(k-j) phi phi^T: near zero when a parameter direction is not excited."""
         if self._wr == 0.0:
             return 0.0
         return float(np.linalg.eigvalsh(self._R / self._wr)[0])
@@ -384,8 +376,7 @@ class RecursiveLeastSquares:
         """Smallest eigenvalue of D^-1/2 R D^-1/2 (D = diag R), dimensionless in [0, 1].
 
         0 when a regressor is identically zero or regressors are collinear (e.g. constant
-        phi); approaches 1 for orthogonal, equally weighted regressors.
-        """
+        phi); approaches 1 for orthogonal, equally weighted regressors."""
         d = np.diag(self._R)
         if self._wr == 0.0 or np.any(d <= 0.0):
             return 0.0

@@ -18,17 +18,15 @@ Algorithm (all thresholds are arguments; defaults in brackets):
 3. Samples covered by at least one passing sub-window form the steady region; each maximal
    contiguous run of them lasting at least ``min_duration_s`` (after step 4) is reported, with
    its mean, standard deviation and slope of velocity and force.
-4. Edge trimming: leading and trailing samples of a region farther than :data:`EDGE_FACTOR` (2)
-   times ``max_std`` from the region mean are dropped (a 2 s window whose first samples are
-   still in the tail of the transient can pass the std test, since its std dilutes the tail);
-   the duration test is repeated after trimming. So every sample at a window's edges is within
-   ``EDGE_FACTOR * max_std`` of the window mean.
+4. Edge trimming: leading and trailing samples of a region farther than :data:`EDGE_FACTOR` (2) times ``max_std`` from
+   the region mean are dropped (a 2 s window whose first samples are still in the tail of the transient can pass the std
+   test, since its std dilutes the tail); the duration test is repeated after trimming. So every sample at a window's
+   edges is within ``EDGE_FACTOR * max_std`` of the window mean.
 
 Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise (DVL ~ 0.01 m/s,
 filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient accelerations (force / inertia).
 [Hindrax-Drag]'s heave runs never became steady for lack of depth (section 5); expect no windows there and use the
-transient fit (the fit core, :mod:`..identification.fit.fit_core`).
-"""
+transient fit (the fit core, :mod:`..identification.fit.fit_core`)."""
 
 from __future__ import annotations
 
@@ -55,8 +53,7 @@ class SteadyWindow:
         velocity_mean, velocity_std: mean and std of the velocity (m/s or rad/s).
         velocity_slope: LS slope of the velocity over the window (m/s^2 or rad/s^2).
         force_mean, force_std: mean and std of the force (N or N m).
-        n: number of samples.
-    """
+        n: number of samples."""
 
     start: int
     stop: int
@@ -81,8 +78,7 @@ def constant_force_segments(force, force_tolerance: float = 0.05) -> List[Tuple[
         List of (start, stop) index pairs covering the record.
 
     Raises:
-        EstimationError: bad input or negative tolerance.
-    """
+        EstimationError: bad input or negative tolerance."""
     f = as_float_array(force, "force", 1)
     if not force_tolerance >= 0:
         raise EstimationError(f"force_tolerance must be >= 0, got {force_tolerance}")
@@ -146,8 +142,7 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
         List of :class:`SteadyWindow` in time order (empty when nothing is steady).
 
     Raises:
-        EstimationError: bad shapes, NaN, non-increasing time, non-positive thresholds.
-    """
+        EstimationError: bad shapes, NaN, non-increasing time, non-positive thresholds."""
     t = check_time_vector(t_s, "t_s")
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)

@@ -34,11 +34,9 @@ declared ``thrusters.thrust_uncertainty_rel`` in the intervals
 (:mod:`hindrax_fit.assessment.verdicts`). It is the fit's statistical uncertainty at the bollard-pull
 test's battery voltage only; a voltage that sags during a session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
 
-:func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses
-it because [Hindrax-Drag] Table 2's printed positive-direction row evaluates to about -1070 N at
-1500 us (docs/architecture.md §4), while the negative row is consistent (-15.6 N at 1100 us,
-about -1.1 N at 1500 us).
-"""
+:func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses it because
+[Hindrax-Drag] Table 2's printed positive-direction row evaluates to about -1070 N at 1500 us (docs/architecture.md §4),
+while the negative row is consistent (-15.6 N at 1100 us, about -1.1 N at 1500 us)."""
 
 from __future__ import annotations
 
@@ -78,8 +76,7 @@ class CubicFit:
         n: number of samples used; residual_std_n: sqrt(sigma^2) of eq. 8 in N.
         centre_us, scale_us: the centring used internally; ls: the centred LS result
             (coefficients of s^3, s^2, s, 1).
-        pulse_width_min_us, pulse_width_max_us: range of the data.
-    """
+        pulse_width_min_us, pulse_width_max_us: range of the data."""
 
     c4: float
     c3: float
@@ -124,8 +121,7 @@ class CubicFit:
         (dimensionless, module docstring): sqrt(sum sd^2 / sum f^2) on 101 uniformly spaced widths.
 
         Raises:
-            EstimationError: the fitted thrust is zero over the whole range.
-        """
+            EstimationError: the fitted thrust is zero over the whole range."""
         P = np.linspace(self.pulse_width_min_us, self.pulse_width_max_us, 101)
         f2 = float(np.sum(np.asarray(self.predict(P)) ** 2))
         if not f2 > 0.0:
@@ -182,8 +178,7 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US) -> CubicF
 
     Raises:
         EstimationError: fewer than 5 samples (n > p = 4), fewer than 4 distinct pulse widths,
-            NaN, shape mismatch.
-    """
+            NaN, shape mismatch."""
     P = as_float_array(pulse_width_us, "pulse_width_us", 1)
     F = as_float_array(thrust_n, "thrust_n", 1)
     check_same_length(pulse_width_us=P, thrust_n=F)
@@ -223,8 +218,7 @@ def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
         :class:`ThrusterCurveFit`.
 
     Raises:
-        EstimationError: bad input or too few samples on one side (see :func:`fit_cubic`).
-    """
+        EstimationError: bad input or too few samples on one side (see :func:`fit_cubic`)."""
     P = as_float_array(pulse_width_us, "pulse_width_us", 1)
     F = as_float_array(thrust_n, "thrust_n", 1)
     check_same_length(pulse_width_us=P, thrust_n=F)
@@ -255,8 +249,7 @@ def point_reflection(c4: float, c3: float, c2: float, c1: float,
 
     Returns:
         (c4', c3', c2', c1') of the reflected cubic, so that
-        f_pos(neutral + d) = -f_neg(neutral - d). Exact polynomial composition (numpy.polynomial).
-    """
+        f_pos(neutral + d) = -f_neg(neutral - d). Exact polynomial composition (numpy.polynomial)."""
     f_neg = Polynomial([c1, c2, c3, c4])
     reflected = -f_neg(Polynomial([2.0 * float(neutral_us), -1.0]))
     coef = np.zeros(4)

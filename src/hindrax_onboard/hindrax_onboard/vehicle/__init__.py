@@ -13,5 +13,4 @@ The rigid body, the thrust lag, the thrust curve and the angle wrap exist once i
   :func:`hindrax_bringup.allocation.from_config.thrust_curve_from_config` (the allocation's, used as it is);
 - the angle wrap: :func:`hindrax_common.base.frames.wrap_angle` (in the drivers because the DVL-75 emulator needs it).
 
-Nothing here imports the simulator, identification or control.
-"""
+Nothing here imports the simulator, identification or control."""

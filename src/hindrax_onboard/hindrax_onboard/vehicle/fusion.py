@@ -14,8 +14,7 @@ its import cost, that module's docstring) and offline by filterpy's ``KalmanFilt
 Why: the DVL and pressure sensor report at 10 Hz, too slowly to resolve the thrust transients (thruster lag
 0.1 s, velocity time constants 0.3-0.6 s); smoothing them alone attenuates nu_dot and biases the
 equation-error and RLS inertia low. The 100 Hz accelerometer measures nu_dot directly ([Hindrax-Drag] Table 1;
-docs/identification.md §4 R8: "use an IMU to measure acceleration directly").
-"""
+docs/identification.md §4 R8: "use an IMU to measure acceleration directly")."""
 from __future__ import annotations
 
 import math

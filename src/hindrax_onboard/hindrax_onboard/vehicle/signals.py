@@ -6,8 +6,7 @@ These functions make such samples from the drivers' ROS messages, rclpy or bag-d
 attributes), so the live node (:mod:`..identification.online.node`), the controller (:mod:`..control.node`) and the
 bag analysis (:mod:`..identification.bag_input.from_bag`) see the same numbers.
 They also hold the thrust model of the widths the ESC node wrote (:func:`thrust_of_written_widths`) and the
-status prefix that marks the still window (:data:`STILL_MESSAGE`). No rclpy import: usable offline.
-"""
+status prefix that marks the still window (:data:`STILL_MESSAGE`). No rclpy import: usable offline."""
 from __future__ import annotations
 
 import math
@@ -44,13 +43,11 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
     ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
     samples, so :class:`~hindrax_onboard.vehicle.state.SensorState` must not remove it again.
 
-    Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
-    attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
-    first (as the emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e.
-    measured at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
-    50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as
-    damping.
-    """
+    Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the attitude
+    comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it first (as the
+    emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e. measured at the end
+    of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A 50 ms error there shows
+    up in roll and pitch as a restoring moment out of phase, i.e. as damping."""
     t = _stamp_s(msg.header)
     half = 0.5 * float(msg.delta_time_s)
     t_att = t + half if math.isfinite(half) and half > 0.0 else t
@@ -77,8 +74,7 @@ def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> li
     The simulator's samples are in the sensor axes, which :class:`~hindrax_onboard.vehicle.state.SensorState` rotates
     with the configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
     with ``mounting_frd_from_flu`` = R_mount^T (3, 3) (identity when None). Angular rate rad/s, specific
-    force m/s^2.
-    """
+    force m/s^2."""
     t = _stamp_s(msg.header)
     r = np.eye(3) if mounting_frd_from_flu is None else mounting_frd_from_flu
     w = r @ np.array([msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z], dtype=float)
@@ -105,8 +101,7 @@ def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[flo
     The ESC applies reversal (2 neutral - w) and trim after the allocation
     (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve
     ([Hindrax-Drag] eq. 1) gives the force along each thruster's configured direction. Raises
-    ``ValueError`` for a wrong number of widths.
-    """
+    ``ValueError`` for a wrong number of widths."""
     w = np.asarray(written_us, dtype=float)
     th = cfg.thrusters.thrusters
     if w.shape[-1:] != (len(th),) or w.ndim > 2:

@@ -10,8 +10,7 @@
 
 Used alike by the identification (online executive and bag analysis) and the controller. Everything here uses the
 vehicle configuration and SENSOR samples only, never the simulator's truth. Frames: body FRD, world NED
-(docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`.
-"""
+(docs/architecture.md §3); conversions through :mod:`hindrax_common.base.frames`."""
 from __future__ import annotations
 
 import math
@@ -102,8 +101,7 @@ class SensorState:
     without lock) at ``dvl_beam_stamp_s``, ``position_ned_m`` (3,) dead-reckoned x, y and depth,
     ``acceleration_frd_m_s2`` (3,) nu_dot of the body origin and ``acceleration_ned_m_s2`` (3,) its acceleration in
     NED (accelerometer: specific force + gravity, bias removed; NaN before the first sample).
-    ``log``: device -> list of (stamp_s, value tuple) with the conditioned values (what the estimators use).
-    """
+    ``log``: device -> list of (stamp_s, value tuple) with the conditioned values (what the estimators use)."""
 
     cfg: VehicleConfig
     depth_m: float = math.nan
@@ -265,8 +263,7 @@ class DepthEstimator:
     ``predict_to(t_s)`` returns (depth m, depth rate m/s), NaN before the first depth sample.
     depth_std_m, accel_std_m_s2, jerk_psd: the filter's noise settings (the campaign passes those of
     :func:`~.uncertainty.measurement_settings` for heave). Raises
-    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` for a setting that is not > 0.
-    """
+    :class:`~hindrax_onboard.estimation.least_squares.EstimationError` for a setting that is not > 0."""
 
     def __init__(self, depth_std_m: float = 0.005, accel_std_m_s2: float = 0.07, jerk_psd: float = 20.0) -> None:
         self.kf = AccelAidedFilter("position", depth_std_m, accel_std_m_s2, jerk_psd)

@@ -3,8 +3,7 @@
 ``T dF/dt = F_cmd - F`` with ``T = thrusters.time_constant_s`` (0 = no lag). For a command held constant the solution
 is exact: ``F(t0 + s) = F_cmd + (F(t0) - F_cmd) exp(-s / T)``. The
 simulator integrates with it, the online executive lags its thrust-model force with it, and the offline fit core
-and output error evaluate it at the start, middle and end of each control tick.
-"""
+and output error evaluate it at the start, middle and end of each control tick."""
 from __future__ import annotations
 
 import math
@@ -20,8 +19,7 @@ class ThrustLag:
     """First-order thrust lag of time constant ``time_constant_s`` (s, >= 0; 0 = the thrust follows at once).
 
     Raises:
-        ValueError: a negative or non-finite time constant.
-    """
+        ValueError: a negative or non-finite time constant."""
 
     time_constant_s: float
 

@@ -2,8 +2,7 @@
 sensors' declared noise (:func:`measurement_settings`), and the relative thrust uncertainty (:func:`declared_rel`).
 
 Pure, no ROS. The controller's depth filter, the identification's online filters, its offline fit and its verdicts
-read them here, so they agree on the same noise.
-"""
+read them here, so they agree on the same noise."""
 from __future__ import annotations
 
 import math
@@ -28,8 +27,7 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
     ``attitude_noise_std_rad``, ``sensors.ms5837.noise_std_pa``, ``sensors.icm20948.*_noise_std_*``; else
     ``sensors.dvl75.velocity_std_m_s`` / typical values), never the simulator's truth; q = std^2 w^k puts the filter
     bandwidth near w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
-    velocity and ^(1/6) for position measurements).
-    """
+    velocity and ^(1/6) for position measurements)."""
     dvl, imu = cfg.sensors.dvl75, cfg.sensors.icm20948
     k = DOFS.index(dof)
     acc = max(float(or_default(imu.accel_noise_std_m_s2, 0.05)), 1e-3)

@@ -7,8 +7,7 @@ displaced volume, net buoyancy) and the environment (water density, gravity), an
 through the sensors' mounting (position and orientation keys of ``sensors.*``). Those values, as the vehicle file
 held them, are written to ``provenance.vehicle_parameters``; the controller uses the identification only for a
 vehicle file whose values are the same (:func:`parameter_differences`). Anything else in the file (comments, the disk
-floor, ESC calibration, supervisor limits, the hydrodynamic priors) can change without invalidating it.
-"""
+floor, ESC calibration, supervisor limits, the hydrodynamic priors) can change without invalidating it."""
 from __future__ import annotations
 
 import math

@@ -11,8 +11,7 @@ the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing ``/c
 on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an emulated bus); every other node
 then runs with ``use_sim_time`` and the simulator takes the thrusters' pulse widths from the PCA9685 registers.
 
-Each node class also runs alone (``python -m hindrax_drivers.<device>.node --ros-args --params-file ...``).
-"""
+Each node class also runs alone (``python -m hindrax_drivers.<device>.node --ros-args --params-file ...``)."""
 from __future__ import annotations
 
 import os
@@ -53,11 +52,9 @@ class Graph:
     """A running node graph: ``nodes`` (name -> node), the executor, the virtual hardware (sim only).
 
     ``stepped`` (sim with driven clocks, :func:`build_graph`): the simulator node is not in the executor; each
-    :meth:`spin_once` advances it by one /clock period and then runs the callbacks ready at that
-    instant (:meth:`spin_until_idle`). What runs at a tick then never depends on wall-clock timing
-    (on a timer, the simulator could advance again before a driver's timer due at this tick had
-    run, or not, depending on the load).
-    """
+    :meth:`spin_once` advances it by one /clock period and then runs the callbacks ready at that instant
+    (:meth:`spin_until_idle`). What runs at a tick then never depends on wall-clock timing (on a timer, the simulator
+    could advance again before a driver's timer due at this tick had run, or not, depending on the load)."""
 
     config: VehicleConfig
     nodes: dict[str, Any]
@@ -145,8 +142,7 @@ class Graph:
         ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); with time frozen
         again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request.
         Returns the SetArmed response. Raises :class:`~hindrax_common.process.conditions.ConditionTimeout` when a step
-        takes longer than ``timeout_s`` of wall time.
-        """
+        takes longer than ``timeout_s`` of wall time."""
         spin = lambda: self.spin_once(spin_timeout_s)  # noqa: E731
         self.freeze_time()
         wait_until(lambda: self.startup_complete() and arm_client.service_is_ready() and ready(), timeout_s, spin,
@@ -208,8 +204,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
                 drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None, controller: bool = False,
-                model_file: str = "", truth_rate_hz: float | None = None,
-                parameter_services: bool = True) -> Graph:
+                model_file: str = "", truth_rate_hz: float | None = None, parameter_services: bool = True) -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
@@ -229,8 +224,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     parameter_services: False leaves out the nodes' parameter and type-description services
     (:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`; a graph nothing outside this process
     inspects, e.g. ``hindrax run``'s: a third fewer entities in each executor wait).
-    Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration.
-    """
+    Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration."""
     overrides = dict(overrides or {})
     if seed is not None:
         overrides["simulation.seed"] = int(seed)

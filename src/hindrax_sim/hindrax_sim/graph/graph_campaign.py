@@ -23,8 +23,7 @@ simulated instant no longer depends on wall-clock timing, so the same seed gives
 
 Isolation: without ``ROS_DOMAIN_ID`` in the environment the graph runs on a ROS domain that no other process on
 the machine holds (:func:`run_domain`), and says which; another graph on the same domain (a second ``hindrax
-run``, a launch on the system clock) would feed its messages into the identification and the bag.
-"""
+run``, a launch on the system clock) would feed its messages into the identification and the bag."""
 from __future__ import annotations
 
 import contextlib
@@ -71,19 +70,16 @@ class VirtualOperator:
     """The virtual pool's operator for the calibration steps on the ROS graph (module docstring);
     what each step code does is :class:`~.sim.campaign.PoolOperator`'s, as in-process.
 
-    simulator: the :class:`~hindrax_sim.simulator.Simulator`; ballast_weight_n, line_pull_n,
-    inclining_load_n_m (weight in water N, arm m), float_buoyancy_n: the known forces
-    (:mod:`~.identification.online.executive`: ``calibration_forces``, ``inclining_load``,
-    ``float_buoyancy``); request_continue: sends one ``identification/continue`` request and returns
-    its future (or None); say: progress lines; freeze / resume: hold simulated time
-    (:meth:`~hindrax_sim.graph.bringup.Graph.freeze_time`) from acting on a prompt until the continue
-    answer, so the step goes on at the simulated instant the operator acted. Feed it every feedback
-    prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step and :meth:`poll`
-    from the wait loop: a request with no answer within ``resend_after_s`` of wall time is sent
-    again (after a continue every step holds at least
-    :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat
-    finds nothing awaited and is answered False).
-    """
+    simulator: the :class:`~hindrax_sim.simulator.Simulator`; ballast_weight_n, line_pull_n, inclining_load_n_m (weight
+    in water N, arm m), float_buoyancy_n: the known forces (:mod:`~.identification.online.executive`:
+    ``calibration_forces``, ``inclining_load``, ``float_buoyancy``); request_continue: sends one
+    ``identification/continue`` request and returns its future (or None); say: progress lines; freeze / resume: hold
+    simulated time (:meth:`~hindrax_sim.graph.bringup.Graph.freeze_time`) from acting on a prompt until the continue
+    answer, so the step goes on at the simulated instant the operator acted. Feed it every feedback prompt
+    (:meth:`on_prompt`), call :meth:`on_step` after every integration step and :meth:`poll` from the wait loop: a
+    request with no answer within ``resend_after_s`` of wall time is sent again (after a continue every step holds at
+    least :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing
+    awaited and is answered False)."""
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
                  request_continue: Callable[[], object], say: Callable[[str], None] = lambda _m: None,
@@ -157,8 +153,7 @@ class GraphCampaignOutcome:
 
     success / message: the action result; identifications / errors: offline results per DOF
     (:func:`~.identification.fit.campaign_fit.identify_all_with_errors`) from the bag; bag_dir;
-    sim_time_s / wall_time_s of the whole run.
-    """
+    sim_time_s / wall_time_s of the whole run."""
 
     success: bool = False
     message: str = ""
@@ -197,17 +192,15 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
                        sections: Callable | None = None) -> GraphCampaignOutcome:
     """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
 
-    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers
-    the prompts); with ``dofs`` empty only the calibration steps run (goal ``calibration_only``).
-    sections(doc, record, identifications): optional, adds sections to identification.yaml from
-    the identification node's own record (e.g. ``free_decay`` and ``inclining`` of the tilt_decay
-    and inclining steps, which need its sensor log).
+    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers the prompts); with
+    ``dofs`` empty only the calibration steps run (goal ``calibration_only``). sections(doc, record, identifications):
+    optional, adds sections to identification.yaml from the identification node's own record (e.g. ``free_decay`` and
+    ``inclining`` of the tilt_decay and inclining steps, which need its sensor log).
 
     Raises :class:`~hindrax_common.config.ConfigError` for an invalid configuration,
     ``TimeoutError`` when a step does not finish within its wall-clock deadline (the graph is shut
     down, thrusters neutral) and :class:`~hindrax_common.node_support.vehicle_graph.ForeignVehicleError` when
-    another ESC or supervisor is on the domain.
-    """
+    another ESC or supervisor is on the domain."""
     say = progress or (lambda _m: None)
     wall0 = time.monotonic()
     out = Path(out)
@@ -346,12 +339,10 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
         outcome.wall_time_s = time.monotonic() - wall0
         if idents:
             ticker.set("offline identification: writing identification.yaml and the report")
-            note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), "
-                    f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
-                    f"action result: {outcome.message}")
+            note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), {outcome.sim_time_s:.0f} s "
+                    f"simulated, wall {outcome.wall_time_s:.0f} s; action result: {outcome.message}")
             # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
             add = sections if sections is not None and node_record is not None else None
             write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),
-                          calibration=calibration,
-                          sections=add and (lambda doc: add(doc, node_record, idents)))
+                          calibration=calibration, sections=add and (lambda doc: add(doc, node_record, idents)))
     return outcome

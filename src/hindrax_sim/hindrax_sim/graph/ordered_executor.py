@@ -1,33 +1,29 @@
 """The one-process graph's executor: rclpy's ``SingleThreadedExecutor`` visiting its nodes in the
 order they were added, with a leaner construction of its wait set and of its callbacks' handlers.
 
-Order: rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready
-at the same instant run (e.g. the allocation's wrench subscription and the ESC node's output timer)
-follows the nodes' memory addresses and changes from one run to the next; with a fixed order a
-stepped simulation is reproducible.
+Order: rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready at the same instant
+run (e.g. the allocation's wrench subscription and the ESC node's output timer) follows the nodes' memory addresses and
+changes from one run to the next; with a fixed order a stepped simulation is reproducible.
 
-Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle
-through an ``ExitStack``, asking every entity's callback group (a weak reference and a lock each),
-adding up the waitables' ``NumberOfEntities`` one object at a time and looking every entity of
-every node up in the ready lists; the virtual pool's graph waits once per /clock tick, on about 120
-entities (:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`s: no parameter services, few QoS event
-handlers). :meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the
-same callbacks in the same order (tasks in progress; ready waitables node by node; then per node
-its timers, subscriptions, guard conditions, clients and services in creation order) from a
-snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts, each entity's rank in
-that order by its handle pointer), taken again whenever an entity or a node comes or goes (rclpy
-wakes the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is
-free to run (a callback group is busy, or an entity's handler pending, only inside a task), so the
-snapshot's lists go into the wait set as they are; otherwise each entity is asked as rclpy asks it.
-The snapshot's handles are marked in use (rclpy enters each at every wait) once, when it is taken,
-and released in the executor's thread when the next one is taken, or at ``shutdown``: an entity
-destroyed meanwhile (out of the snapshot from its wake on) is freed then.
-QoS event handlers (most waitables) enter their event handle into the wait set directly, without
-their Python wrappers. A wait over a subset of the nodes is rclpy's.
+Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle through an
+``ExitStack``, asking every entity's callback group (a weak reference and a lock each), adding up the waitables'
+``NumberOfEntities`` one object at a time and looking every entity of every node up in the ready lists; the virtual
+pool's graph waits once per /clock tick, on about 120 entities
+(:class:`~hindrax_common.node_support.vehicle_node.VehicleNode`s: no parameter services, few QoS event handlers).
+:meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the same callbacks in the same order
+(tasks in progress; ready waitables node by node; then per node its timers, subscriptions, guard conditions, clients and
+services in creation order) from a snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts, each
+entity's rank in that order by its handle pointer), taken again whenever an entity or a node comes or goes (rclpy wakes
+the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is free to run (a callback
+group is busy, or an entity's handler pending, only inside a task), so the snapshot's lists go into the wait set as they
+are; otherwise each entity is asked as rclpy asks it. The snapshot's handles are marked in use (rclpy enters each at
+every wait) once, when it is taken, and released in the executor's thread when the next one is taken, or at
+``shutdown``: an entity destroyed meanwhile (out of the snapshot from its wake on) is freed then. QoS event handlers
+(most waitables) enter their event handle into the wait set directly, without their Python wrappers. A wait over a
+subset of the nodes is rclpy's.
 
 Handlers: a ready timer or subscription whose callback is a plain function gets a :class:`_Call`;
-the other entities get rclpy's.
-"""
+the other entities get rclpy's."""
 from __future__ import annotations
 
 import inspect
@@ -50,12 +46,10 @@ __all__ = ["LeanWaitExecutor"]
 
 #: NumberOfEntities fields in the order _rclpy.WaitSet takes them (after subscriptions: guards,
 #: timers, clients, services, events)
-_COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num_clients",
-                 "num_services", "num_events")
+_COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num_clients", "num_services", "num_events")
 #: entity kinds in rclpy's per-node order of ready callbacks
 _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE = range(5)
-#: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves every
-#: handle)
+#: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves every handle)
 _ENTER, _EXIT = methodcaller("__enter__"), methodcaller("__exit__", None, None, None)
 _MESSAGE_ONLY = Subscription.CallbackType.MessageOnly
 
@@ -114,17 +108,14 @@ class _Snapshot:
                 self.waitables.append((wt, node))
                 counts = [a + b for a, b in zip(counts, _counts(wt))]
         self.waitable_counts = counts
-        # with every entity free (no task in progress) the wait takes these as they are: the handles
-        # of the subscriptions, clients, services and timers, then the QoS event handlers' event
-        # handles (module docstring)
+        # with every entity free (no task in progress) the wait takes these as they are: the handles of the
+        # subscriptions, clients, services and timers, then the QoS event handlers' event handles (module docstring)
         self.sub_h, self.cli_h, self.srv_h, self.tmr_h = ([e.handle for e in group] for group in (
             self.subs, self.clients, self.services, self.timers))
         self.events = [(wt, node, wt._EventHandler__event) for wt, node in self.waitables
                        if isinstance(wt, EventHandler)]
-        self.others = [(wt, node) for wt, node in self.waitables
-                       if not isinstance(wt, EventHandler)]
-        self.handles = (self.sub_h + self.cli_h + self.srv_h + self.tmr_h
-                        + [h for *_w, h in self.events])
+        self.others = [(wt, node) for wt, node in self.waitables if not isinstance(wt, EventHandler)]
+        self.handles = (self.sub_h + self.cli_h + self.srv_h + self.tmr_h + [h for *_w, h in self.events])
 
 
 def _enter_each(handles: list) -> list | None:
@@ -152,8 +143,7 @@ def _release(held: list) -> None:
 
 class LeanWaitExecutor(SingleThreadedExecutor):
     """A ``SingleThreadedExecutor`` whose nodes run in the order they were added and whose wait is
-    :meth:`_wait_for_ready_callbacks` (module docstring). ``kwargs`` go to the executor
-    (``context``)."""
+    :meth:`_wait_for_ready_callbacks` (module docstring). ``kwargs`` go to the executor (``context``)."""
 
     def __init__(self, **kw: Any) -> None:
         self._order: list = []
@@ -171,8 +161,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
         return done
 
     def wake(self) -> None:
-        """rclpy's wake (an entity was created or destroyed, a task finished); the next wait takes a
-        new snapshot."""
+        """rclpy's wake (an entity was created or destroyed, a task finished); the next wait takes a new snapshot."""
         self._snapshot = None
         super().wake()
 
@@ -197,8 +186,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
         return (self._take_timer, self._take_subscription, self._take_guard_condition,
                 self._take_client, self._take_service)[kind]
 
-    def _wait_for_ready_callbacks(self, timeout_sec=None, nodes=None,
-                                  condition: Callable[[], bool] = lambda: False):
+    def _wait_for_ready_callbacks(self, timeout_sec=None, nodes=None, condition: Callable[[], bool] = lambda: False):
         """rclpy's ``Executor._wait_for_ready_callbacks`` (same arguments, exceptions, callbacks and
         order), with the wait set built as the module docstring says."""
         if nodes is not None:
@@ -226,13 +214,11 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                 tasks = list(self._tasks)
             if tasks:
                 for task, entity, node in reversed(tasks):
-                    if (not task.executing() and not task.done()
-                            and (node is None or node in nodes_to_use)):
+                    if (not task.executing() and not task.done() and (node is None or node in nodes_to_use)):
                         yielded_work = True
                         yield task, entity, node
                 with self._tasks_lock:
-                    self._tasks = [t for t in self._tasks
-                                   if not t[0].done() and not t[0].cancelled()]
+                    self._tasks = [t for t in self._tasks if not t[0].done() and not t[0].cancelled()]
                     busy = bool(self._tasks)
             else:
                 busy = False
@@ -327,15 +313,13 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                     if gc.handle.pointer in guards_ready:
                         gc._executor_triggered = True
 
-                # ready waitables (node by node, in each node's order), checked before the wait set
-                # is destroyed
+                # ready waitables (node by node, in each node's order), checked before the wait set is destroyed
                 is_ready = wait_set.is_ready
                 ready_events = {id(wt) for wt, _node, _h in events
                                 if wt._ready_to_take_data or is_ready('event', wt._event_index)}
                 in_set = ready_events | {id(wt) for wt, _node in others}
                 for wt, node in snap.waitables:
-                    if (id(wt) in in_set and wt.is_ready(wait_set)
-                            and wt.callback_group.can_execute(wt)):
+                    if (id(wt) in in_set and wt.is_ready(wait_set) and wt.callback_group.can_execute(wt)):
                         yielded_work = True
                         yield self._make_handler(wt, node, self._take_waitable), wt, node
             finally:
@@ -359,8 +343,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                     else:
                         yield self._make_handler(entity, node, self._take(kind)), entity, node
 
-            if timeout_nsec == 0 or (timeout_timer is not None
-                                     and timeout_timer.handle.pointer in timers_ready):
+            if timeout_nsec == 0 or (timeout_timer is not None and timeout_timer.handle.pointer in timers_ready):
                 raise TimeoutException()
         if self._is_shutdown:
             raise ShutdownException()
@@ -369,12 +352,11 @@ class LeanWaitExecutor(SingleThreadedExecutor):
 
 
 class _Call:
-    """The handler of a ready timer or subscription whose callback is a plain function: takes and
-    runs it when called, with the part of rclpy's ``Task`` interface that ``spin_once`` and
-    ``Graph.spin_until_idle`` use (call, ``exception``, ``result``, ``done``). rclpy instead wraps
-    every callback in a ``Task`` over two coroutines and triggers the executor's guard condition
-    twice; with one thread running one callback at a time, every callback group is free and the
-    handler runs before the next wait, so none of that changes what runs or in which order."""
+    """The handler of a ready timer or subscription whose callback is a plain function: takes and runs it when called,
+    with the part of rclpy's ``Task`` interface that ``spin_once`` and ``Graph.spin_until_idle`` use (call,
+    ``exception``, ``result``, ``done``). rclpy instead wraps every callback in a ``Task`` over two coroutines and
+    triggers the executor's guard condition twice; with one thread running one callback at a time, every callback group
+    is free and the handler runs before the next wait, so none of that changes what runs or in which order."""
 
     __slots__ = ("_entity", "_kind", "_exc", "_done")
 
@@ -415,8 +397,7 @@ class _Call:
 
 
 def _plain(entity: Any) -> bool:
-    """The entity's callback is a plain function (not a coroutine function), asked once per
-    callback object."""
+    """The entity's callback is a plain function (not a coroutine function), asked once per callback object."""
     cb = entity.callback
     c = entity.__dict__.get("_lean_plain")
     if c is None or c[0] is not cb:

@@ -3,13 +3,12 @@
 Usage: ``python -m hindrax_sim.graph.record_bag [--out DIR]`` (default: the repository's
 ``src/hindrax_bringup/test/data``; the synthetic bags are :mod:`hindrax_bringup.recording.make_test_bags`).
 
-Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with
-``sim=True``: simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837,
-ICM-20948 and ESC driver nodes), recorded by the stack's own recorder node (all topics), simulated time
-starting at 0 (``/clock``), as fast as possible. The vehicle floats passively from
-``pool.start_position_ned_m`` = :data:`START_POSITION_NED_M` (ESC disarmed, neutral): every parsed topic
-(``dvl/*``, ``ping/*``, ``pressure/*``, ``imu/*``, ``thrusters/pulse_width``) beside the raw device data
-(``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chunk and I2C transaction), the simulator's
+Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with ``sim=True``:
+simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837, ICM-20948 and ESC driver
+nodes), recorded by the stack's own recorder node (all topics), simulated time starting at 0 (``/clock``), as fast as
+possible. The vehicle floats passively from ``pool.start_position_ned_m`` = :data:`START_POSITION_NED_M` (ESC disarmed,
+neutral): every parsed topic (``dvl/*``, ``ping/*``, ``pressure/*``, ``imu/*``, ``thrusters/pulse_width``) beside the
+raw device data (``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chunk and I2C transaction), the simulator's
 ground truth (``sim/*``) and ``/clock``.
 
 A clean start and end, so that a replay of the raw data through fresh drivers reproduces the parsed topics
@@ -18,11 +17,9 @@ has subscribed to and matched every topic; at the end simulated time is frozen a
 only once it has written every message the drivers published. The only driver traffic before the recording
 are the ESC node's constructor writes (PCA9685 configuration and first neutral), inside ``build_graph``.
 
-Simulated content is deterministic for a seed, but the exact message count is not (how the executor
-interleaves the driver timers with /clock steps varies with machine load), so tests check
-properties, not counts fixed in advance. It lives here, not in hindrax_bringup, so that the drivers
-do not import the simulator.
-"""
+Simulated content is deterministic for a seed, but the exact message count is not (how the executor interleaves the
+driver timers with /clock steps varies with machine load), so tests check properties, not counts fixed in advance. It
+lives here, not in hindrax_bringup, so that the drivers do not import the simulator."""
 from __future__ import annotations
 
 import argparse
@@ -58,13 +55,11 @@ SIM_BAGS: dict[str, tuple[float, dict[str, Any]]] = {
 
 def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any,
                          overrides: dict | None = None) -> dict:
-    """Record ``duration_s`` (s) of simulated time of the whole driver graph (the shipped vehicle
-    file, seed :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if
-    it exists), in the initialised rclpy ``context``. Returns topic -> number of messages the
-    graph's nodes published while recording (every one is in the bag). Raises
-    :class:`~hindrax_common.process.conditions.ConditionTimeout` naming the condition not reached (each
-    wait: 60 s of wall time), ConfigError for bad overrides.
-    """
+    """Record ``duration_s`` (s) of simulated time of the whole driver graph (the shipped vehicle file, seed
+    :data:`SIM_SEED`, extra dotted-key ``overrides``) into ``bag_dir`` (removed first if it exists), in the initialised
+    rclpy ``context``. Returns topic -> number of messages the graph's nodes published while recording (every one is in
+    the bag). Raises :class:`~hindrax_common.process.conditions.ConditionTimeout` naming the condition not reached (each
+    wait: 60 s of wall time), ConfigError for bad overrides."""
     timeout_s = 60.0
     bag_dir = Path(bag_dir)
     if bag_dir.exists():
@@ -96,14 +91,12 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     wanted = {pub.topic_name for node in drivers + [sim_node] for pub in node.publishers}
     try:
         graph.freeze_time()  # at 0 until the drivers' start-up and the recorder's subscriptions
-        wait_until(graph.startup_complete, timeout_s, spin,
-                   "the drivers' start-up and the recorder's subscriptions")
+        wait_until(graph.startup_complete, timeout_s, spin, "the drivers' start-up and the recorder's subscriptions")
         links = list(graph.hardware.serial_lock_steps.values())
         counting[0] = True
         graph.resume_time()
         sim = sim_node.simulator
-        wait_until(lambda: sim.t_s >= duration_s, timeout_s, spin,
-                   f"{duration_s} s of simulated time")
+        wait_until(lambda: sim.t_s >= duration_s, timeout_s, spin, f"{duration_s} s of simulated time")
         graph.freeze_time()
 
         def flushed() -> bool:

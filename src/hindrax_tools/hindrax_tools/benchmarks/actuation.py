@@ -14,8 +14,7 @@ over the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
 wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,
-``allocation/deadband.py``), so the search's own cost is the difference of two figures measured in the same process.
-"""
+``allocation/deadband.py``), so the search's own cost is the difference of two figures measured in the same process."""
 from __future__ import annotations
 
 import os
@@ -49,8 +48,7 @@ def allocator_cost(quick: bool = False) -> list[dict]:
     timed with ``time.thread_time_ns`` (CPU of this thread: waiting for a core on a shared machine is not counted),
     the least of 3 passes over the list per wrench (a cache miss or interrupt is not the allocator's cost). The passes
     go through the whole list, so no call repeats the one before it: a repeat is answered from the allocator's last
-    result (``ThrustAllocator.allocate``), whose cost is ``allocate_cpu_repeat_p50``.
-    """
+    result (``ThrustAllocator.allocate``), whose cost is ``allocate_cpu_repeat_p50``."""
     n = 300 if quick else 3000
     rng = np.random.default_rng(26)
     sizes = rng.choice([0.1, 0.3, 1.0, 3.0, 10.0, 30.0], size=(n, 1))
@@ -157,8 +155,7 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
          "target": "<= 3 ms (event-driven ESC output)", "note": f"SCHED_FIFO {sched.requested}"
          if sched.granted else f"nice 0: {sched.reason or 'no priority in the launch file'}"},
         {"name": "wrench_to_registers_cpu_p99", "value": float(np.percentile(np.array(cpu_latencies) * 1e3, 99)),
-         "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait "
-                               "for a core"},
+         "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait for a core"},
         {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count", "note": f"of {state['sent']} sent"},
         {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
          "note": "whole process: publisher + allocation + ESC node"},

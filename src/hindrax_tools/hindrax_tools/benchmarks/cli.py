@@ -1,13 +1,11 @@
 """CLI start-up benchmark: wall time of ``hindrax --help`` (target 0.3 s on the development machine).
 
 Each run is a fresh process, the ``hindrax`` console script of this interpreter's environment (or
-``python -m hindrax_tools.cli`` when the script is not installed), started with
-:mod:`subprocess` and timed
-from spawn to exit with ``time.perf_counter``. The value is the median of the runs (one unmeasured warm-up
-run first, so the file cache is warm as for an engineer typing commands). For comparison the row
-``hindrax_config_check`` times ``hindrax config check`` of the repository's vehicle file (numpy + yaml, no ROS).
-What ``--help`` may import is checked by ``src/hindrax_tools/test/test_cli_help.py``, not here.
-"""
+``python -m hindrax_tools.cli`` when the script is not installed), started with :mod:`subprocess` and timed from spawn
+to exit with ``time.perf_counter``. The value is the median of the runs (one unmeasured warm-up run first, so the file
+cache is warm as for an engineer typing commands). For comparison the row ``hindrax_config_check`` times
+``hindrax config check`` of the repository's vehicle file (numpy + yaml, no ROS). What ``--help`` may import is checked
+by ``src/hindrax_tools/test/test_cli_help.py``, not here."""
 from __future__ import annotations
 
 import os

@@ -19,8 +19,7 @@ its segment; segments of ``segment_s`` from each chunk's start, a last part of a
 rule of ``hindrax ident predict --segment-s``, docs/identification.md §4).
 
 No maintained library fits a simulation-error gray-box model with a delay and lag grid (python-control and SIPPY
-identify linear models only), hence this module.
-"""
+identify linear models only), hence this module."""
 from __future__ import annotations
 
 import math

@@ -15,8 +15,7 @@ each beat is read by two receivers (docs/architecture.md §8), so a beat's cost 
   rclpy objects; after: the raw subscription the receivers use (:class:`~.liveness.HeartbeatWatch`).
 * ``heartbeat_graph_queries_per_s``: graph queries of one :class:`~.liveness.HeartbeatWatch` checked
   at 25 Hz with its peer publishing (before: one query per check, 25 a second; the ESC and the guard check four
-  watches and the command topic, 115 queries a second), and ``heartbeat_graph_query_cpu_us`` what one costs.
-"""
+  watches and the command topic, 115 queries a second), and ``heartbeat_graph_query_cpu_us`` what one costs."""
 from __future__ import annotations
 
 import statistics
@@ -101,9 +100,8 @@ def cycle_rows(n: int) -> list[dict]:
                     per[kind].append((time.process_time() - t0) / n * 1e6)
         tx.destroy_node()
     return _cpu_rows("cycle", per, n,
-                     "process CPU per beat built, published, delivered to a second participant "
-                     "through the EventsExecutor and read ({k}), median of {blocks} alternating "
-                     "blocks")
+                     "process CPU per beat built, published, delivered to a second participant through the "
+                     "EventsExecutor and read ({k}), median of {blocks} alternating blocks")
 
 
 def _cpu_rows(what: str, per: dict[str, list[float]], n: int, note: str) -> list[dict]:

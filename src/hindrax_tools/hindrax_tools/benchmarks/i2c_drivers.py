@@ -10,13 +10,11 @@ subscribing to the main topic, all in one EventsExecutor (the executor of every 
   of D2, the last read of a cycle) to the probe's callback for the message made from it, wall clock
   (``time.time_ns``, the same clock as the ROS stamps). For the MS5837 the age of the stamp (the D1 read,
   see the node docstring) at receipt is reported too; it includes the D2 conversion time.
-* CPU per message: process CPU time (node + probe + raw-traffic publication + DDS) over the run, minus
-  the CPU spent inside the emulator's ``i2c_read``/``i2c_write`` (reported separately: the MS5837
-  emulator inverts the compensation by bisection at every conversion start, which costs more than the
-  driver), divided by the messages published on the main topic; and the load in % of one core. The
-  ``_marginal`` rows also subtract the CPU an idle process with one DDS participant uses over the same
-  time (measured first), which dominates the per-message figure of a 10 Hz driver.
-"""
+* CPU per message: process CPU time (node + probe + raw-traffic publication + DDS) over the run, minus the CPU spent
+  inside the emulator's ``i2c_read``/``i2c_write`` (reported separately: the MS5837 emulator inverts the compensation by
+  bisection at every conversion start, which costs more than the driver), divided by the messages published on the main
+  topic; and the load in % of one core. The ``_marginal`` rows also subtract the CPU an idle process with one DDS
+  participant uses over the same time (measured first), which dominates the per-message figure of a 10 Hz driver."""
 from __future__ import annotations
 
 import bisect

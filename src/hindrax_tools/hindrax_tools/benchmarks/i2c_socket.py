@@ -1,17 +1,15 @@
 """Emulated I2C bus over a Unix socket: round-trip time of one transaction, with the serving process quiet or busy.
 
 The launch-layout tests and the pool-day rehearsal serve the emulated PCA9685, MS5837 and ICM-20948 from the test
-process (:class:`~hindrax_common.transport.socket_i2c.I2CSocketServer`, one thread per client connection); the
-driver processes are its clients (:class:`~hindrax_common.transport.socket_i2c.SocketI2CBus`). A serving thread
-needs the GIL of its process for every request, so CPU-bound Python threads beside it (the test's own spinning,
-other emulators) delay every transaction by up to the interpreter's switch interval (``sys.getswitchinterval()``,
-5 ms) per hand-over.
+process (:class:`~hindrax_common.transport.socket_i2c.I2CSocketServer`, one thread per client connection); the driver
+processes are its clients (:class:`~hindrax_common.transport.socket_i2c.SocketI2CBus`). A serving thread needs the GIL
+of its process for every request, so CPU-bound Python threads beside it (the test's own spinning, other emulators) delay
+every transaction by up to the interpreter's switch interval (``sys.getswitchinterval()``, 5 ms) per hand-over.
 
 Rows (milliseconds, p50 and p99 of one 32-byte block write to the PCA9685, what the ESC writes per command, timed in
 a client process): the server in a quiet process; with two busy Python threads beside it; the same with the switch
 interval at 0.5 ms; and the server in a process of its own while the two busy threads run in the process that
-started it.
-"""
+started it."""
 from __future__ import annotations
 
 import contextlib

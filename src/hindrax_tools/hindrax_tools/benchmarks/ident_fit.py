@@ -1,14 +1,13 @@
 """``hindrax ident fit`` on realistic virtual-pool data nobody designed: held-out prediction against two baselines.
 
-Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_sim.piloted_bag`) with a
-different truth: three vehicles (Hindrax; a smaller BlueROV2-sized frame; a larger 45 kg work-class-like frame with
-stronger thrusters), the setpoint pilot or the closed-loop survey autopilot, the command through the thrusters (so
-the real force differs from the recorded wrench: lag, ESC latency, reverse asymmetry, battery sag, inflow loss), the
-simulated DVL, IMU and pressure sensor, and the scenario suite's disturbances (current, tether, DVL latency, scale
-error, misalignment and multipath dropouts). The first ``train`` bags are fitted, the other ``holdout`` bags are
-predicted. Per DOF and data set the held-out prediction NRMSE (RMS(v_pred - v_meas) / std(v_meas) over 10 s
-open-loop predictions re-initialised from the measured velocity,
-:func:`..identification.fit.fit_core.validation_measures`) of
+Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_sim.piloted_bag`) with a different truth:
+three vehicles (Hindrax; a smaller BlueROV2-sized frame; a larger 45 kg work-class-like frame with stronger thrusters),
+the setpoint pilot or the closed-loop survey autopilot, the command through the thrusters (so the real force differs
+from the recorded wrench: lag, ESC latency, reverse asymmetry, battery sag, inflow loss), the simulated DVL, IMU and
+pressure sensor, and the scenario suite's disturbances (current, tether, DVL latency, scale error, misalignment and
+multipath dropouts). The first ``train`` bags are fitted, the other ``holdout`` bags are predicted. Per DOF and data set
+the held-out prediction NRMSE (RMS(v_pred - v_meas) / std(v_meas) over 10 s open-loop predictions re-initialised from
+the measured velocity, :func:`..identification.fit.fit_core.validation_measures`) of
 
 * ``fit``: ``hindrax ident fit`` (no vehicle file, as on another vehicle's data);
 * ``ls``: a plain per-DOF least squares: M nu_dot + k_q |nu| nu + k_l nu + b = tau on the same resampled record,
@@ -21,8 +20,7 @@ noise over the measured std, what a perfect model would still score).
 Acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
 ``hold``. Tune on this benchmark, never on the tests. Usage: ``python -m
 hindrax_tools.benchmarks.ident_fit
-[--only NAME,...] [--quick] [--keep DIR]`` (``make bench BENCH_ARGS=--only=ident_fit`` runs it in the suite).
-"""
+[--only NAME,...] [--quick] [--keep DIR]`` (``make bench BENCH_ARGS=--only=ident_fit`` runs it in the suite)."""
 from __future__ import annotations
 
 import argparse
@@ -279,9 +277,8 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
             rows.append({"name": f"{data.name} {dof} nrmse fit / ls / hold",
                          "value": f"{r['fit']:.3f} / {r['ls']:.3f} / {r['hold']:.3f}", "unit": "",
                          "target": "fit <= 0.9 ls and < hold",
-                         "note": f"cv {r.get('cv', math.nan):.3f}; noise floor "
-                                 f"{r.get('floor', math.nan):.3f}; {r['status']}; {r['samples']} "
-                                 f"samples; {r.get('model', '')}"})
+                         "note": f"cv {r.get('cv', math.nan):.3f}; noise floor {r.get('floor', math.nan):.3f}; "
+                                 f"{r['status']}; {r['samples']} samples; {r.get('model', '')}"})
             rows.append({"name": f"{data.name} {dof} fit / ls", "unit": "", "target": "<= 0.9",
                          "value": round(r["fit"] / r["ls"], 3) if r["ls"] > 0 else math.nan})
     return rows

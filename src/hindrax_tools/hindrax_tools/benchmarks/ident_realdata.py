@@ -26,8 +26,7 @@ and whether the delay sat at its bound.
 
 Usage: ``python -m hindrax_tools.benchmarks.ident_realdata [--keep DIR] [--only NAME,...]
 [--results-doc docs/results.md]``: prints the table; with ``--results-doc`` writes section ``ident-realdata`` of that
-document and the figure ``figures/ident_realdata.png`` next to it. Tune on this, never on the tests.
-"""
+document and the figure ``figures/ident_realdata.png`` next to it. Tune on this, never on the tests."""
 from __future__ import annotations
 
 import argparse
@@ -116,8 +115,7 @@ DATASETS: tuple[DataSet, ...] = (
 
 def run(only: list[str] | None = None, keep: str | None = None) -> dict:
     """{data set name: {"note", "bags_s", "fit_s", dof: row of :func:`.ident_fit.evaluate`}}."""
-    return {data.name: {"note": data.note, "bags_s": bags_s, "fit_s": fit_s,
-                        **{d: res[d] for d in DOFS_COMPARED}}
+    return {data.name: {"note": data.note, "bags_s": bags_s, "fit_s": fit_s, **{d: res[d] for d in DOFS_COMPARED}}
             for data, bags_s, fit_s, res in evaluated(DATASETS, only, keep, gray_box=True)}
 
 

@@ -5,8 +5,7 @@ short; the all-DOF campaign's wall time and accuracy are ``make run``'s, in docs
 ``run``). Rows: wall time (target < 600 s for the full campaign), pool time per DOF, and per DOF the
 relative error of the inertia and quadratic damping for the reported (output-error, the fit core)
 estimate, the equation-error batch LS, the online RLS and the steady-state LS, with the pool time
-each needed (RLS: until converged; steady-state: until the end of the last window used).
-"""
+each needed (RLS: until converged; steady-state: until the end of the last window used)."""
 from __future__ import annotations
 
 import math

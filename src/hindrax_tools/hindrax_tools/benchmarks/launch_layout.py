@@ -11,8 +11,7 @@ at real-time factor 1 (no ``/clock``, no ground truth: every node on system time
 emulators on pseudo-terminals, the I2C emulators on an
 :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
 (:class:`I2CSocketServer`), all on ``time.monotonic``. The pty paths go to ``--ports-file`` (JSON,
-:func:`write_ports_file`: whole or not at all) once everything is up.
-"""
+:func:`write_ports_file`: whole or not at all) once everything is up."""
 from __future__ import annotations
 
 import argparse

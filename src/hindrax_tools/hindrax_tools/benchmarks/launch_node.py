@@ -7,17 +7,14 @@ does. The I2C drivers reach the virtual pool's emulated bus through their own ``
 simulator, emulator or benchmark code, so a benchmarked process holds the modules and memory the vehicle's holds
 (``test_bench_launch_layout.py`` checks it).
 
-``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`): cProfile, ``DIR/<module>.prof`` written on
-exit, ``os._exit`` included (:data:`hindrax_common.process.ros_process.BEFORE_PROCESS_END`). Every Python
-thread takes its ``threading`` name as its OS thread name (:func:`name_os_threads`), for the
-benchmark's figures by thread.
+``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`): cProfile, ``DIR/<module>.prof`` written on exit, ``os._exit``
+included (:data:`hindrax_common.process.ros_process.BEFORE_PROCESS_END`). Every Python thread takes its ``threading``
+name as its OS thread name (:func:`name_os_threads`), for the benchmark's figures by thread.
 
-``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`): a SIGUSR1 writes the process's nodes'
-endpoints to ``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of
-such a topology without logic: the same nodes and endpoints, one pre-serialised message per
-publisher from a timer at its rate (publishers of one rate share a timer), callbacks that do
-nothing; SIGUSR2 switches it to its next phase's rates.
-"""
+``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`): a SIGUSR1 writes the process's nodes' endpoints to
+``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of such a topology without logic: the
+same nodes and endpoints, one pre-serialised message per publisher from a timer at its rate (publishers of one rate
+share a timer), callbacks that do nothing; SIGUSR2 switches it to its next phase's rates."""
 from __future__ import annotations
 
 import cProfile

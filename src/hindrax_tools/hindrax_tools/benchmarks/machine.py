@@ -11,8 +11,7 @@ those of the Benchmarks Game's Python program, so they do not rescale a publishe
 machines: a figure times ``nbody_cpu_s() / REFERENCE_NBODY_CPU_S`` is the figure at the reference machine's speed.
 
 The workload is pure Python, which is most of the stack's cost (docs/architecture.md §10.1); the C/C++ half (rcl,
-Fast DDS) may scale differently between machines.
-"""
+Fast DDS) may scale differently between machines."""
 from __future__ import annotations
 
 import collections

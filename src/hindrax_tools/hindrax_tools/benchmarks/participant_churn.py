@@ -11,26 +11,22 @@ the heartbeats; hardware is never starved by a CPU load, so it takes ``SCHED_FIF
 the right to, the rows say so). Each run gives the rows of :meth:`_Watch.rows` (disarms, target 0;
 heartbeat gaps as received, with a target, and between send stamps; tick gaps) under its prefix:
 
-* ``participant_churn_*``: a new ROS 2 process starts every :data:`PERIOD_S` seconds for
-  :data:`DURATION_S` seconds (alternately a 3 s subscriber to ``/diagnostics`` and the three
-  heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each exiting on its
-  own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a safety process on
-  such a start; gap target :data:`GAP_TARGET_MS` (the heartbeat timeouts are 200 ms).
-* ``busy_neighbours_*``: :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a
-  session of their own (as another service or a terminal on the Pi), run for :data:`DURATION_S`
-  seconds (:func:`cpu_bound_neighbours`; these rows are not measured without ``SCHED_FIFO``);
-  ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's
-  nice -5 only), no target: what the priority buys here (docs/deployment.md §1).
+* ``participant_churn_*``: a new ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds
+  (alternately a 3 s subscriber to ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and
+  ``hindrax health --quiet``), each exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can
+  stall a safety process on such a start; gap target :data:`GAP_TARGET_MS` (the heartbeat timeouts are 200 ms).
+* ``busy_neighbours_*``: :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as
+  another service or a terminal on the Pi), run for :data:`DURATION_S` seconds (:func:`cpu_bound_neighbours`; these rows
+  are not measured without ``SCHED_FIFO``); ``busy_neighbours_nice_only_*``: the same with the real-time priority
+  withheld (the launch file's nice -5 only), no target: what the priority buys here (docs/deployment.md §1).
 * ``pool_day_churn_*``: the same processes with the gateway beside them
-  (:func:`~hindrax_tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz
-  beside :data:`NEIGHBOURS` CPU-bound processes; each of :data:`TRIALS` trials starts three
-  processes together and waits for them to exit, as an operator and a curious user do on the pool
-  day: a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three heartbeats on the Pi's
-  internal domain with Fast DDS's default transports (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``,
-  no profile: shared memory + UDP), one to the gateway's topside topics on the topside domain, and
-  ``hindrax health --quiet`` on the internal domain (the Pi's shell); gap target
-  :data:`POOL_DAY_GAP_TARGET_MS`.
-"""
+  (:func:`~hindrax_tools.benchmarks.sealed_authority.gateway_running`), commanded at 50 Hz beside :data:`NEIGHBOURS`
+  CPU-bound processes; each of :data:`TRIALS` trials starts three processes together and waits for them to exit, as an
+  operator and a curious user do on the pool day: a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three
+  heartbeats on the Pi's internal domain with Fast DDS's default transports
+  (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, no profile: shared memory + UDP), one to the gateway's topside topics on
+  the topside domain, and ``hindrax health --quiet`` on the internal domain (the Pi's shell); gap target
+  :data:`POOL_DAY_GAP_TARGET_MS`."""
 from __future__ import annotations
 
 import os
@@ -134,8 +130,7 @@ class _Watch:
         node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
         #: status name -> the worst tick gap it reported on /diagnostics, (gap, thread CPU, process CPU) in ms
         self.tick_gaps: dict[str, tuple[float, float, float]] = {}
-        #: status name -> heartbeats its process took at a stale judgement
-        #: (liveness.HeartbeatWatch.fresh)
+        #: status name -> heartbeats its process took at a stale judgement (liveness.HeartbeatWatch.fresh)
         self.taken_late: dict[str, int] = {}
         self._active_since: float | None = None
         node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
@@ -166,10 +161,9 @@ class _Watch:
         worst = max(v[0] for v in self.tick_gaps.values())
         each = "; ".join(f"{k} {g:.0f} ms ({t:.1f} / {p:.1f})" for k, (g, t, p) in sorted(self.tick_gaps.items()))
         return {"name": name, "value": worst, "unit": "ms",
-                "note": f"longest gap between two steady ticks of a safety process (reports "
-                        f"covering the window only), each with the CPU time in it (its executor "
-                        f"thread / the whole process, ms): {each}; heartbeats taken at a stale "
-                        f"judgement: {self.taken_late or 'none reported'}"}
+                "note": f"longest gap between two steady ticks of a safety process (reports covering the window only), "
+                        f"each with the CPU time in it (its executor thread / the whole process, ms): {each}; "
+                        f"heartbeats taken at a stale judgement: {self.taken_late or 'none reported'}"}
 
     def _beat(self, name: str, msg) -> None:
         if self.active:
@@ -237,9 +231,8 @@ def churn_rows(quick: bool = False) -> list[dict]:
             for p in started:
                 p.wait(60)
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
-            f"`hindrax health` alternately) while armed at 1700 us; safety processes on the UDP "
-            f"loopback transport; emulated hardware "
-            f"{'not real-time: ' + refused if refused else 'real-time, above them'}")
+            f"`hindrax health` alternately) while armed at 1700 us; safety processes on the UDP loopback transport; "
+            f"emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
     return watch.rows("participant_churn_", what, GAP_TARGET_MS, n=k)
 
 
@@ -265,9 +258,8 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
     with running_layout("hindrax-bench-busy-", layout=layout) as lay:
         watch = _Watch(lay.probe)
         lay.armed_at_1700()
-        # real-time from here on: every thread of this process, the emulation's serving threads
-        # included (one per node process, started when it connected: a thread started under
-        # SCHED_RESET_ON_FORK would not be)
+        # real-time from here on: every thread of this process, the emulation's serving threads included (one per node
+        # process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
         with hardware_priority() as refused:
             if refused:  # the same rows, not measured
                 return [{**r, "value": None, "note": f"not measured: {refused}"}
@@ -286,8 +278,7 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
 
 
 def topside_topics(vehicle: str) -> tuple[str, ...]:
-    """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics
-    and odometry."""
+    """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics and odometry."""
     return (f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/supervisor/status",
             f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status", f"nav_msgs.msg:Odometry=/{vehicle}/odom")
 
@@ -317,11 +308,10 @@ def pool_day_rows(quick: bool = False) -> list[dict]:
                 watch.active = False
                 load = os.getloadavg()[0]
     hardware = "not real-time: " + refused if refused else "real-time, above them"
-    what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with "
-            f"default transports, one on the topside and `hindrax health` started together (exit "
-            f"codes {sorted(set(exits))}), armed and commanded at 1700 us, 50 Hz, beside "
-            f"{NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the end); emulated "
-            f"hardware {hardware}")
+    what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with default transports, "
+            f"one on the topside and `hindrax health` started together (exit codes {sorted(set(exits))}), armed and "
+            f"commanded at 1700 us, 50 Hz, beside {NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the "
+            f"end); emulated hardware {hardware}")
     return watch.rows("pool_day_churn_", what, POOL_DAY_GAP_TARGET_MS, n=trials)
 
 

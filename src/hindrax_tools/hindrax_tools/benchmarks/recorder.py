@@ -14,8 +14,7 @@ pre-serialized messages of realistic size (the synthetic test-bag messages) on a
 "Recorded" is the recorder's own per-topic count (``/diagnostics``), checked against the finished bag.
 CPU is the recorder process's user + system time from ``/proc/<pid>/stat`` over the publishing window;
 CPU per message = that time / messages recorded. The process and its DDS traffic stay on loopback in a
-reserved ROS domain.
-"""
+reserved ROS domain."""
 from __future__ import annotations
 
 import subprocess

@@ -5,8 +5,7 @@ machine). Only ``provenance.date`` and ``provenance.bag`` (the run's folder) may
 
 quick: heave and yaw, 2 levels; full: every DOF, the default levels (``make run``'s campaign). Rows: the entries
 that differ (target 0; the note names the first ones), the wall time of each run and the 1-minute load beside the
-busy processes.
-"""
+busy processes."""
 from __future__ import annotations
 
 import os

@@ -28,8 +28,7 @@ each takes one core of the Pi), each ending after ``busy_s`` (``timeout``).
 
 A process joins the rig at its start, before it runs anything: :attr:`Rig.prefix` is a command to put before its
 argv (a shell that writes its pid into the group, then ``exec``s it), so respawned processes join too. Needs root
-(or a delegated writable cgroup); :class:`RigError` otherwise, in one line.
-"""
+(or a delegated writable cgroup); :class:`RigError` otherwise, in one line."""
 from __future__ import annotations
 
 import argparse

@@ -1,15 +1,14 @@
 """Robustness benchmark: fuzzed parsers and injected faults, measured.
 
-Fuzzing (:mod:`hypothesis`, derandomised so every run draws the same inputs): per parser at least
-:data:`FUZZ_INPUTS` inputs. Each hypothesis example draws one *template* (arbitrary bytes, a frame with a
-*valid* checksum around arbitrary fields or payloads so that the field decoders are reached and not only
-the checksum test, or a valid frame with byte flips) and a random generator seeded by hypothesis
-(``st.randoms(use_true_random=True)``), from which :data:`BATCH` - 1 mutants of the template are made
-(byte flips, insertions, deletions, truncations, splices; half of them with the checksum recomputed).
-Hypothesis alone costs ~0.3 ms per example here: a hundred thousand plain examples per parser would
-take most of a minute each. A **crash** is any exception other than the
-parser's documented error class, or a result that breaks the parser's contract (a non-finite value
-accepted as valid, a DVL velocity accepted outside the vehicle file's plausibility gates):
+Fuzzing (:mod:`hypothesis`, derandomised so every run draws the same inputs): per parser at least :data:`FUZZ_INPUTS`
+inputs. Each hypothesis example draws one *template* (arbitrary bytes, a frame with a *valid* checksum around arbitrary
+fields or payloads so that the field decoders are reached and not only the checksum test, or a valid frame with byte
+flips) and a random generator seeded by hypothesis (``st.randoms(use_true_random=True)``), from which
+:data:`BATCH` - 1 mutants of the template are made (byte flips, insertions, deletions, truncations, splices; half of
+them with the checksum recomputed). Hypothesis alone costs ~0.3 ms per example here: a hundred thousand plain examples
+per parser would take most of a minute each. A **crash** is any exception other than the parser's documented error
+class, or a result that breaks the parser's contract (a non-finite value accepted as valid, a DVL velocity accepted
+outside the vehicle file's plausibility gates):
 
 - DVL-75 sentences: :class:`~hindrax_drivers.dvl75.stream.DvlStreamDecoder` (never raises), every
   ``$DVPDL`` it returns through :class:`~hindrax_drivers.dvl75.report.DvlReportBuilder` with the gates of
@@ -39,8 +38,7 @@ I2C devices on the emulated bus, each node in its own rclpy context, polled ever
   ``imu/data_raw`` after the re-initialisation.
 - magnetometer NACK (AK09916 behind the ICM's I2C master): detect = NACK onset -> ERROR ``magnetometer``;
   recover = the AK09916 answers again (right after the failed re-initialisation) -> first ``imu/mag`` (the
-  node retries every ``sensors.icm20948.mag_retry_interval_s``).
-"""
+  node retries every ``sensors.icm20948.mag_retry_interval_s``)."""
 from __future__ import annotations
 
 import math

@@ -5,9 +5,8 @@ the safety supervisor, and a probe (controller, operator, sensors). For each pat
 commanded to 1700 us on every thruster, then the event happens; the time is taken from the event to the first
 I2C transaction after which the emulator decodes every thruster channel at neutral (1500 us within one count):
 
-* ``watchdog``: commands stop; measured from the last command the node took, so it includes
-  ``esc.watchdog_timeout_s`` (0.5 s in the shipped file); the row ``..._beyond_timeout`` subtracts it (the design
-  bound: one output period);
+* ``watchdog``: commands stop; measured from the last command the node took, so it includes ``esc.watchdog_timeout_s``
+  (0.5 s in the shipped file); the row ``..._beyond_timeout`` subtracts it (the design bound: one output period);
 * ``disarm_service``: ``esc/set_armed`` with ``arm=False`` called;
 * ``supervisor_breach``: a ``pressure/depth`` message beyond ``supervisor.max_depth_m`` published;
 * ``estop``: ``supervisor/estop`` called;
@@ -38,8 +37,7 @@ the player with ``safety_topics`` and its graph check off, as a tool without tha
 supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
 
 * ``supervisor_killed_during_replay_thrust_after_kill``: from the kill until no thruster carries a non-neutral pulse
-  (0 when the outputs had already stopped; :data:`REPLAY_CENSOR_S` when thrust was still on then, counted in the
-  note);
+  (0 when the outputs had already stopped; :data:`REPLAY_CENSOR_S` when thrust was still on then, counted in the note);
 * ``replay_alone_stopped_outputs``: the repeats in which the replay itself stopped the outputs before the kill (a
   second heartbeat publisher is a fault), with the time from the replay process's start in the note.
 
@@ -54,18 +52,16 @@ The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench'
 * ``guard_without_line_arming_refused``: the guard started while its /OE line is busy (the request fails); the arm
   requests refused of those made, then the line is granted and the time until an arm is accepted is in the note.
 
-A partial freeze without the hardware watchdog (:func:`partial_freeze_rows`; the shipped vehicle file has no feed
-line): the same layout with /OE but no feed, its processes under :class:`SystemdWatchdogStandIn` (what systemd does
-for the bare-metal unit: ``WatchdogSec`` :data:`UNIT_WATCHDOG_S`, SIGKILL; without systemd's timer slack of up to
-0.25 s):
+A partial freeze without the hardware watchdog (:func:`partial_freeze_rows`; the shipped vehicle file has no feed line):
+the same layout with /OE but no feed, its processes under :class:`SystemdWatchdogStandIn` (what systemd does for the
+bare-metal unit: ``WatchdogSec`` :data:`UNIT_WATCHDOG_S`, SIGKILL; without systemd's timer slack of up to 0.25 s):
 
 * ``partial_freeze_no_feed_outputs_stopped_ms``: SIGSTOP of the ESC and the guard while the supervisor runs, armed
   at 1700 us, until no thruster carries a pulse (the guard's pings stop, the unit is killed, the freed /OE line
   goes high). The Docker unit has no watchdog (no ``$NOTIFY_SOCKET`` in the container): there only the feed stops it.
 
 Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :data:`REPEATS` in-process and
-:data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms.
-"""
+:data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms."""
 from __future__ import annotations
 
 import functools
@@ -866,8 +862,7 @@ def replay_rows(quick: bool = False) -> list[dict]:
                     "before the kill" + (f", {1e3 * float(np.median(by_replay)):.0f} ms median, "
                                          f"{1e3 * float(np.max(by_replay)):.0f} ms max after the replay process "
                                          "started" if by_replay else ""))
-    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill,
-                    target=500.0, note=note),
+    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill, target=500.0, note=note),
             {"name": "replay_alone_stopped_outputs", "value": len(by_replay), "unit": f"of {repeats} repeats",
              "note": stopped_note}]
 
@@ -1010,8 +1005,7 @@ def run_processes(quick: bool = False) -> list[dict]:
         times["clock_step_back_detected"] = _clock_rows(lay, repeats)
         rearms = lay.rearms
     rows = [{"name": "guard_cpu_percent", "value": guard_cpu, "unit": "% of a core",
-             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz "
-                     "timer)"},
+             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz timer)"},
             {"name": "esc_disarmed_right_after_arm", "value": len(rearms), "unit": "arms",
              "note": f"of {5 * repeats + 1} arm requests, the ESC disarmed itself before 1700 us "
                      "reached the wire (the bench armed again)"

@@ -1,12 +1,10 @@
 """Scenario-suite benchmark: a short subset of ``hindrax ident scenarios`` in ``make bench``.
 
-quick: scenario ``thrust_0.90`` only, surge, 2 levels, seed 1; full: ``none``, ``thrust_0.90`` and
-``reverse_weak``, surge, 2 levels, seed 1 (the full table is written by the command into
-docs/results.md, section ``scenarios``). Rows: wall time per campaign, and per scenario the fraction
-of parameters whose 95 % interval covers the truth, the fraction marked suspect and the fraction
-covered-or-suspect (target 100 %: a parameter that misses the truth must be suspect), plus the
-no-disturbance scenario's suspect fraction (target <= 10 %).
-"""
+quick: scenario ``thrust_0.90`` only, surge, 2 levels, seed 1; full: ``none``, ``thrust_0.90`` and ``reverse_weak``,
+surge, 2 levels, seed 1 (the full table is written by the command into docs/results.md, section ``scenarios``). Rows:
+wall time per campaign, and per scenario the fraction of parameters whose 95 % interval covers the truth, the fraction
+marked suspect and the fraction covered-or-suspect (target 100 %: a parameter that misses the truth must be suspect),
+plus the no-disturbance scenario's suspect fraction (target <= 10 %)."""
 from __future__ import annotations
 
 import time

@@ -12,8 +12,7 @@ domain and a topside domain of its own, with an operator key for the vehicle (``
 * ``operator_{unsigned,wrong_key,replayed}_requests_accepted``: of :data:`REQUESTS` (:data:`QUICK_REQUESTS`) arm
   requests sent to ``/<vehicle>/arm`` from the topside domain, each unsigned, signed with another key, or a copy of
   an arm the gateway had accepted (the ESC disarmed again in between), those answered with success (target 0). A
-  freshly signed arm before and after them is answered armed (the path works; otherwise the bench stops).
-"""
+  freshly signed arm before and after them is answered armed (the path works; otherwise the bench stops)."""
 from __future__ import annotations
 
 import subprocess

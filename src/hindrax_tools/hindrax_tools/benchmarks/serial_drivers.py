@@ -8,18 +8,15 @@ subscribed to the output topics, in one SingleThreadedExecutor:
     emulator.poll -> pty write -> pyserial read (reader thread) -> decode -> publish -> probe callback
 
 * Latency: from the emulator's write of the bytes (``time.monotonic_ns`` right after ``poll`` returns;
-  :class:`PtyDevice` writes them at once) to the probe's callback for the message made from them. The
-  side channel identifying each message is the emulator truth: the k-th DVL cycle reports confidence
-  ``1 + k % 100`` % and altitude ``2.00 + (k % 100) * 0.01`` m, the k-th ping a distance of
-  ``1.000 + (k % 1000) * 0.001`` m, all exact on the wire, so a received message maps to the write that
-  carried it.
-* CPU per report: (a) the transport reader thread's own CPU time (``pthread_getcpuclockid``): decode,
-  conversion and publication of every output topic of that report (DVL: dvl/data + dvl/twist +
-  dvl/altitude + raw/dvl75; Ping: ping/altitude + ping/confidence + raw/ping1d); (b) process CPU time minus
-  the emulator thread's, i.e. node + probe + executor + DDS. Both divided by the reports published.
-  Rates: DVL 20 Hz (its maximum, docs/devices.md §1.1); Ping 40 Hz (25 ms interval: a 236-byte profile per
-  ping is about the most a 115200-baud link carries).
-"""
+  :class:`PtyDevice` writes them at once) to the probe's callback for the message made from them. The side channel
+  identifying each message is the emulator truth: the k-th DVL cycle reports confidence ``1 + k % 100`` % and altitude
+  ``2.00 + (k % 100) * 0.01`` m, the k-th ping a distance of ``1.000 + (k % 1000) * 0.001`` m, all exact on the wire, so
+  a received message maps to the write that carried it.
+* CPU per report: (a) the transport reader thread's own CPU time (``pthread_getcpuclockid``): decode, conversion and
+  publication of every output topic of that report (DVL: dvl/data + dvl/twist + dvl/altitude + raw/dvl75; Ping:
+  ping/altitude + ping/confidence + raw/ping1d); (b) process CPU time minus the emulator thread's, i.e.
+  node + probe + executor + DDS. Both divided by the reports published. Rates: DVL 20 Hz (its maximum, docs/devices.md
+  §1.1); Ping 40 Hz (25 ms interval: a 236-byte profile per ping is about the most a 115200-baud link carries)."""
 from __future__ import annotations
 
 import time

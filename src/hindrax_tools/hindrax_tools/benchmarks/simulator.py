@@ -5,8 +5,7 @@ Rows:
   (``simulation.step_s``) with every sensor model on, thrust changing every 0.5 s;
 * ``real_time_factor``: simulated seconds per wall second of the same run (target >= 20);
 * ``node_real_time_factor``: the ROS node at real_time_factor 0 in one SingleThreadedExecutor with a
-  ``use_sim_time`` probe subscribing to /clock and sim/odometry (what a node under test sees; informative).
-"""
+  ``use_sim_time`` probe subscribing to /clock and sim/odometry (what a node under test sees; informative)."""
 from __future__ import annotations
 
 import time

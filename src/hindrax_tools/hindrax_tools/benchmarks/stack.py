@@ -12,9 +12,8 @@ The graph: the sensor drivers, the ESC, the allocation, the identification node,
 ``inproc``: the graph of ``hindrax run`` (:func:`hindrax_sim.graph.bringup.build_graph`, ``drive_clocks``) in one
 executor; per node the CPU of its callbacks less the emulators' time in them, plus its own threads; the rest is
 ``executor+dds``. ``launch``: the processes of :data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the
-virtual pool in another process; CPU per process from ``/proc/<pid>/stat``; the running phase in
-:data:`RUNNING_WINDOWS` windows, each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the
-launch layout's bag.
+virtual pool in another process; CPU per process from ``/proc/<pid>/stat``; the running phase in :data:`RUNNING_WINDOWS`
+windows, each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the launch layout's bag.
 
 Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at the reference
 machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`. Wake-ups per process and the
@@ -23,13 +22,11 @@ commit's launch layout first (:func:`baseline_launch`, rows ``..._vs_baseline``)
 the launch layout alone in a Pi-sized CPU rig of F cores here (:func:`rig_rows`,
 :mod:`hindrax_tools.benchmarks.rig`), rows ``rig_*``.
 
-Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
-with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
-launch-prefix and environment, each topic at the launch's rate with a recorded message, callbacks
-doing nothing: the floor of moving the vehicle's messages (``launch_skeleton_*``,
-``launch_*_vs_skeleton_ratio_*``). ``cpu_bare_rclpy_same_topics`` is one publisher process for the
-one-process idle phase's topics.
-"""
+Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes with the same endpoints
+(read back by SIGUSR1, :func:`read_topologies`, and checked equal), launch-prefix and environment, each topic at the
+launch's rate with a recorded message, callbacks doing nothing: the floor of moving the vehicle's messages
+(``launch_skeleton_*``, ``launch_*_vs_skeleton_ratio_*``). ``cpu_bare_rclpy_same_topics`` is one publisher process for
+the one-process idle phase's topics."""
 from __future__ import annotations
 
 import argparse
@@ -124,11 +121,10 @@ def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, fl
 
 
 def _proc_mb(pid: int, key: str) -> float:
-    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size,
-    from /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private
-    pages plus its share of the pages it shares, the venv's libraries mapped by every node process,
-    so the sum over processes is the memory they hold together, unlike the sum of RSS, which counts
-    shared pages once per process)."""
+    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size, from
+    /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private pages plus its share of the
+    pages it shares, the venv's libraries mapped by every node process, so the sum over processes is the memory they
+    hold together, unlike the sum of RSS, which counts shared pages once per process)."""
     path = Path(f"/proc/{pid}/{'status' if key == 'VmRSS' else 'smaps_rollup'}")
     for line in path.read_text().splitlines():
         if line.startswith(key + ":"):
@@ -634,8 +630,7 @@ def read_topologies(procs: dict[str, subprocess.Popen], directory: Path) -> dict
 
 
 def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
-              envs: dict | None = None, stream_phase: str | None = None,
-              check: dict | None = None) -> dict:
+              envs: dict | None = None, stream_phase: str | None = None, check: dict | None = None) -> dict:
     """Run ``spec`` (:func:`skeleton_spec`; ``envs[label] = (launch-prefix, env)``) and measure
     ``phases`` (name, windows of ``duration_s``; SIGUSR2, 2 s warm-up first), the pilot's wrench
     stream on in ``stream_phase``; ``check``: topology to match (else RuntimeError). Returns
@@ -733,9 +728,8 @@ def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
             target = ("<= 1.3" if phase == "running" else "<= 1.0") if n == "total" else ""
             rows += [{"name": f"launch_skeleton_{phase}_cpu_{n}_per_pool", "value": sk[n] / pool,
                       "unit": "x", "target": target,
-                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and "
-                              f"messages without logic; unit: the pool's {100 * pool:.1f} % in the "
-                              f"launch's {phase} windows"},
+                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and messages without "
+                              f"logic; unit: the pool's {100 * pool:.1f} % in the launch's {phase} windows"},
                      {"name": f"launch_{phase}_vs_skeleton_ratio_{n}", "value": la[n] / sk[n],
                       "unit": "x",
                       "note": f"launch {la[n] / pool:.3f} - skeleton {sk[n] / pool:.3f} = "
@@ -912,8 +906,7 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 
 
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
-        duration_s: float | None = None, baselines: bool = True,
-        baseline: str | None = None) -> list[dict]:
+        duration_s: float | None = None, baselines: bool = True, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running windows of
     the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length, s; baselines:
     bare rclpy and the launch's skeleton; baseline: a git ref whose launch layout is measured first in the same run

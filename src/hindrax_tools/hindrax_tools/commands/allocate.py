@@ -1,15 +1,13 @@
 """``hindrax allocate X Y Z K M N [--config FILE]``: run the thrust-allocation node's core on one wrench.
 
-The wrench is in base_link (FLU): forces X Y Z in N, moments K M N in N m, about the CG. Prints one JSON
-object: ``force_n`` (per thruster, N), ``pulse_width_us`` (per thruster, us), ``achieved_wrench``
-(base_link, N and N m), ``scale`` and ``saturated`` (per-thruster flags). Computed by
-:class:`hindrax_bringup.allocation.core.AllocationCore`, exactly what the node runs. Exit 1 on an
-invalid wrench or configuration.
+The wrench is in base_link (FLU): forces X Y Z in N, moments K M N in N m, about the CG. Prints one JSON object:
+``force_n`` (per thruster, N), ``pulse_width_us`` (per thruster, us), ``achieved_wrench`` (base_link, N and N m),
+``scale`` and ``saturated`` (per-thruster flags). Computed by :class:`hindrax_bringup.allocation.core.AllocationCore`,
+exactly what the node runs. Exit 1 on an invalid wrench or configuration.
 
 ``achieved_wrench`` is what the thrusters give at the printed widths, so it shows every component nobody asked
 for: a thruster runs at 0 N or at least its smallest thrust outside the ESC deadband, and the allocator chooses
-which thrusters run (docs/architecture.md §9).
-"""
+which thrusters run (docs/architecture.md §9)."""
 from __future__ import annotations
 
 import argparse

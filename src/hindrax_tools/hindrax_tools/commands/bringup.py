@@ -9,8 +9,7 @@ Runs until Ctrl-C / SIGTERM, then commands neutral thrust and closes any bag.
 The vehicle does not run this: it runs the launch layout, one process per node, respawned
 (``ros2 launch hindrax_bringup vehicle.launch.xml``, started by the Docker image and the systemd unit;
 docs/deployment.md). Without ``--sim`` the graph still opens the configured ports and I2C bus (a bench check of
-the hardware on one process), after printing :data:`VEHICLE_NOTICE` on stderr.
-"""
+the hardware on one process), after printing :data:`VEHICLE_NOTICE` on stderr."""
 from __future__ import annotations
 
 import argparse

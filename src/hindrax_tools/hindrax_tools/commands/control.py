@@ -14,8 +14,7 @@
 * ``hindrax control model [--model YAML]``: the gains of each hold, their bandwidth and the source of every model
   value (identified, or the vehicle file and why).
 
-Exit status 0, or 1 on bad input (one line on stderr).
-"""
+Exit status 0, or 1 on bad input (one line on stderr)."""
 from __future__ import annotations
 
 import argparse

@@ -12,8 +12,7 @@ was held and its error over them (:func:`hold_result`).
 
 On the topside the names are the gateway's ``/<name>/controller/...`` (docs/architecture.md §8.2); on the vehicle
 they are the controller's own. The vehicle is the one named, or the only one on the domain
-(:mod:`hindrax_onboard.commands.vehicle`). Prints ``<name>: <the controller's message>``.
-"""
+(:mod:`hindrax_onboard.commands.vehicle`). Prints ``<name>: <the controller's message>``."""
 from __future__ import annotations
 
 import argparse

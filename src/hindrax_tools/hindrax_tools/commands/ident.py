@@ -2,12 +2,10 @@
 tools (the references of priors, inclining and tilt-decay do not depend on the thrust curve).
 
 * ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO] [--model linear|quadratic]``:
-  [Hindrax-AM] analysis of a free-decay record (CSV with a header row; column 1 time in s, column 2
-  acceleration in m/s^2). Prints one JSON object
-  (:meth:`hindrax_onboard.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
-  added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8),
-  kc (eq. 9)... ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear +
-  quadratic damping, [SmallROV] eq. 12;
+  [Hindrax-AM] analysis of a free-decay record (CSV with a header row; column 1 time in s, column 2 acceleration in
+  m/s^2). Prints one JSON object (:meth:`hindrax_onboard.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s,
+  zeta, added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
+  ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear + quadratic damping, [SmallROV] eq. 12;
   :func:`hindrax_onboard.estimation.free_decay.quadratic_free_decay_keys`).
 * ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
@@ -37,8 +35,7 @@ tools (the references of priors, inclining and tilt-decay do not depend on the t
 * ``hindrax ident campaign``: the identification campaign on the simulator, same as ``hindrax run``
   (:mod:`hindrax_tools.commands.run`).
 
-Exit status 0 on success, 1 on bad input (one-line message on stderr).
-"""
+Exit status 0 on success, 1 on bad input (one-line message on stderr)."""
 from __future__ import annotations
 
 import argparse
@@ -72,10 +69,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--volume", type=float, required=True, help="displaced volume V, m^3")
         parser.add_argument("--density", type=float, default=1000.0, help="water density, kg/m^3 (default 1000)")
         parser.add_argument("--model", choices=("linear", "quadratic"), default="linear",
-                            help="linear: log decrement and period only (default); quadratic: also fit the "
-                                 "nonlinear ODE with linear + quadratic damping to the whole record "
-                                 "([SmallROV] eq. 12), adding linear_damping_n_s_per_m, "
-                                 "quadratic_damping_n_s2_per_m2 and their _std")
+                            help="linear: log decrement and period only (default); quadratic: also fit the nonlinear "
+                                 "ODE with linear + quadratic damping to the whole record ([SmallROV] eq. 12), adding "
+                                 "linear_damping_n_s_per_m, quadratic_damping_n_s2_per_m2 and their _std")
     elif which == "thruster-fit":
         parser.add_argument("file", help="CSV with a header: pulse width (us), thrust (N)")
         parser.add_argument("--write", metavar="CONFIG", default=None,
@@ -228,11 +224,10 @@ def _inclining(args) -> int:
 
 
 def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
-    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the
-    free-decay result ``out`` (in place) by the campaign's verdict rule itself
-    (:func:`~hindrax_fit.assessment.verdicts.apply_reference_verdicts` on a one-DOF
-    document: suspect beyond ``REFERENCE_Z_MAX`` combined std). Raises ``ValueError`` when ``path``
-    has no ``dofs.<dof>``."""
+    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the free-decay result
+    ``out`` (in place) by the campaign's verdict rule itself
+    (:func:`~hindrax_fit.assessment.verdicts.apply_reference_verdicts` on a one-DOF document: suspect beyond
+    ``REFERENCE_Z_MAX`` combined std). Raises ``ValueError`` when ``path`` has no ``dofs.<dof>``."""
     from hindrax_fit.assessment.results import read_identification
     from hindrax_fit.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
 

@@ -7,8 +7,7 @@ Writes ``identification.yaml`` and ``report/index.html`` into a new folder besid
 (``identification/calibration``) are applied as ``hindrax run`` applies them (docs/identification.md §6). A DOF whose
 chosen model does not beat holding the velocity in the cross-validation gets that verdict, as in ``hindrax ident
 fit``. Exit 0, or 1 with one line on stderr when the configuration, the bag or its content is unusable, or when no
-DOF could be identified.
-"""
+DOF could be identified."""
 from __future__ import annotations
 
 import argparse

@@ -9,8 +9,7 @@ message type (preprocessing, K-fold and holdout validation). Writes ``identifica
 validation data) in ``--out`` (new or empty; default: a new ``<first bag>_fit_<time>`` beside it) and prints a
 table. Without ``--config`` the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready:
 false`` with the reason, also printed (:func:`hindrax_fit.assessment.results.to_config_overrides`
-refuses it). Exit 0, or 1 with one line on stderr for an unusable bag, topic, frame or too little data.
-"""
+refuses it). Exit 0, or 1 with one line on stderr for an unusable bag, topic, frame or too little data."""
 from __future__ import annotations
 
 import argparse
@@ -43,8 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "velocity in cross-validation, else its verdict is 'no model beats "
                              "holding the velocity' (default 0.05; docs/identification.md §7)")
     parser.add_argument("--max-delay-s", type=float, default=1.0,
-                        help="largest input delay + lag searched for a commanded wrench, s "
-                             "(default 1.0)")
+                        help="largest input delay + lag searched for a commanded wrench, s (default 1.0)")
     parser.add_argument("--config", default=None,
                         help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
                              "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")

@@ -16,8 +16,7 @@
 Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain
 (:mod:`hindrax_onboard.commands.vehicle`): on the topside through the vehicle's gateway
 (``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
-The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise.
-"""
+The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise."""
 from __future__ import annotations
 
 import argparse

@@ -6,8 +6,7 @@ frame and time origin in the first ``#`` line; :mod:`hindrax_fit.assessment.pred
 ``--segment-s S`` the prediction restarts from the measured velocity every S seconds from the first instant with both
 force and velocity; without it, the tool's own rule (its holdout validation's 10 s segments). Prints per bag and DOF the
 segments, samples and nrmse, nrmse_hold, nrmse_zero of those rows (the definition in the predict module). Exit 0,
-or 1 with one line on stderr for an unusable model file, bag, topic or frame.
-"""
+or 1 with one line on stderr for an unusable model file, bag, topic or frame."""
 from __future__ import annotations
 
 import argparse

@@ -18,8 +18,7 @@ then reads the pool operator's hands from its standard input: a prompt's code (`
 launch (SIGINT: the recorder closes its bag) and the pool. Logs: ``DIR/logs/``; bags: ``DIR/runs/``. It does
 the block's ``hindrax keys`` itself (the gateway reads the key at its start): a new operator key in ``DIR/keys/``,
 named in both environments (``HINDRAX_KEYS_DIR``). ``--rig-cores F``: the launch's processes run in a Pi-sized
-CPU rig (:mod:`hindrax_tools.benchmarks.rig`), the pool outside it.
-"""
+CPU rig (:mod:`hindrax_tools.benchmarks.rig`), the pool outside it."""
 from __future__ import annotations
 
 import argparse

@@ -14,8 +14,7 @@ with a ``latest`` link beside it moved once the run has completed (:mod:`hindrax
 which must be new or empty. It holds ``identification.yaml`` (:mod:`hindrax_fit.assessment.results`),
 ``report/index.html`` with its plots, and (graph) ``bag/``. At the end a table is printed: per DOF and parameter the
 identified value with its std, the configured value ("truth" in simulation) and the relative error. Exit 0, or 1 when
-the campaign aborted or produced no estimate.
-"""
+the campaign aborted or produced no estimate."""
 from __future__ import annotations
 
 import argparse
@@ -63,10 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="reference steps before the ladders, comma-separated: thrust (= "
-                             "ballast, float, line_pull, line_pull_negative), or some of them, "
-                             "tilt_decay, inclining (docs/identification.md §6); through the graph "
-                             "the virtual pool plays the operator")
+                        help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
+                             "line_pull, line_pull_negative), or some of them, tilt_decay, inclining "
+                             "(docs/identification.md §6); through the graph the virtual pool plays the operator")
     for dest, key, text in _CALIBRATION_OPTIONS:
         parser.add_argument("--" + dest.replace("_", "-"), type=float, default=None,
                             help=f"{text} (default {key} of the vehicle file)")

@@ -82,9 +82,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--excitation-duration", type=float, default=None,
                         help="broadband run per DOF, s (default identification.excitation_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="reference steps before the manoeuvres of every case, as hindrax run "
-                             "--calibrate (docs/identification.md §6.2); the label gains "
-                             "[calibrate <steps>]")
+                        help="reference steps before the manoeuvres of every case, as hindrax run --calibrate "
+                             "(docs/identification.md §6.2); the label gains [calibrate <steps>]")
     parser.add_argument("--cached-only", action="store_true",
                         help="with --cache: use only the cases found there (re-assess them with the current verdicts "
                              "and tables; the others are listed as not run)")
@@ -114,8 +113,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
-    covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file.
-    """
+    covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file."""
     from hindrax_common.config import or_default
 
     from hindrax_sim.campaign import Campaign
@@ -341,8 +339,7 @@ def run(args: argparse.Namespace) -> int:
     names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]
     missing = [n for n in names if not _truth_path(n).is_file()]
     if missing:
-        raise CommandError(f"--scenarios: no truth file for {missing}; "
-                           f"shipped: {', '.join(scenario_names())}")
+        raise CommandError(f"--scenarios: no truth file for {missing}; shipped: {', '.join(scenario_names())}")
     dofs = choices("--dofs", args.dofs, DOFS, "DOF", empty_ok=False)
     if args.seeds < 1 or args.jobs < 1:
         raise CommandError("--seeds and --jobs must be >= 1")

@@ -1,8 +1,7 @@
 """``hindrax bag info BAG``: topics, types, message counts, rates, duration and size of a bag.
 
 BAG is a bag directory (metadata.yaml + .mcap files) or one .mcap file. Exit 0, or 1 with one line
-on stderr when BAG is not a readable bag. Implementation: :mod:`hindrax_bringup.recording.info`.
-"""
+on stderr when BAG is not a readable bag. Implementation: :mod:`hindrax_bringup.recording.info`."""
 from __future__ import annotations
 
 import argparse

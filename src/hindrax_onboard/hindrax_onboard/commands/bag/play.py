@@ -1,12 +1,10 @@
 """``hindrax bag play BAG``: publish a bag with its recorded timing (options: ``--help``).
 
-The safety and actuation topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``,
-``guard/*``, ``wrench``, setpoints, action topics) are withheld unless ``--safety-topics``, so that
-a bag never answers for a vehicle's supervisor or drives its thrusters; that option is refused
-while an ESC or supervisor is on the graph. Give BAG first (``--topics`` takes every following
-word). Exit 0 when played, 1 with one line on stderr when the bag cannot be played or is refused.
-Implementation: :class:`hindrax_bringup.recording.player_node.BagPlayerNode`.
-"""
+The safety and actuation topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``wrench``,
+setpoints, action topics) are withheld unless ``--safety-topics``, so that a bag never answers for a vehicle's
+supervisor or drives its thrusters; that option is refused while an ESC or supervisor is on the graph. Give BAG first
+(``--topics`` takes every following word). Exit 0 when played, 1 with one line on stderr when the bag cannot be played
+or is refused. Implementation: :class:`hindrax_bringup.recording.player_node.BagPlayerNode`."""
 from __future__ import annotations
 
 import argparse

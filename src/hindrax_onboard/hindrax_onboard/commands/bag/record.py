@@ -1,12 +1,10 @@
 """``hindrax bag record``: record topics to a rosbag2-compatible MCAP bag until Ctrl-C or --duration.
 
 Selection: ``--topics T [T ...]``, ``--regex R`` and/or ``--all``; none of them records the configured
-``recording.topics`` (hindrax.yaml), else every topic. Topics appearing later are added. Chunking,
-compression and splitting come from the ``recording.*`` keys of the configuration file (``--config``).
-Ctrl-C / SIGTERM / the end of ``--duration`` finish the bag; prints the bag path and message count.
-Exit 0, 1 on a configuration or output-directory error (one line on stderr).
-Implementation: :class:`hindrax_bringup.recording.recorder_node.RecorderNode`.
-"""
+``recording.topics`` (hindrax.yaml), else every topic. Topics appearing later are added. Chunking, compression and
+splitting come from the ``recording.*`` keys of the configuration file (``--config``). Ctrl-C / SIGTERM / the end of
+``--duration`` finish the bag; prints the bag path and message count. Exit 0, 1 on a configuration or output-directory
+error (one line on stderr). Implementation: :class:`hindrax_bringup.recording.recorder_node.RecorderNode`."""
 from __future__ import annotations
 
 import argparse

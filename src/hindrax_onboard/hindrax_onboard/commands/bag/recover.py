@@ -3,8 +3,7 @@
 Rewrites every truncated .mcap file of BAG as a complete file (summary, indexes, rosbag2 metadata
 record) and rebuilds metadata.yaml from the files; complete files are left unchanged. Prints one line
 per file and a total. Exit 0, or 1 with one line on stderr. Implementation:
-:mod:`hindrax_bringup.recording.recover`.
-"""
+:mod:`hindrax_bringup.recording.recover`."""
 from __future__ import annotations
 
 import argparse

@@ -1,10 +1,9 @@
 """The calibration steps' results as a standard message: topic ``identification/calibration``.
 
-The identification node (:mod:`..online.node`) publishes, when a calibration step of a goal ends
-(docs/identification.md §6.1, "On the ROS graph"), one ``diagnostic_msgs/msg/DiagnosticArray``
-holding every step result measured since the node started, one ``DiagnosticStatus`` per result,
-transient-local (depth 1); ``hindrax ident bag`` (:mod:`.from_bag`) reads it back into the
-:class:`~.campaign_record.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``.
+The identification node (:mod:`..online.node`) publishes, when a calibration step of a goal ends (docs/identification.md
+§6.1, "On the ROS graph"), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured since the node
+started, one ``DiagnosticStatus`` per result, transient-local (depth 1); ``hindrax ident bag`` (:mod:`.from_bag`) reads
+it back into the :class:`~.campaign_record.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``.
 
 Each status: ``level`` OK, ``hardware_id`` :data:`HARDWARE_ID`, ``name`` ``<kind>/<key>``, ``message`` a
 one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the float: exact round trip):
@@ -30,8 +29,7 @@ one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the f
     header stamps' time base); the gyro gives the inertia offline (:func:`~hindrax_fit.fit.calibration.decay_inertia`).
 
 Pure apart from the message import in :func:`calibration_array`; :func:`results_from_array` duck-types the
-message (rclpy or bag-decoded objects).
-"""
+message (rclpy or bag-decoded objects)."""
 from __future__ import annotations
 
 from typing import Any, Iterable, Mapping

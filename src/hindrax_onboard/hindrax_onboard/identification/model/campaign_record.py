@@ -2,8 +2,7 @@
 
 The executive (:class:`~..online.executive.Executive`) fills one while it runs; the bag reader
 (:func:`~.from_bag.record_from_bag`) rebuilds one from a recorded campaign; the campaign reader of the fit
-(:mod:`hindrax_fit.fit.campaign_fit`) reads either into the fit core's per-DOF records.
-"""
+(:mod:`hindrax_fit.fit.campaign_fit`) reads either into the fit core's per-DOF records."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -24,8 +23,7 @@ class CampaignRecord:
     only (never used by control or estimation; NaN on the ROS graph). sensors: the conditioned sensor log of
     :class:`~hindrax_onboard.vehicle.state.SensorState`. windows: DOF -> (t_start, t_end). online: DOF ->
     OnlineDofEstimator. levels / authority: DOF -> ladder (N or N m) / (positive, negative) authority. aborted,
-    abort_reason, wall_time_s, tick_s, time_constant_s, seed, final_pulse_width_us.
-    """
+    abort_reason, wall_time_s, tick_s, time_constant_s, seed, final_pulse_width_us."""
 
     t_s: np.ndarray
     wrench_frd: np.ndarray

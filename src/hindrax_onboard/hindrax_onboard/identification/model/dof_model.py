@@ -18,8 +18,7 @@ records (:mod:`hindrax_fit.fit.campaign_fit`); :class:`DofIdentification` holds 
 online RLS on :func:`regressor_matrix` (:class:`~..online.estimators.OnlineDofEstimator`, a live
 indicator), the equation-error batch LS ([Hindrax-Drag] eqs. 6-8; its inertia biased low by the
 smoothing of the fast thrust transients) and the steady-state method (:func:`steady_state_fit`,
-[Hindrax-Drag] eqs. 2-8; heave usually has too few steady windows, [Hindrax-Drag] §5).
-"""
+[Hindrax-Drag] eqs. 2-8; heave usually has too few steady windows, [Hindrax-Drag] §5)."""
 from __future__ import annotations
 
 import math
@@ -45,8 +44,7 @@ def core_index(names: Sequence[str], core_names: Sequence[str]) -> list:
     out = []
     for n in names:
         base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
-        out.append(core_names.index(n) if n in core_names
-                   else core_names.index(base) if base in core_names else None)
+        out.append(core_names.index(n) if n in core_names else core_names.index(base) if base in core_names else None)
     return out
 
 
@@ -77,8 +75,7 @@ def parameter_units(dof: str) -> dict[str, str]:
 def restoring_regressor(dof: str, roll_rad, pitch_rad) -> np.ndarray:
     """Restoring column s(eta): roll cos(theta) sin(phi), pitch sin(theta).
 
-    Source: docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23.
-    """
+    Source: docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23."""
     if dof == "roll":
         return np.cos(pitch_rad) * np.sin(roll_rad)
     return np.sin(pitch_rad)
@@ -94,13 +91,11 @@ def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
     one = np.ones_like(v)
     if dof == "heave":
         pos = v > 0
-        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0),
-                np.where(pos, 0.0, v), one]
+        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0), np.where(pos, 0.0, v), one]
     else:
         cols = [q, v, one]
         if dof in ("roll", "pitch"):
-            cols.append(np.zeros_like(v) if restoring is None
-                        else np.asarray(restoring, dtype=float))
+            cols.append(np.zeros_like(v) if restoring is None else np.asarray(restoring, dtype=float))
     return np.stack(cols, axis=-1)
 
 
@@ -120,17 +115,14 @@ def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
     """Configured ("true") values of every parameter of :func:`parameter_names` plus added_mass.
 
     inertia = rigid + added mass (configuration hydrodynamics); bias: heave (rho V - m) g, FRD force holding
-    depth (+0.785 N for Hindrax), 0 otherwise; restoring: z_g W - z_b B (module docstring).
-    """
+    depth (+0.785 N for Hindrax), 0 otherwise; restoring: z_g W - z_b B (module docstring)."""
     h = cfg.dof_hydrodynamics(dof)
     added = float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)])
     out = {"inertia": rigid_inertia(cfg, dof) + added, "added_mass": added}
     if dof == "heave":  # its damping parameters are named as the fields of DofHydrodynamics
-        out.update({n: getattr(h, n) for n in parameter_names(dof)[1:5]},
-                   bias=float(cfg.buoyancy_n - cfg.weight_n))
+        out.update({n: getattr(h, n) for n in parameter_names(dof)[1:5]}, bias=float(cfg.buoyancy_n - cfg.weight_n))
     else:
-        out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive,
-                   bias=0.0)
+        out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive, bias=0.0)
     if dof in ("roll", "pitch"):
         out["restoring"] = float(cfg.vehicle.centre_of_gravity_frd_m[2] * cfg.weight_n
                                  - cfg.vehicle.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n)
@@ -147,8 +139,7 @@ class DofIdentification:
     (steady: None when too few windows, with ``steady_note``). truth: configured values (simulation only).
     pool_time_s: duration of the DOF's manoeuvres; rls_time_s: pool time until the RLS converged (None:
     never); steady_time_s: pool time until the end of the last steady window used. signals: arrays for the
-    report (t, velocity, acceleration, force, fitted velocity, steady window means).
-    """
+    report (t, velocity, acceleration, force, fitted velocity, steady window means)."""
 
     dof: str
     names: list
@@ -190,8 +181,7 @@ def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, resto
     t, velocity (smoothed), force (thrust model), run_id (-1 outside runs) (n,); restoring (n,) and its
     coefficient are subtracted from the force for roll/pitch. Returns (params {name: (value, std)},
     windows list, note, end time of the last window). Heave: one fit per direction (names with
-    _positive/_negative). params is None when there are too few windows (note says why).
-    """
+    _positive/_negative). params is None when there are too few windows (note says why)."""
     t = np.asarray(t, dtype=float)
     v = np.asarray(velocity, dtype=float)
     f = np.asarray(force, dtype=float)
@@ -213,8 +203,7 @@ def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, resto
                 if sel.sum() < 4:
                     return None, wins, f"{int(sel.sum())} steady windows in {suffix} heave (need 4)", t_end
                 fit = fit_drag(vm[sel], fm[sel])
-                out.update({f"{k}_{suffix}": (getattr(fit, k), getattr(fit, f"{k}_std"))
-                            for k in _DRAG})
+                out.update({f"{k}_{suffix}": (getattr(fit, k), getattr(fit, f"{k}_std")) for k in _DRAG})
         else:
             if len(wins) < 4:
                 return None, wins, f"{len(wins)} steady windows (need 4)", t_end
@@ -263,12 +252,10 @@ RLS_STD_DOFS = ("surge", "sway", "heave", "yaw")
 def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg: VehicleConfig) -> np.ndarray:
     """The online RLS standard deviations worth publishing (p,), NaN = "not converged / not trusted".
 
-    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping
-    parameters of :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty
-    (:func:`thrust_covariance`): the RLS inertia and bias carry the lag of the causal filter behind
-    the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
-    suite.
-    """
+    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping parameters of
+    :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty (:func:`thrust_covariance`): the RLS
+    inertia and bias carry the lag of the causal filter behind the acceleration, so their std would not cover the truth;
+    roll and pitch are not in the scenario suite."""
     std = np.asarray(converged_std, dtype=float)
     keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
                     dtype=bool)

@@ -9,8 +9,7 @@ for a linear problem) is
     P = C^-1 + D,   theta = P^-1 (C^-1 theta_fit + D mu),   cov = P^-1,
 
 D = diag(1 / sd_i^2) on the parameters with a prior (0 elsewhere): the no-calibration case of
-:func:`~.calibration.joint_estimate`, which calls it then. Units: those of the parameters.
-"""
+:func:`~.calibration.joint_estimate`, which calls it then. Units: those of the parameters."""
 from __future__ import annotations
 
 import math
@@ -57,8 +56,7 @@ def prior_entries(cfg) -> dict[str, dict]:
         return {}
     src = "[NTNU-Thesis] App. A.1/A.2 empirical estimate, solid prism of the configured box"
     keys = ("added_mass", "linear_damping", "quadratic_damping")
-    return {dof: {**{k: finite_or_none(p[k][i]) for k in keys}, "source": src}
-            for i, dof in enumerate(DOFS)}
+    return {dof: {**{k: finite_or_none(p[k][i]) for k in keys}, "source": src} for i, dof in enumerate(DOFS)}
 
 
 def theta_priors(dof: str, names: Sequence[str], cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:

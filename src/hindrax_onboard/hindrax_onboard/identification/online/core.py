@@ -35,15 +35,13 @@ Rules (one test row each in ``test/test_identification_core.py``):
   phase and the step's message; estimates every ``publish_period_s``.
 * **Undo** (:attr:`~IdentificationCore.pending_undo`): the loads a stopped goal's calibration asked for and did not
   see removed are named in its result and confirmed first by the next goal (:class:`~.steps.Confirm`).
-* **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more
-  than :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is
-  said in a warning naming it ("identification starved for 0.31 s"); one later than twice
-  ``thrusters.wrench_timeout_s`` (the allocation has held neutral for as long as a wrench may be old: the manoeuvre
-  is not what the executive commanded) stops the goal with that reason, which trips the supervisor (its
-  ``disarm_cause`` then names the starvation).
+* **Starvation** (:meth:`~IdentificationCore.starved`, docs/architecture.md §10.1): a control tick that comes more than
+  :data:`STARVED_WARN_TICKS` periods after the previous one (the steady clock's gap, measured by the node) is said in a
+  warning naming it ("identification starved for 0.31 s"); one later than twice ``thrusters.wrench_timeout_s`` (the
+  allocation has held neutral for as long as a wrench may be old: the manoeuvre is not what the executive commanded)
+  stops the goal with that reason, which trips the supervisor (its ``disarm_cause`` then names the starvation).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
-  past the next control tick while a goal runs.
-"""
+  past the next control tick while a goal runs."""
 from __future__ import annotations
 
 import math
@@ -120,13 +118,12 @@ def goal_problem(dofs: Sequence[str], calibrate: Sequence[str], calibration_only
 class Event:
     """One thing the node does, in order; ``kind`` and its ``data`` are below.
 
-    ``status`` (phase name: idle, positioning, running, returning, done, aborted; ExecutiveStatus or
-    None; message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus,
-    operator prompt: the action feedback), ``estimates`` (the executive whose online estimates to
-    publish), ``calibration`` (every step result since start, list of
-    :func:`~..model.calibration_topic.statuses` items), ``abort`` (the reason for
-    ``supervisor/abort``), ``log`` (level info / warn / error, text), ``warn_throttled`` (text),
-    ``end`` (the :class:`GoalRun` that ended: deliver its result)."""
+    ``status`` (phase name: idle, positioning, running, returning, done, aborted; ExecutiveStatus or None; message),
+    ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus, operator prompt: the action feedback),
+    ``estimates`` (the executive whose online estimates to publish), ``calibration`` (every step result since start,
+    list of :func:`~..model.calibration_topic.statuses` items), ``abort`` (the reason for ``supervisor/abort``), ``log``
+    (level info / warn / error, text), ``warn_throttled`` (text), ``end`` (the :class:`GoalRun` that ended: deliver its
+    result)."""
 
     kind: str
     data: tuple = ()
@@ -158,8 +155,7 @@ class IdentificationCore:
 
     config: the vehicle configuration; tick_s: control tick period (s); publish_period_s: period of the online
     estimates (s); dvl_lock_timeout_s, sensor_timeout_s, stop_timeout_s: the node parameters (s, > 0);
-    executive: factory ``(config, dofs, levels, **kwargs) -> Executive`` (tests pass a stand-in).
-    """
+    executive: factory ``(config, dofs, levels, **kwargs) -> Executive`` (tests pass a stand-in)."""
 
     def __init__(self, config: VehicleConfig, *, tick_s: float, publish_period_s: float, dvl_lock_timeout_s: float,
                  sensor_timeout_s: float, stop_timeout_s: float, executive: Callable[..., Any] = Executive) -> None:
@@ -353,8 +349,7 @@ class IdentificationCore:
         else:
             samples, self.samples = self.samples, []
             previous = ex.t_s
-            valid = ordered_samples(samples, previous, t + FUTURE_STAMP_TOLERANCE_S,
-                                    previous - STALE_STAMP_TOLERANCE_S)
+            valid = ordered_samples(samples, previous, t + FUTURE_STAMP_TOLERANCE_S, previous - STALE_STAMP_TOLERANCE_S)
             if len(valid) < len(samples):
                 self.samples_dropped += len(samples) - len(valid)
                 out.append(Event("warn_throttled", (

@@ -7,8 +7,7 @@ physical-sign bounds, the change detector and the start at the empirical priors 
 from ``identification.rls_*``. The causal filter lags the fast transients and the forgetting window
 (1 / (1 - lambda) = 500 ticks, 20 s at the 25 Hz tick) is short, so the online values are a live indicator (a few
 per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly conditioned online), not the
-reported estimate (that is the fit core's, :mod:`hindrax_fit.fit.fit_core`).
-"""
+reported estimate (that is the fit core's, :mod:`hindrax_fit.fit.fit_core`)."""
 from __future__ import annotations
 
 import math
@@ -48,12 +47,11 @@ def rls_setting(cfg: VehicleConfig, name: str):
 def rls_prior(cfg: VehicleConfig, dof: str, prior_std_rel: float) -> tuple[np.ndarray, np.ndarray] | None:
     """Start value and 1-sigma (p,) of the online RLS of ``dof`` from the empirical priors, or None.
 
-    inertia = rigid + prior added mass, std ``prior_std_rel`` x the added mass (the rigid part is known);
-    quadratic and linear damping (heave: the same prior for both directions) std ``prior_std_rel`` x the value
-    ([NTNU-Thesis] App. A.1/A.2 via :func:`~..model.posterior.prior_entries`; a solid prism of the configured
-    box); bias: the expected one (0; heave (rho V - m) g) with :data:`RLS_PRIOR_BIAS_STD`; restoring: the
-    configured z_g W - z_b B with ``prior_std_rel`` x its value. None when ``prior_std_rel`` is 0 or the geometry
-    gives no prior."""
+    inertia = rigid + prior added mass, std ``prior_std_rel`` x the added mass (the rigid part is known); quadratic and
+    linear damping (heave: the same prior for both directions) std ``prior_std_rel`` x the value ([NTNU-Thesis] App.
+    A.1/A.2 via :func:`~..model.posterior.prior_entries`; a solid prism of the configured box); bias: the expected one
+    (0; heave (rho V - m) g) with :data:`RLS_PRIOR_BIAS_STD`; restoring: the configured z_g W - z_b B with
+    ``prior_std_rel`` x its value. None when ``prior_std_rel`` is 0 or the geometry gives no prior."""
     if not prior_std_rel > 0:
         return None
     p = prior_entries(cfg).get(dof)
@@ -107,12 +105,10 @@ def online_rls(cfg: VehicleConfig, dof: str) -> RecursiveLeastSquares:
 class OnlineDofEstimator:
     """Online estimator of one DOF: KinematicKalmanFilter on its sensor + RLS with forgetting.
 
-    ``on_sample(device, stamp_s, state)`` feeds the filter from the conditioned
-    :class:`~..vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
-    one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
-    (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
-    first time :meth:`_converged` holds.
-    """
+    ``on_sample(device, stamp_s, state)`` feeds the filter from the conditioned :class:`~..vehicle.state.SensorState`;
+    ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds one regressor row (``force``: thrust-model
+    force/moment on the axis, N or N m). ``history`` holds (t, theta, std, excitation_normalised) every
+    ``history_every`` updates; ``converged_at_s`` is the first time :meth:`_converged` holds."""
 
     _DEVICE = {"dvl": "dvl75", "depth": "ms5837", "gyro": "icm20948_gyro"}
 

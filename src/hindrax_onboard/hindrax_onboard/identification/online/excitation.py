@@ -13,10 +13,9 @@ the start of the run.
   and Schoukens 2012, *System Identification: A Frequency Domain Approach*, 2nd ed., §5.2.4), scaled so that
   its peak over one period is the amplitude. Periodic, so a run of whole periods has power on the designed
   lines only (no leakage) and a bounded displacement.
-* :class:`Prbs` - a maximum-length binary sequence (m-sequence, ``scipy.signal.max_len_seq``) of ``nbits`` bits
-  held for a clock period ``clock_s`` each: +-A, period (2^nbits - 1) clock_s, spectrum flat to about
-  0.44 / clock_s (Godfrey 1993, *Perturbation Signals for System Identification*, ch. 1; Pintelon and Schoukens
-  2012 §5.2.6).
+* :class:`Prbs` - a maximum-length binary sequence (m-sequence, ``scipy.signal.max_len_seq``) of ``nbits`` bits held for
+  a clock period ``clock_s`` each: +-A, period (2^nbits - 1) clock_s, spectrum flat to about 0.44 / clock_s (Godfrey
+  1993, *Perturbation Signals for System Identification*, ch. 1; Pintelon and Schoukens 2012 §5.2.6).
 * :class:`Chirp` - a logarithmic swept sine from ``f_min`` to ``f_max`` over the run (``scipy.signal.chirp``).
 * :func:`design_band` - the band from the DOF's time constant: with the vehicle file's inertia M, linear and
   quadratic damping k_l, k_q, the speed reached under the amplitude A is v_A (k_q v^2 + k_l v = A) and the
@@ -39,8 +38,7 @@ Pool-box shaping (:meth:`BoxShaping.force`), with e the displacement from the bo
    reaches the room left, the whole command is a full brake -sign(v) ``brake_fraction`` x authority.
 
 The total is clipped to the authority. Because the fit uses the recorded force, the shaping does not bias the
-identification; it only removes some low-frequency power.
-"""
+identification; it only removes some low-frequency power."""
 from __future__ import annotations
 
 import math
@@ -81,8 +79,7 @@ class Multisine:
         object.__setattr__(self, "_scale", self.amplitude / peak)
 
     @classmethod
-    def design(cls, amplitude: float, f_min_hz: float, f_max_hz: float, period_s: float | None = None
-               ) -> "Multisine":
+    def design(cls, amplitude: float, f_min_hz: float, f_max_hz: float, period_s: float | None = None) -> "Multisine":
         """Lines k / P for k from ceil(f_min P) (>= 1) to floor(f_max P); the period P defaults to 1 / f_min (the
         lowest line is then f_min). Raises ``ValueError`` when no line falls in the band."""
         p = 1.0 / f_min_hz if period_s is None else float(period_s)

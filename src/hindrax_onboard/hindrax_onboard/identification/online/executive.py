@@ -35,21 +35,19 @@ ladder (``identification.levels_per_dof`` levels, or the goal's fractions of the
 ``identification.excitation`` (or the ``excitation`` argument) ``multisine``, ``prbs`` or ``chirp``, one broadband run
 of ``identification.excitation_duration_s``.
 
-Command rate (``identification.command_rate_hz``, default the tick's rate): the steps' control laws run every tick,
-and the wrench :meth:`Executive.start` or :meth:`Executive.step` returns is the law's output of the last command tick,
-every :attr:`Executive.command_ticks` ticks, held in between (sample-and-hold); :attr:`Executive.new_command` says
-whether this tick's wrench is a new one (the identification node publishes only those). Both plants get the same
-held command. Why: on the vehicle each wrench is a message through the allocation, the ESC and the
-recorder (docs/architecture.md §10.1), while the samples, the recorded force, the online estimators
-and the thrust lag stay at the tick's rate.
+Command rate (``identification.command_rate_hz``, default the tick's rate): the steps' control laws run every tick, and
+the wrench :meth:`Executive.start` or :meth:`Executive.step` returns is the law's output of the last command tick, every
+:attr:`Executive.command_ticks` ticks, held in between (sample-and-hold); :attr:`Executive.new_command` says whether
+this tick's wrench is a new one (the identification node publishes only those). Both plants get the same held command.
+Why: on the vehicle each wrench is a message through the allocation, the ESC and the recorder (docs/architecture.md
+§10.1), while the samples, the recorded force, the online estimators and the thrust lag stay at the tick's rate.
 
 Stops (:class:`CampaignAbort`, the record says why): a limit (``limits.*``: depth, altitude, roll, pitch; the
 pool box grown by half ``pool.margin_m``), no valid DVL velocity for ``dvl_lock_timeout_s`` during surge or sway,
 the ESC output disarmed, a cancel request. The caller then commands neutral thrust. A calibration step stopped after
 it asked for a load (ballast, float, line, test mass) leaves it in :attr:`Executive.undo`: the aborted status asks
 to remove it (:func:`~.steps.undo_line`), and a campaign given it as ``confirm`` first waits, thrusters stopped, for
-the operator to confirm each removal (:class:`~.steps.Confirm`).
-"""
+the operator to confirm each removal (:class:`~.steps.Confirm`)."""
 from __future__ import annotations
 
 import math
@@ -78,8 +76,7 @@ __all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "comman
            "CALIBRATION_STEPS", "THRUST_STEPS", "expand_calibration", "calibration_forces", "inclining_load",
            "float_buoyancy"]
 
-#: Reference steps the executive can run before the manoeuvres; ``thrust`` runs
-#: every step of :data:`THRUST_STEPS`.
+#: Reference steps the executive can run before the manoeuvres; ``thrust`` runs every step of :data:`THRUST_STEPS`.
 CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay", "inclining", "float", "line_pull_negative", "thrust")
 #: The steps the per-direction thrust scales need (docs/identification.md §6.1): sinker and float (the vertical
 #: thrusters' reverse and forward directions; their hovers against the weighed net buoyancy), line pulls in both
@@ -92,8 +89,7 @@ def expand_calibration(steps: Iterable[str]) -> list[str]:
     Raises ``ValueError`` for a name not in :data:`CALIBRATION_STEPS`."""
     bad = [s for s in steps if s not in CALIBRATION_STEPS]
     if bad:
-        raise ValueError(f"unknown calibration step(s) {bad}; "
-                         f"choose from {', '.join(CALIBRATION_STEPS)}")
+        raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
     out: list[str] = []
     for s in steps:
         for x in (THRUST_STEPS if s == "thrust" else (s,)):
@@ -130,8 +126,7 @@ class TickInput:
     t_s: time of the tick (s, the plant's clock). elapsed_s: time the last command was held (s; the lag of the
     recorded force runs over it). samples: new sensor samples ``(device, sample)`` in the simulator's form
     (:mod:`hindrax_sim.sensors`, or :mod:`...vehicle.signals` from ROS messages), in the order to condition them.
-    armed: the ESC output is armed. cancel: the operator asked to stop.
-    """
+    armed: the ESC output is armed. cancel: the operator asked to stop."""
 
     t_s: float
     elapsed_s: float
@@ -142,10 +137,9 @@ class TickInput:
 
 @dataclass
 class ExecutiveStatus:
-    """Where the campaign is: phase ``"positioning"`` (dive, moving, settling), ``"running"`` (a level is
-    commanded) or ``"returning"`` (between runs of a DOF), or ``"done"`` / ``"aborted"``; the DOF under test
-    ('' when none), level index and count, level command (N or N m, FRD; 0 outside runs), progress 0-1 and
-    the current step's message."""
+    """Where the campaign is: phase ``"positioning"`` (dive, moving, settling), ``"running"`` (a level is commanded) or
+    ``"returning"`` (between runs of a DOF), or ``"done"`` / ``"aborted"``; the DOF under test ('' when none), level
+    index and count, level command (N or N m, FRD; 0 outside runs), progress 0-1 and the current step's message."""
 
     phase: str
     dof: str
@@ -161,12 +155,11 @@ def ordered_samples(samples: Iterable[tuple[str, Any]], not_before_s: float = -m
     """Samples sorted by stamp (stable), each stamped before ``not_before_s`` moved to it (a copy), those stamped
     after ``not_after_s`` or before ``drop_before_s`` (s) left out.
 
-    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion
-    start, the DVL time of validity), the online filters have already been predicted to the previous
-    tick, ``not_before_s``; the messages and the bag keep the original stamps. Samples outside
-    [``drop_before_s``, ``not_after_s``] cannot be valid (a publisher on another clock, such as a
-    second graph on the same ROS domain; :mod:`.core`'s tolerances); the caller counts those left
-    out (``len(samples) - len(result)``)."""
+    For samples that arrive late (sensor latency through a graph: the MS5837 stamp of its conversion start, the DVL time
+    of validity), the online filters have already been predicted to the previous tick, ``not_before_s``; the messages
+    and the bag keep the original stamps. Samples outside [``drop_before_s``, ``not_after_s``] cannot be valid (a
+    publisher on another clock, such as a second graph on the same ROS domain; :mod:`.core`'s tolerances); the caller
+    counts those left out (``len(samples) - len(result)``)."""
     out = []
     for dev, s in sorted(samples, key=lambda ds: ds[1].stamp_s):
         if not drop_before_s <= s.stamp_s <= not_after_s:
@@ -216,8 +209,7 @@ class Executive:
     held for :func:`command_ticks` ticks. confirm: (remove code, instruction) pairs an aborted campaign left
     (its :attr:`undo`): the operator confirms each first, thrusters stopped (module docstring, "Stops").
     Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
-    calibration step or a missing known force, an unknown excitation or a non-positive duration or command rate.
-    """
+    calibration step or a missing known force, an unknown excitation or a non-positive duration or command rate."""
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None, *,
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,
@@ -280,8 +272,7 @@ class Executive:
         self.levels_per_dof = levels
         self.fractions = [float(x) for x in fractions] if fractions else None
         self.heave_repeats = max(1, int(heave_repeats))
-        self.max_level_s = float(ident.max_level_duration_s if max_level_duration_s is None
-                                 else max_level_duration_s)
+        self.max_level_s = float(ident.max_level_duration_s if max_level_duration_s is None else max_level_duration_s)
         self.dvl_lock_timeout_s = float(dvl_lock_timeout_s)
         #: the state every step shares (sensors, holds, pool box, tick log, results, operator hand-shake)
         self.ctx = StepContext(cfg, self.tick_s, progress)
@@ -306,10 +297,9 @@ class Executive:
             self.ctx.undo.update(dict(confirm))
 
     # ------------------------------------------------------------------ the shared state, by name
-    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents
-    #: them): the conditioned sensors ``state``, the pool ``box``, the allocation model ``core``,
-    #: ``curve``, ``matrix``, ``authority``, ``time_constant_s``, the step results, ``awaiting``
-    #: and ``prompt`` (operator), ``message``, ...
+    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents them): the conditioned
+    #: sensors ``state``, the pool ``box``, the allocation model ``core``, ``curve``, ``matrix``, ``authority``,
+    #: ``time_constant_s``, the step results, ``awaiting`` and ``prompt`` (operator), ``message``, ...
     _SHARED = frozenset({"state", "box", "core", "curve", "matrix", "authority", "time_constant_s",
                          "calibration", "inclining", "decays", "windows", "levels", "awaiting",
                          "prompt", "message", "depth_hold_m", "t_s"})
@@ -544,8 +534,7 @@ class Executive:
         if math.isfinite(st.depth_m) and st.depth_m > lim.max_depth_m:
             raise CampaignAbort(f"depth {st.depth_m:.2f} m beyond limits.max_depth_m {lim.max_depth_m:g}")
         if math.isfinite(st.altitude_m) and st.altitude_m < lim.min_altitude_m:
-            raise CampaignAbort(f"altitude {st.altitude_m:.2f} m below limits.min_altitude_m "
-                                f"{lim.min_altitude_m:g}")
+            raise CampaignAbort(f"altitude {st.altitude_m:.2f} m below limits.min_altitude_m {lim.min_altitude_m:g}")
         roll, pitch = st.rpy_rad[0], st.rpy_rad[1]
         if math.isfinite(roll) and abs(roll) > lim.max_roll_rad:
             raise CampaignAbort(f"roll {roll:.2f} rad beyond limits.max_roll_rad {lim.max_roll_rad:g}")

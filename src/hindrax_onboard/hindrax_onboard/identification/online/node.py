@@ -2,14 +2,13 @@
 
 A thin rclpy node over two pure objects: :class:`~.core.IdentificationCore` (goal checks, the goal's life from
 acceptance to the end of its neutral hold, what each tick publishes; table-tested in
-``test/test_identification_core.py``) and the :class:`~.executive.Executive` it drives (the dive, positioning,
-level ladders, holds, pool-box planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the
-in-process campaign steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples
-(:mod:`...vehicle.signals`) for the core, and at every tick of its control timer
-(``identification.estimate_rate_hz``, ROS clock) turns the core's events into messages (wrench, status, feedback,
-estimates, calibration results, supervisor abort, the goal's result). Nothing in a callback waits, and no
-coroutine runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is
-simulated: it sees the same topics from the drivers either way.
+``test/test_identification_core.py``) and the :class:`~.executive.Executive` it drives (the dive, positioning, level
+ladders, holds, pool-box planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the in-process
+campaign steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples
+(:mod:`...vehicle.signals`) for the core, and at every tick of its control timer (``identification.estimate_rate_hz``,
+ROS clock) turns the core's events into messages (wrench, status, feedback, estimates, calibration results, supervisor
+abort, the goal's result). Nothing in a callback waits, and no coroutine runs while a goal does (see "Action execution"
+below). The node does not know whether the vehicle is simulated: it sees the same topics from the drivers either way.
 
 The force in the regression is the thrust model of the pulse widths the ESC node actually wrote
 (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed, through the allocation's cubic curves,
@@ -39,12 +38,11 @@ Service ``identification/continue`` (std_srvs/Trigger)
     (8.56 N in water), then call continue``), the step goes on (success True, message ``continuing: <what>``);
     otherwise success False with the reason (no goal, or nothing awaited). Nothing waits in the callback.
 Subscribes
-    ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure``
-    (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
-    ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag): only while a goal is
-    accepted or runs (see "Inputs"); ``esc/output_state`` (the ESC's armed flag, latched, on change; always);
-    ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust, and why, for the result; :mod:`.core`;
-    always).
+    ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure`` (FluidPressure, Pa),
+    ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range), ``thrusters/pulse_width`` (ThrusterPwm, widths written by
+    the ESC node and the armed flag): only while a goal is accepted or runs (see "Inputs"); ``esc/output_state`` (the
+    ESC's armed flag, latched, on change; always); ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust,
+    and why, for the result; :mod:`.core`; always).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz``
     (the control tick is ``identification.estimate_rate_hz``; executive module docstring, "Command
@@ -125,11 +123,9 @@ __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
     """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
 
-    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`
-    (:func:`~..model.dof_model.rls_published_std`), -1 where that is NaN ("not converged or
-    not trusted": the message's float64 std has no NaN convention). ``covariance`` stays the raw
-    RLS one.
-    """
+    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std` (:func:`~..model.dof_model.rls_published_std`),
+    -1 where that is NaN ("not converged or not trusted": the message's float64 std has no NaN convention).
+    ``covariance`` stays the raw RLS one."""
     rls = estimator.rls
     units = parameter_units(dof)
     msg = HydroEstimate(dof=dof, method=method)
@@ -153,8 +149,7 @@ class IdentificationNode(VehicleNode):
 
     config: a VehicleConfig (default: from the node's parameters,
     :func:`~hindrax_common.node_support.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
-    :class:`ConfigError` for an invalid configuration.
-    """
+    :class:`ConfigError` for an invalid configuration."""
 
     def __init__(self, *, config: VehicleConfig | None = None, node_name: str = "identification",
                  **kwargs: Any) -> None:
@@ -181,8 +176,7 @@ class IdentificationNode(VehicleNode):
         # no QoS event handlers (VehicleNode): a missing sensor fails the goal (timeouts, DVL lock)
         self._inputs: list = []  # the sensor subscriptions, open while a goal is accepted or runs
         # the ESC's armed flag while no goal runs (latched, on change; the goal's pulse_width reports carry it too)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
-                                 esc_state_qos())
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
         self.create_subscription(DiagnosticStatus, "supervisor/status", lambda m: self.core.on_disarm_cause(
             next((kv.value for kv in m.values if kv.key == "disarm_cause"), "")), 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
@@ -192,8 +186,7 @@ class IdentificationNode(VehicleNode):
         # transient local: a recorder or tool that subscribes after the step still gets every result
         latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC,
-                                                     latched)
+        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC, latched)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._goal_result,
                                     goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
                                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
@@ -202,9 +195,8 @@ class IdentificationNode(VehicleNode):
         self._timer = self.create_timer(self.tick_s, self._on_tick, autostart=False)
         self._idle_timer = self.create_timer(IDLE_STATUS_PERIOD_S, self._on_tick)
         command_hz = 1.0 / (self.tick_s * command_ticks(self.config, self.tick_s))
-        log.info(f"identification executive ready: action run_identification, ticks at "
-                 f"{1.0 / self.tick_s:g} Hz, wrench at {command_hz:g} Hz, estimates at "
-                 f"{1.0 / self.publish_period_s:g} Hz")
+        log.info(f"identification executive ready: action run_identification, ticks at {1.0 / self.tick_s:g} Hz, "
+                 f"wrench at {command_hz:g} Hz, estimates at {1.0 / self.publish_period_s:g} Hz")
 
     def _param(self, name: str, default: float, description: str) -> float:
         """A read-only node parameter (> 0, s). Raises :class:`ConfigError` (one line) for another value."""
@@ -245,8 +237,7 @@ class IdentificationNode(VehicleNode):
                                 (Dvl, "dvl/data", lambda m: add(samples_from_dvl(m)), 20),
                                 (FluidPressure, "pressure/fluid_pressure",
                                  lambda m: add([sample_from_pressure(m)]), 20),
-                                (Imu, "imu/data_raw",
-                                 lambda m: add(samples_from_imu(m, self._mount_t)), 50),
+                                (Imu, "imu/data_raw", lambda m: add(samples_from_imu(m, self._mount_t)), 50),
                                 (Range, "ping/altitude", lambda m: add([sample_from_range(m)]), 20),
                                 (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))]
         else:

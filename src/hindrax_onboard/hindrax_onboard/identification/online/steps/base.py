@@ -2,8 +2,7 @@
 
 A :class:`Step` is one self-contained part of a campaign (the dive, a known-force calibration step,
 one DOF's ladder or broadband run), run one after the other by the sequencer; :mod:`.context`
-describes its ticks and what it sees (never the plant).
-"""
+describes its ticks and what it sees (never the plant)."""
 from __future__ import annotations
 
 import math

@@ -2,8 +2,7 @@
 
 The signal (Schroeder multisine, m-sequence PRBS or log chirp, :mod:`..excitation`) drives the DOF under test
 through the :class:`~..excitation.BoxShaping` of its displacement from the pool-box centre, the other DOFs held;
-the DOF is identified by the same output-error fit as a ladder (:func:`~hindrax_fit.fit.campaign_fit.identify_dof`).
-"""
+the DOF is identified by the same output-error fit as a ladder (:func:`~hindrax_fit.fit.campaign_fit.identify_dof`)."""
 from __future__ import annotations
 
 import math

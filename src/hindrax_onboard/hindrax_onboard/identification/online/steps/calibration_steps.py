@@ -1,5 +1,4 @@
-"""Reference steps with known forces or moments, run before the manoeuvres
-(docs/identification.md §6.1 and §6.4).
+"""Reference steps with known forces or moments, run before the manoeuvres (docs/identification.md §6.1 and §6.4).
 
 Thrust steps (:class:`KnownForceStep`): hold, average the holding force X1 (thrust model, on one body axis); the
 operator applies a known force E along that axis; hold again, X2; the operator removes it. At rest the thrust
@@ -22,8 +21,7 @@ Attitude steps: :class:`Inclining` (restoring stiffness C of roll or pitch from 
 :class:`TiltDecay` (roll or pitch free decay after a thruster-made tilt).
 
 Durations: :data:`CALIBRATION_SETTLE_S` before and :data:`CALIBRATION_WINDOW_S` of each averaging hold (the
-constructors' defaults; a calibration-only test passes shorter ones).
-"""
+constructors' defaults; a calibration-only test passes shorter ones)."""
 from __future__ import annotations
 
 import math
@@ -65,8 +63,7 @@ class KnownForceStep(Step):
     (the single-scale estimate, from the two means' batch-mean std), ``known_force_n`` (magnitude), ``direction``
     (body FRD axis and sense of E), ``group``, ``holding_force_n`` [X1, X2] and ``holding_force_std_n``,
     ``forward_force_n`` [P1, P2] and ``reverse_force_n`` [N1, N2], ``method``. Raises :class:`CampaignAbort` when
-    the holding force did not change against the known force.
-    """
+    the holding force did not change against the known force."""
 
     key = ""
     method = ""
@@ -101,8 +98,7 @@ class KnownForceStep(Step):
         yield from self._holds(ctx, self.settle_s, centre)
         t1 = ctx.t_s
         yield from self._holds(ctx, self.window_s, centre)
-        return (*ctx.mean_recorded_force(self.axis, t1),
-                *ctx.mean_force_by_direction(self.axis, t1))
+        return (*ctx.mean_recorded_force(self.axis, t1), *ctx.mean_force_by_direction(self.axis, t1))
 
     def run(self, ctx: StepContext) -> Wrenches:
         yield from ctx.move_to_centre()
@@ -121,8 +117,7 @@ class KnownForceStep(Step):
         dx = x1 - x2
         scale = e / dx if dx != 0.0 else math.nan
         if not scale > 0.0:
-            raise CampaignAbort(f"{head} the holding force did not {self.change} "
-                                f"({x1:.3g} -> {x2:.3g} N)")
+            raise CampaignAbort(f"{head} the holding force did not {self.change} ({x1:.3g} -> {x2:.3g} N)")
         ctx.calibration[self.key] = {
             "value": scale, "std": scale * math.hypot(s1, s2) / abs(dx), "known_force_n": self.force_n,
             "holding_force_n": [x1, x2], "holding_force_std_n": [s1, s2], "method": self.method,
@@ -187,8 +182,7 @@ class LinePull(KnownForceStep):
     def prompts(self):
         sign = "+" if self.sense > 0 else "-"
         return ((f"apply_line_pull_{self.key}",
-                 f"calibration: pull the line along {sign}{'xy'[self.axis]} "
-                 f"({self.force_n:.3g} N over the pulley)"),
+                 f"calibration: pull the line along {sign}{'xy'[self.axis]} ({self.force_n:.3g} N over the pulley)"),
                 (f"release_line_{self.key}", "calibration: release the line"))
 
 

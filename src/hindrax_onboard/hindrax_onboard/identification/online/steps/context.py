@@ -17,8 +17,7 @@ conditioned that tick's sensor samples. Between yields the step reads the campai
 * the motion primitives every step shares (:meth:`hold`, :meth:`station`, :meth:`move_to_centre`,
   :meth:`wait_still`), which are generators too (``yield from ctx.hold(2.0)``).
 
-Frames: body FRD, world NED (docs/architecture.md §3); forces N, moments N m, times s (the plant's clock).
-"""
+Frames: body FRD, world NED (docs/architecture.md §3); forces N, moments N m, times s (the plant's clock)."""
 from __future__ import annotations
 
 import math
@@ -48,8 +47,7 @@ class CampaignAbort(RuntimeError):
 class StepContext:
     """The campaign state shared by the sequencer and its steps (module docstring).
 
-    cfg: vehicle configuration; tick_s: control period (s); progress: callable receiving one-line messages.
-    """
+    cfg: vehicle configuration; tick_s: control period (s); progress: callable receiving one-line messages."""
 
     def __init__(self, cfg: VehicleConfig, tick_s: float, progress: Callable[[str], None] | None = None) -> None:
         self.cfg = cfg
@@ -80,10 +78,9 @@ class StepContext:
         self.calibration: dict = {}
         self.inclining: dict = {}
         self.decays: dict[str, tuple[float, float]] = {}
-        #: what a step waits for the operator to do ("" when not waiting): attach_ballast,
-        #: remove_ballast, attach_float, remove_float, apply_line_pull_<surge|sway>[_negative],
-        #: release_line_<surge|sway>[_negative], attach_inclining_mass_<dof>,
-        #: remove_inclining_mass_<dof>
+        #: what a step waits for the operator to do ("" when not waiting): attach_ballast, remove_ballast, attach_float,
+        #: remove_float, apply_line_pull_<surge|sway>[_negative], release_line_<surge|sway>[_negative],
+        #: attach_inclining_mass_<dof>, remove_inclining_mass_<dof>
         self.awaiting = ""
         #: the operator's instruction while :attr:`awaiting` ("" otherwise), e.g. 'calibration:
         #: attach the ballast (8.56 N in water), then call continue'
@@ -142,8 +139,7 @@ class StepContext:
     def mean_force_by_direction(self, k: int, t_from: float) -> tuple[float, float]:
         """Means since ``t_from`` of the parts of the recorded force on axis k made by thrusters turning forward
         (positive thrust) and in reverse (negative thrust), N; their sum is :meth:`mean_recorded_force`'s mean."""
-        return (float(np.mean(self._window("wp", t_from)[:, k])),
-                float(np.mean(self._window("wn", t_from)[:, k])))
+        return (float(np.mean(self._window("wp", t_from)[:, k])), float(np.mean(self._window("wn", t_from)[:, k])))
 
     def mean_tilt(self, i: int, t_from: float) -> tuple[float, float]:
         """Mean of the attitude log's angle i (0 roll, 1 pitch; the DVL-75's own IMU) since ``t_from`` and the std
@@ -160,8 +156,7 @@ class StepContext:
 
     # ------------------------------------------------------------------ sensor helpers
     def axis_velocity(self, k: int) -> float:
-        """Velocity on axis k (0-5): DVL body velocity (surge, sway), depth rate (heave), gyro rate; 0 when
-        unknown."""
+        """Velocity on axis k (0-5): DVL body velocity (surge, sway), depth rate (heave), gyro rate; 0 when unknown."""
         st = self.state
         if k < 2:
             v = st.velocity_frd_m_s[k]

@@ -7,8 +7,7 @@
   steady state needed: identified through the transient).
 * :class:`RotationLadder` (roll, pitch, yaw): roll and pitch rotate until the predicted stopping angle reaches
   ``identification.roll_test_angle_rad`` / ``pitch_test_angle_rad`` and return to level ([Hindrax-Drag] §4.2);
-  yaw turns once (2 pi) per run ([Hindrax-Drag] §4.2: 360 deg rotations); both directions.
-"""
+  yaw turns once (2 pi) per run ([Hindrax-Drag] §4.2: 360 deg rotations); both directions."""
 from __future__ import annotations
 
 import math
