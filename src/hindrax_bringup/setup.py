@@ -3,8 +3,7 @@ Dependencies and metadata: package.xml (rosdep on the Pi) and requirements.txt (
 
 Installed (colcon): every node and composed process as a console script in ``lib/hindrax_bringup``
 (``ros2 run hindrax_bringup <node>``; setup.cfg puts scripts there) and the launch files in
-``share/hindrax_bringup/launch``.
-"""
+``share/hindrax_bringup/launch``."""
 from glob import glob
 from pathlib import Path
 
@@ -13,8 +12,7 @@ from setuptools import find_packages, setup
 PACKAGE = "hindrax_bringup"
 HERE = Path(__file__).resolve().parent
 
-#: console script -> module with main(); the names `ros2 run hindrax_bringup <name>` and launch
-#: files use.
+#: console script -> module with main(); the names `ros2 run hindrax_bringup <name>` and launch files use.
 NODES = {
     "allocation_node": "hindrax_bringup.allocation.node",
     "recorder_node": "hindrax_bringup.recording.recorder_node",
@@ -24,8 +22,7 @@ NODES = {
     "gateway_node": "hindrax_bringup.gateway.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
-NODES = {name: mod for name, mod in NODES.items()
-         if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
+NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
 #: composed processes (hindrax_bringup.layout.composition: several nodes, one process):
 #: console script -> module:function
 GROUPS = {

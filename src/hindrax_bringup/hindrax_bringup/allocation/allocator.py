@@ -13,21 +13,19 @@ m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hin
 
    * ``mode="uniform"``: the wrench is scaled by the largest ``s`` in (0, 1] keeping every force
      within its limits: the direction is kept exactly.
-   * ``mode="priority"``: the axes are split into ordered ``priority_groups`` (default ``(("heave",
-     "yaw"),)``; the others form a last group). Each group's part of the wrench is allocated with
-     the same pseudo-inverse and added with the largest factor in [0, 1] that keeps all forces
-     feasible: a group is reproduced exactly when feasible on top of the earlier ones, else scaled
-     along its own direction (unlike ``scipy.optimize.lsq_linear``, which could turn the reduced
-     axes). The null space of B is not used.
+   * ``mode="priority"``: the axes are split into ordered ``priority_groups`` (default ``(("heave", "yaw"),)``; the
+     others form a last group). Each group's part of the wrench is allocated with the same pseudo-inverse and added with
+     the largest factor in [0, 1] that keeps all forces feasible: a group is reproduced exactly when feasible on top of
+     the earlier ones, else scaled along its own direction (unlike ``scipy.optimize.lsq_linear``, which could turn the
+     reduced axes). The null space of B is not used.
 3. **Deadband.** An ESC gives 0 N inside its deadband (docs/devices.md §5.2). If a force of step 2
    falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses which thrusters run
    as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one symmetric pair at 1.73 N instead of four at
    0.87 N. Otherwise step 2's forces are kept (the search costs nothing).
-4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (:mod:`.thrust_curve`),
-   optionally on the PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the
-   nearest width not in the deadband, and the *actual* thrust at that width is evaluated with the
-   forward curve. The achieved wrench ``B @ force_n`` is what the thrusters will apply according to
-   the model (for anti-windup).
+4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (:mod:`.thrust_curve`), optionally on the
+   PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the nearest width not in the deadband, and
+   the *actual* thrust at that width is evaluated with the forward curve. The achieved wrench ``B @ force_n`` is what
+   the thrusters will apply according to the model (for anti-windup).
 
 Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8)."""
 
@@ -181,17 +179,15 @@ class ThrustAllocator:
     mode:
         ``"uniform"`` (default) or ``"priority"``.
     priority_groups:
-        For ``"priority"``: ordered groups of axes (names from :data:`AXIS_NAMES` or indices 0-5),
-        highest priority first; axes not listed form a final group. Default
-        :data:`DEFAULT_PRIORITY_GROUPS`. Ignored in uniform mode.
+        For ``"priority"``: ordered groups of axes (names from :data:`AXIS_NAMES` or indices 0-5), highest priority
+        first; axes not listed form a final group. Default :data:`DEFAULT_PRIORITY_GROUPS`. Ignored in uniform mode.
     pulse_width_step_us:
         Optional quantisation step of the pulse-width generator (us), e.g. the PCA9685 tick
         ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no quantisation.
     deadband_search:
-        ``True`` (default): forces the thrusters cannot give (inside the ESC deadband) are avoided by choosing
-        which thrusters run (:mod:`.deadband`); ``False``: each force is inverted on its own (small-force rule
-        of :mod:`.thrust_curve`). Ignored (always ``False``) for more than :data:`.deadband.MAX_THRUSTERS`
-        thrusters.
+        ``True`` (default): forces the thrusters cannot give (inside the ESC deadband) are avoided by choosing which
+        thrusters run (:mod:`.deadband`); ``False``: each force is inverted on its own (small-force rule of
+        :mod:`.thrust_curve`). Ignored (always ``False``) for more than :data:`.deadband.MAX_THRUSTERS` thrusters.
     effort_weight:
         rho of the deadband search (>= 0): the thrust spent, ``rho sum w_i F_i^2``, weighed against the
         squared wrench error. ``None`` (default): ``(delta / m)^2`` with m the smallest thrust outside the

@@ -27,10 +27,9 @@ from .from_config import allocator_from_config
 class FluAllocation:
     """One allocation in ROS terms.
 
-    requested_wrench_flu / achieved_wrench_flu: (6,) [Fx Fy Fz Tx Ty Tz] in base_link, N and N m.
-    force_n (n,): thrust of each thruster at its pulse width (curve output). pulse_width_us (n,).
-    scale: uniform scale in (0, 1] (priority mode: smallest group factor). saturated (n,) bool.
-    frd: the underlying :class:`AllocationResult` in body FRD."""
+    requested_wrench_flu / achieved_wrench_flu: (6,) [Fx Fy Fz Tx Ty Tz] in base_link, N and N m. force_n (n,): thrust
+    of each thruster at its pulse width (curve output). pulse_width_us (n,). scale: uniform scale in (0, 1] (priority
+    mode: smallest group factor). saturated (n,) bool. frd: the underlying :class:`AllocationResult` in body FRD."""
 
     requested_wrench_flu: np.ndarray
     achieved_wrench_flu: np.ndarray

@@ -20,15 +20,13 @@ Method: a search over active sets, vectorised over all of them at once (no maint
 answers a mixed-integer QP in well under a millisecond; ``scipy.optimize.milp`` takes only a linear
 objective and is tens of ms here).
 
-1. *Seeds.* Every subset S of thrusters that may run (2^n seeds), with the forces of S the
-   least-squares solution of ``B_S F_S = tau`` of least W-norm (a weighted pseudo-inverse per
-   subset, computed once per configuration); and every choice of one thruster pinned at +m or -m, or
-   of two with each at +m, -m or 0 N, the others least squares (for n = 8: 256 + 16 + 224 = 496
-   seeds, one matrix product per call). With rank(B) = 6 and n = 8 the exact solutions form a 2-D
-   affine family on which the allowed forces are polygons bounded by the lines ``F_i = +-m_i`` and
-   ``F_i = 0``; their least-effort point is the pseudo-inverse solution, the least-norm point of one
-   such line, or a crossing of two, all seeded: the exact solution of least effort is always a
-   candidate (saturation limits are reached by the repair).
+1. *Seeds.* Every subset S of thrusters that may run (2^n seeds), with the forces of S the least-squares solution of
+   ``B_S F_S = tau`` of least W-norm (a weighted pseudo-inverse per subset, computed once per configuration); and every
+   choice of one thruster pinned at +m or -m, or of two with each at +m, -m or 0 N, the others least squares (for n = 8:
+   256 + 16 + 224 = 496 seeds, one matrix product per call). With rank(B) = 6 and n = 8 the exact solutions form a 2-D
+   affine family on which the allowed forces are polygons bounded by the lines ``F_i = +-m_i`` and ``F_i = 0``; their
+   least-effort point is the pseudo-inverse solution, the least-norm point of one such line, or a crossing of two, all
+   seeded: the exact solution of least effort is always a candidate (saturation limits are reached by the repair).
 2. *Repair.* A seed with forces inside a deadband gap (0 < |F_i| < m_i) or beyond a saturation limit
    has those thrusters pinned at the nearest allowed value and the others solved again, until none
    is (at most n rounds). Pinning cannot lower the residual, so a seed whose residual plus pinned

@@ -234,8 +234,7 @@ class SupervisorCore:
         self.on_message("pressure", t_s)
         self.depth_m = float(depth_m)
         if depth_m > self.limits.max_depth_m:
-            return self._breach(f"depth {depth_m:.2f} m beyond supervisor.max_depth_m "
-                                f"{self.limits.max_depth_m:g}")
+            return self._breach(f"depth {depth_m:.2f} m beyond supervisor.max_depth_m {self.limits.max_depth_m:g}")
         return ""
 
     def on_altitude(self, t_s: float, altitude_m: float, stamp_s: float | None = None) -> str:

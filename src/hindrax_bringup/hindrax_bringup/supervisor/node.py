@@ -49,8 +49,7 @@ Time
     be blind).
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``);
-    the read-only node parameter ``clock_stall_timeout_s``.
-"""
+    the read-only node parameter ``clock_stall_timeout_s``."""
 from __future__ import annotations
 
 import math

@@ -21,14 +21,13 @@ class Device:
     """One device of the vehicle.
 
     name: device name (``raw/<name>`` topic, emulator key, pty link name in the simulator). node: its driver node's
-    name. transport: :data:`SERIAL` (a port at ``<section>.port``) or :data:`I2C` (at ``<section>.i2c_address``,
-    the node takes the bus as ``bus=``). node_class / emulator: "module:attribute" or a callable; the emulator
-    factory is called as ``emulator(config, truth, clock, seed)`` (truth: a callable of time, s, or None for an
-    output). section: dotted configuration section. topics: parsed topic (absolute) -> message type, the topics a
-    replay compares. output: an actuator (its reads echo the driver's writes; not part of the sensors group).
-    status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``. truth_keywords: the emulator factory's
-    keyword-only arguments that only the simulated part knows (the simulator passes each from its truth's section
-    of this device, by name)."""
+    name. transport: :data:`SERIAL` (a port at ``<section>.port``) or :data:`I2C` (at ``<section>.i2c_address``, the
+    node takes the bus as ``bus=``). node_class / emulator: "module:attribute" or a callable; the emulator factory is
+    called as ``emulator(config, truth, clock, seed)`` (truth: a callable of time, s, or None for an output). section:
+    dotted configuration section. topics: parsed topic (absolute) -> message type, the topics a replay compares. output:
+    an actuator (its reads echo the driver's writes; not part of the sensors group). status: its ``/diagnostics`` status
+    name, "" for ``hindrax/<node>``. truth_keywords: the emulator factory's keyword-only arguments that only the
+    simulated part knows (the simulator passes each from its truth's section of this device, by name)."""
 
     name: str
     node: str

@@ -113,8 +113,7 @@ class VehicleConfig:
     limits = _TypedSection(LimitsSection, "the identification's own abort limits.")
     supervisor = _TypedSection(SupervisorSection, "the safety supervisor.")
     identification = _TypedSection(IdentificationSection)
-    calibration = _TypedSection(CalibrationSection, "masses and volumes (:attr:`known_forces`: "
-                                "the derived forces).")
+    calibration = _TypedSection(CalibrationSection, "masses and volumes (:attr:`known_forces`: the derived forces).")
     control = _TypedSection(ControlSection, "the holds' settings (all optional: None when absent).")
     simulation = _TypedSection(SimulationSection, "the virtual pool's integration, sensor models.")
     recording = _TypedSection(RecordingSection, "the MCAP recorder.")

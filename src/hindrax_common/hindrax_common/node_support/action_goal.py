@@ -122,8 +122,7 @@ class GoalSender:
             if rejected and (len(futures) == 1 or now - last > self.resend_every_s):
                 return rejected[0]  # a real rejection: no status for the UUID after a resend either
             if now - t0 > timeout_s:
-                raise GoalNotAnswered(f"no answer to the goal within {timeout_s:g} s "
-                                      f"({len(futures)} request(s) sent)")
+                raise GoalNotAnswered(f"no answer to the goal within {timeout_s:g} s ({len(futures)} request(s) sent)")
             if not rejected and now - last > self.resend_every_s:
                 futures.append(self._client.send_goal_async(goal, feedback_callback=feedback_callback,
                                                             goal_uuid=goal_id))

@@ -2,20 +2,18 @@
 wire, for the nodes that need only that (the supervisor, the MS5837 driver's
 ``pressure/zero_depth``, the controller) and not the 50 Hz widths of ``thrusters/pulse_width``.
 
-Message: diagnostic_msgs/DiagnosticStatus with the state of the ESC's ``esc/heartbeat``
-(docs/architecture.md §8): level OK, or ERROR while the output state is unknown; ``message`` the
-state's name (``neutral``, ``commanding``, ``unknown``); KeyValues ``output_state`` (the
-hindrax_msgs/ThrusterPwm ``OUTPUT_*`` constant, decimal text), ``armed`` (``true`` / ``false``,
-false while unknown) and ``reason``. QoS (:func:`esc_state_qos`): reliable, transient local, keep
+Message: diagnostic_msgs/DiagnosticStatus with the state of the ESC's ``esc/heartbeat`` (docs/architecture.md §8): level
+OK, or ERROR while the output state is unknown; ``message`` the state's name (``neutral``, ``commanding``, ``unknown``);
+KeyValues ``output_state`` (the hindrax_msgs/ThrusterPwm ``OUTPUT_*`` constant, decimal text), ``armed``
+(``true`` / ``false``, false while unknown) and ``reason``. QoS (:func:`esc_state_qos`): reliable, transient local, keep
 last 1, so a late subscriber gets the current state at once.
 
 Publishing (:class:`EscStateLatch`, pure): on every change of (armed, output_state), and every
 :data:`REPUBLISH_PERIOD_S` of steady time.
 
-Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid ``output_state``
-(0-2) or ``armed`` is malformed (None: counted, treated as OUTPUT_UNKNOWN, disarmed). An output
-state that became unknown while armed counts as still armed. When the ESC is gone the last state
-stays: each reader says in its docstring what that means for it.
+Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid ``output_state`` (0-2) or ``armed`` is
+malformed (None: counted, treated as OUTPUT_UNKNOWN, disarmed). An output state that became unknown while armed counts
+as still armed. When the ESC is gone the last state stays: each reader says in its docstring what that means for it.
 
 Arm lock (:class:`ArmedWatch`): refuses a change while the thrusters may run (``pressure/zero_depth`` and every vehicle
 key a node applies while running, :func:`hindrax_common.config.node_parameters.declare_vehicle_parameters`): while the

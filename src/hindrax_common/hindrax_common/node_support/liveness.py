@@ -1,11 +1,9 @@
-"""Heartbeats of the safety nodes: their identity, their ages, and ROS-time step detection
-(docs/architecture.md §8).
+"""Heartbeats of the safety nodes: their identity, their ages, and ROS-time step detection (docs/architecture.md §8).
 
 The pieces every safety node (ESC, output guard, supervisor) shares:
 
-* :class:`HeartbeatPublisher`: a node's heartbeat (``hindrax_msgs/Heartbeat``) with ``boot_id``
-  (random, non-zero, new at every node start) and ``seq`` (1, 2, 3 ... per beat), which make it hard
-  to take for another process's.
+* :class:`HeartbeatPublisher`: a node's heartbeat (``hindrax_msgs/Heartbeat``) with ``boot_id`` (random, non-zero, new
+  at every node start) and ``seq`` (1, 2, 3 ... per beat), which make it hard to take for another process's.
 * :class:`HeartbeatIdentity`: the pure check a receiver runs on the topic's publishers and every
   beat (a forger, a replayed bag); a beat it rejects does not count as the peer being alive.
 * :class:`HeartbeatWatch`: the receiver's subscription, taking the beats as bytes
@@ -13,26 +11,22 @@ The pieces every safety node (ESC, output guard, supervisor) shares:
   liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the liveliness event counts the *live*
   publishers (a SIGKILLed process's endpoints stay in the graph until its participant lease runs
   out, 20 s with Fast DDS's default). A writer offering a longer lease does not match at all.
-* :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS
-  says something changed (matched, liveliness, incompatible-QoS and incompatible-type events), for
-  :data:`SETTLE_S` after such an event, while a publisher is still unnamed, and every
-  :data:`BACKSTOP_S`.
+* :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS says something
+  changed (matched, liveliness, incompatible-QoS and incompatible-type events), for :data:`SETTLE_S` after such an
+  event, while a publisher is still unnamed, and every :data:`BACKSTOP_S`.
 
-On simulated time (``use_sim_time``, :func:`simulated_now_s`) the DDS lease, on the wall clock,
-cannot silence a peer (a process starved on a loaded machine would lose it although nothing was late
-on the graph's clock): "no live publisher" then needs no publisher in the graph at all
-(:meth:`HeartbeatIdentity.on_publishers`, ``simulated``), the other identity checks stay, and a dead
-or frozen peer is caught by its :class:`AliveAge`. The QoS is the same in both modes.
+On simulated time (``use_sim_time``, :func:`simulated_now_s`) the DDS lease, on the wall clock, cannot silence a peer (a
+process starved on a loaded machine would lose it although nothing was late on the graph's clock): "no live publisher"
+then needs no publisher in the graph at all (:meth:`HeartbeatIdentity.on_publishers`, ``simulated``), the other identity
+checks stay, and a dead or frozen peer is caught by its :class:`AliveAge`. The QoS is the same in both modes.
 
-* :class:`AliveAge`: a peer's age on ``time.monotonic`` from its beat, over the time this process's
-  executor ran (a gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``), so
-  this process's own stall does not make every peer look dead. On simulated time the age is also
-  counted on the graph's clock and the smaller count holds: a slow or held simulation ages no
-  peer, and the beats, paced by steady timers, are not made late by a fast one.
+* :class:`AliveAge`: a peer's age on ``time.monotonic`` from its beat, over the time this process's executor ran (a gap
+  between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``), so this process's own stall does not make
+  every peer look dead. On simulated time the age is also counted on the graph's clock and the smaller count holds: a
+  slow or held simulation ages no peer, and the beats, paced by steady timers, are not made late by a fast one.
 * :class:`ClockStepMonitor`: reports a backward step of ROS time against the steady clock
   (``/clock`` restarted, a bag looped) and a stall (ROS time frozen while the steady clock runs), so
-  a node can re-base its ROS-time checks and say so on ``/diagnostics``.
-"""
+  a node can re-base its ROS-time checks and say so on ``/diagnostics``."""
 from __future__ import annotations
 
 import math
@@ -117,8 +111,7 @@ class HeartbeatPublisher:
 
     ``node``: the publishing rclpy node (it must be named ``HEARTBEAT_NODES[kind]`` for receivers to accept it); the
     QoS is :func:`heartbeat_qos`; keyword arguments go to ``create_publisher``.
-    :attr:`boot_id` is new for every instance (a node re-created in the same process is a new start).
-    """
+    :attr:`boot_id` is new for every instance (a node re-created in the same process is a new start)."""
 
     def __init__(self, node: Any, kind: str, **publisher_kwargs: Any) -> None:
         self.topic = HEARTBEAT_NAMES[kind]
@@ -142,14 +135,12 @@ class HeartbeatIdentity:
     on the topic (:meth:`on_publishers`, node names from ``get_publishers_info_by_topic``) and every beat
     (:meth:`on_beat`, with its own armed state). :attr:`fault` is '' or the reason, naming the topic.
 
-    Faults: a number of live publishers other than one (a forger or a bag player beside the peer; none), a
-    publisher with another node name, a beat that is not a Heartbeat or has ``boot_id`` or ``seq`` 0, a ``seq`` not
-    greater than the last accepted one of the same ``boot_id`` (a replay or a repeat), a ``boot_id`` change while
-    armed (a forger or a replay of another boot taking over a dead peer's topic). The publisher faults hold while
-    the graph shows them; a beat fault holds until a beat is accepted while not armed (while armed, it stays until
-    the receiver has disarmed). A new ``boot_id`` while not armed is a restart of the peer: its sequence starts
-    again.
-    """
+    Faults: a number of live publishers other than one (a forger or a bag player beside the peer; none), a publisher
+    with another node name, a beat that is not a Heartbeat or has ``boot_id`` or ``seq`` 0, a ``seq`` not greater than
+    the last accepted one of the same ``boot_id`` (a replay or a repeat), a ``boot_id`` change while armed (a forger or
+    a replay of another boot taking over a dead peer's topic). The publisher faults hold while the graph shows them; a
+    beat fault holds until a beat is accepted while not armed (while armed, it stays until the receiver has disarmed). A
+    new ``boot_id`` while not armed is a restart of the peer: its sequence starts again."""
 
     topic: str
     node_name: str
@@ -261,8 +252,7 @@ class HeartbeatWatch:
     every accepted beat (a :class:`~hindrax_common.cdr.lean_cdr.Beat`) only; ``armed()``: the receiver's armed state
     for the check. Call :meth:`check` at the receiver's tick (the graph asked only when due, :class:`PublisherNames`):
     it returns :attr:`identity`'s fault ('' when trusted), judged for the receiver's clock at that moment (module
-    docstring: on simulated time the lease does not silence a peer). Rejected beats are counted in :attr:`identity`.
-    """
+    docstring: on simulated time the lease does not silence a peer). Rejected beats are counted in :attr:`identity`."""
 
     def __init__(self, node: Any, kind: str, handler: Callable[[Any], None], armed: Callable[[], bool]) -> None:
         self.node, self.handler, self.armed = node, handler, armed
@@ -288,14 +278,12 @@ class HeartbeatWatch:
 
     def check(self) -> str:
         """Feed the publishers the graph shows and the live count to the identity check; returns its fault."""
-        return self.identity.on_publishers(self.publishers.names(), self.alive,
-                                           simulated_now_s(self.node) is not None)
+        return self.identity.on_publishers(self.publishers.names(), self.alive, simulated_now_s(self.node) is not None)
 
     def fresh(self, age: AliveAge, timeout_s: float) -> bool:
-        """Whether ``age`` (just ticked) is within ``timeout_s``; if not, the waiting beats (a
-        starved process's timer ran first) are taken through the same check and handler, the
-        newest aged from its send stamp (``steady_ns``, this host's ``time.monotonic``): a dead
-        peer is not made younger. :attr:`taken_late` counts them."""
+        """Whether ``age`` (just ticked) is within ``timeout_s``; if not, the waiting beats (a starved process's timer
+        ran first) are taken through the same check and handler, the newest aged from its send stamp (``steady_ns``,
+        this host's ``time.monotonic``): a dead peer is not made younger. :attr:`taken_late` counts them."""
         if not age.fresh(timeout_s):
             newest = None
             while (taken := self.subscription.handle.take_message(Heartbeat, True)) is not None:
@@ -314,8 +302,7 @@ class AliveAge:
     ``graph_now_s()``: the receiver's simulated time, s, or None on the system clock (:func:`simulated_now_s`);
     when it gives a time at both the beat and the tick, :attr:`age_s` is the smaller of the steady age and the
     simulated time since the beat (a backward step of simulated time restarts that count from the step).
-    ``age_s`` is ``math.inf`` until the peer is first heard.
-    """
+    ``age_s`` is ``math.inf`` until the peer is first heard."""
 
     def __init__(self, max_step_s: float, clock: Callable[[], float] = time.monotonic,
                  graph_now_s: Callable[[], float | None] = lambda: None) -> None:
@@ -415,8 +402,7 @@ class ClockStepMonitor:
 
     ``ros_now_s``: the node's ROS time in seconds; ``tolerance_s``: a backward move smaller than this is jitter.
     :meth:`check` returns the step in seconds (negative) when ROS time went back, else 0.0; :attr:`steps_back`
-    counts them. :meth:`stalled_for_s`: how long ROS time has not moved while the steady clock ran.
-    """
+    counts them. :meth:`stalled_for_s`: how long ROS time has not moved while the steady clock ran."""
 
     def __init__(self, ros_now_s: Callable[[], float], tolerance_s: float = 0.05,
                  clock: Callable[[], float] = time.monotonic) -> None:

@@ -70,8 +70,7 @@ class CommandSequencer:
         gap_s: pause after each command, s (>= 0).
         name: thread name.
     Attributes:
-        commands_sent, sequences_completed, write_failures: counters.
-    """
+        commands_sent, sequences_completed, write_failures: counters."""
 
     def __init__(self, transport: SerialTransport, gap_s: float, name: str = "CommandSequencer") -> None:
         if gap_s < 0:

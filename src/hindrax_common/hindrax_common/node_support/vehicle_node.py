@@ -1,21 +1,19 @@
 """The base of every vehicle node: an rclpy ``Node`` without the entities nothing uses.
 
-rclpy gives every publisher and subscription two QoS event handlers (incompatible QoS, incompatible
-type) that only log, and every node six parameter services and a type-description service. Each is
-one more entity in every wait of the node's executor, visited in Python at every spin: in the
-one-process graph of the virtual pool (13 nodes) they were two thirds of the wait set (213 of 325).
-:class:`VehicleNode`'s publishers and subscriptions get no default event handler; event callbacks a
-node passes itself (e.g. the heartbeat subscriptions' liveliness and matched events,
-:mod:`hindrax_common.node_support.liveness`) are kept as given. Its parameter services stay (``ros2 param``
-reads and sets the nodes' parameters) unless the node is built with
-``start_parameter_services=False``, which then also leaves out the type-description service: the
-one-process graph of ``hindrax run`` does so (nothing outside its process talks to it).
+rclpy gives every publisher and subscription two QoS event handlers (incompatible QoS, incompatible type) that only log,
+and every node six parameter services and a type-description service. Each is one more entity in every wait of the
+node's executor, visited in Python at every spin: in the one-process graph of the virtual pool (13 nodes) they were two
+thirds of the wait set (213 of 325). :class:`VehicleNode`'s publishers and subscriptions get no default event handler;
+event callbacks a node passes itself (e.g. the heartbeat subscriptions' liveliness and matched events,
+:mod:`hindrax_common.node_support.liveness`) are kept as given. Its parameter services stay (``ros2 param`` reads and
+sets the nodes' parameters) unless the node is built with ``start_parameter_services=False``, which then also leaves out
+the type-description service: the one-process graph of ``hindrax run`` does so (nothing outside its process talks to
+it).
 
 rclpy's own parameters (``use_sim_time``; ``start_type_description_service`` is read-only already) are made
 read-only once the node is built: ``use_sim_time`` is set at start only (the simulation's launch and
 ``hindrax run``); set at run time on the guard or the ESC it froze their timers while armed (issue 71.5). Every
-parameter a vehicle node can change at run time, and why each is safe: docs/threat_model.md.
-"""
+parameter a vehicle node can change at run time, and why each is safe: docs/threat_model.md."""
 from __future__ import annotations
 
 import copy
@@ -35,14 +33,12 @@ _TYPE_SERVICE = "start_type_description_service"
 
 
 class VehicleNode(Node):
-    """``rclpy.node.Node`` (same arguments) without default QoS event handlers, rclpy's built-in
-    parameters read-only; with ``start_parameter_services=False`` without the type-description
-    service either (module docstring)."""
+    """``rclpy.node.Node`` (same arguments) without default QoS event handlers, rclpy's built-in parameters read-only;
+    with ``start_parameter_services=False`` without the type-description service either (module docstring)."""
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:
         overrides = list(kwargs.get("parameter_overrides") or [])
-        if kwargs.get("start_parameter_services") is False and not any(
-                p.name == _TYPE_SERVICE for p in overrides):
+        if kwargs.get("start_parameter_services") is False and not any(p.name == _TYPE_SERVICE for p in overrides):
             kwargs["parameter_overrides"] = overrides + [Parameter(_TYPE_SERVICE, value=False)]
         super().__init__(node_name, **kwargs)
         for name in list(self._parameters):  # rclpy's built-ins, the only ones declared so far
@@ -56,12 +52,10 @@ class VehicleNode(Node):
     def create_publisher(self, *args: Any, event_callbacks: PublisherEventCallbacks | None = None,
                          **kwargs: Any) -> Any:
         """``Node.create_publisher``; without ``event_callbacks``, no QoS event handler."""
-        return super().create_publisher(*args, event_callbacks=event_callbacks or NO_PUB_EVENTS,
-                                        **kwargs)
+        return super().create_publisher(*args, event_callbacks=event_callbacks or NO_PUB_EVENTS, **kwargs)
 
     def create_subscription(self, *args: Any,
                             event_callbacks: SubscriptionEventCallbacks | None = None,
                             **kwargs: Any) -> Any:
         """``Node.create_subscription``; without ``event_callbacks``, no QoS event handler."""
-        return super().create_subscription(*args, event_callbacks=event_callbacks or NO_SUB_EVENTS,
-                                           **kwargs)
+        return super().create_subscription(*args, event_callbacks=event_callbacks or NO_SUB_EVENTS, **kwargs)

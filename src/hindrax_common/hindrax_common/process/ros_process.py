@@ -22,14 +22,13 @@ The executor is rclpy's ``EventsExecutor`` (docs/architecture.md §10) unless ``
 says ``single``; a subscription callback takes the message info only through
 :class:`WithMessageInfo` (rclpy 7.1, docs/architecture.md §11.5).
 
-Signals: any number of SIGINT/SIGTERM at any moment after start-up end the process with status 0. In
-the main thread Python's handlers are set before ``rclpy.init`` (rclpy's chain to them): while the
-block runs SIGINT raises ``KeyboardInterrupt`` and SIGTERM shuts the context down; with
-``interrupt=False`` (node processes) both are only recorded, :meth:`RosProcess.spin` returns at its
-next turn (:data:`SPIN_TIMEOUT_S`) and the context is shut down after the clean-ups, never under a
-running callback; from ``__exit__`` on both are absorbed; at the end the handlers found on entry are
-restored, unless a signal arrived (they then stay ignored: finalization would reset SIGINT, status
--2). In another thread the handlers are left as they are.
+Signals: any number of SIGINT/SIGTERM at any moment after start-up end the process with status 0. In the main thread
+Python's handlers are set before ``rclpy.init`` (rclpy's chain to them): while the block runs SIGINT raises
+``KeyboardInterrupt`` and SIGTERM shuts the context down; with ``interrupt=False`` (node processes) both are only
+recorded, :meth:`RosProcess.spin` returns at its next turn (:data:`SPIN_TIMEOUT_S`) and the context is shut down after
+the clean-ups, never under a running callback; from ``__exit__`` on both are absorbed; at the end the handlers found on
+entry are restored, unless a signal arrived (they then stay ignored: finalization would reset SIGINT, status -2). In
+another thread the handlers are left as they are.
 
 ``shutdown_budget_s`` (node processes: :data:`SHUTDOWN_BUDGET_S`): a shutdown still running after it
 writes every thread's traceback and exits with status 1 (``faulthandler``), before ``ros2 launch``'s

@@ -73,8 +73,7 @@ class GpiodLine:
 
     Raises:
         ImportError: the ``gpiod`` bindings are not installed.
-        OSError: the chip cannot be opened or the line is busy (another consumer holds it).
-    """
+        OSError: the chip cannot be opened or the line is busy (another consumer holds it)."""
 
     def __init__(self, chip: str, line: int, initial_high: bool = True, consumer: str = "hindrax-output-guard"):
         import gpiod

@@ -4,15 +4,12 @@
 on the Raspberry Pi, or :class:`~hindrax_common.transport.emulated_i2c.EmulatedI2CBus` in tests and
 simulation; docs/architecture.md §2) for one slave address and adds what smbus2 does not have:
 
-* retries with exponential backoff on ``OSError`` (typically errno 121 "Remote I/O error", a NACK
-  from a slave that is busy, browning out or has a bad connector), with counters of errors,
-  retries and failures for diagnostics;
+* retries with exponential backoff on ``OSError`` (typically errno 121 "Remote I/O error", a NACK from a slave that is
+  busy, browning out or has a bad connector), with counters of errors, retries and failures for diagnostics;
 * a clear :class:`I2CError` (an ``OSError`` carrying the last errno) once retries are exhausted;
-* a *raw tap*: a callback ``(kind, address, register, data, t_monotonic_s)`` invoked for every
-  successful transaction, so the ROS node can publish the raw register traffic for recording and
-  bag replay (docs/architecture.md §7);
-* :class:`RegisterWrite` sequences (the "sequence as data" produced by the protocol modules)
-  executed with their delays.
+* a *raw tap*: a callback ``(kind, address, register, data, t_monotonic_s)`` invoked for every successful transaction,
+  so the ROS node can publish the raw register traffic for recording and bag replay (docs/architecture.md §7);
+* :class:`RegisterWrite` sequences (the "sequence as data" produced by the protocol modules) executed with their delays.
 
 The sleep function and the clock are injected, so tests run without real waiting."""
 
@@ -87,8 +84,7 @@ class I2CStats:
         errors: failed attempts (each ``OSError`` caught).
         retries: attempts made after a failure.
         failures: operations abandoned (``I2CError`` raised).
-        last_error: text of the last ``OSError`` seen, or None.
-    """
+        last_error: text of the last ``OSError`` seen, or None."""
 
     transactions: int = 0
     errors: int = 0
@@ -178,8 +174,7 @@ class I2CDevice:
 
     Raises:
         I2CError: after ``retries + 1`` failed attempts (errno of the last failure).
-        ValueError: invalid address, register, value or length.
-    """
+        ValueError: invalid address, register, value or length."""
 
     def __init__(
         self,
@@ -224,8 +219,7 @@ class I2CDevice:
                     self.stats.failures += 1
                     raise I2CError(
                         exc.errno,
-                        f"{self.name}@0x{self.address:02x}: {operation} failed after {attempts} "
-                        f"attempt(s): {exc}",
+                        f"{self.name}@0x{self.address:02x}: {operation} failed after {attempts} attempt(s): {exc}",
                         device_name=self.name, address=self.address, operation=operation,
                         attempts=attempts,
                     ) from exc

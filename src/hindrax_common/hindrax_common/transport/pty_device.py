@@ -59,8 +59,7 @@ class StreamFaults:
     Args:
         garbage_alphabet: bytes random garbage is drawn from (the DVL emulator uses 0x80-0xFF, i.e.
             line noise that cannot contain ``$`` or LF, so the count a framer reports is exact).
-        seed: seed of the private random generator (deterministic tests).
-    """
+        seed: seed of the private random generator (deterministic tests)."""
 
     def __init__(self, garbage_alphabet: bytes = bytes(range(256)), seed: int = 0) -> None:
         if not garbage_alphabet:
@@ -166,8 +165,7 @@ class PeriodicSchedule:
     exactly 20 messages per second at 20 Hz over any run length.
 
     Args:
-        period_s: tick period, s (> 0).
-    """
+        period_s: tick period, s (> 0)."""
 
     def __init__(self, period_s: float) -> None:
         self._period_s = 1.0

@@ -46,8 +46,7 @@ class TransportStatus:
         closed: True after :meth:`SerialTransport.close`.
         bytes_handled: received bytes whose raw tap and ``on_data`` callback have returned (``bytes_rx`` counts
             a chunk as soon as it is read); equal to ``bytes_rx`` when the reader has nothing in hand.
-        connections: successful opens (1 + reconnects once connected).
-    """
+        connections: successful opens (1 + reconnects once connected)."""
 
     port: str
     connected: bool

@@ -80,8 +80,7 @@ class DvlTruth:
         bottom_lock: False forces "searching" whatever the geometry.
         confidence_pct: ``$DVPDL`` confidence when locked, 0..100 %.
         beam_locked, beam_velocity_m_s, beam_range_m, beam_gain_db: optional per-beam values in the order A port, B
-            stern, C starboard, D bow (4-tuples) reported verbatim instead of the emulator's geometric model.
-    """
+            stern, C starboard, D bow (4-tuples) reported verbatim instead of the emulator's geometric model."""
 
     velocity_frd_m_s: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     altitude_m: Optional[float] = 5.0
@@ -166,8 +165,7 @@ class Dvl75Emulator:
         faults: :class:`StreamFaults` (garbage, bad checksums, truncated/dropped lines, stuck values, disconnect).
         flash: the :class:`DvlFlash` in use.
         sent_counts: sentences generated per sentence id (before faults).
-        commands_received: every command line received, decoded.
-    """
+        commands_received: every command line received, decoded."""
 
     def __init__(self, truth_source: TruthSource, *, rate_hz: float = 10.0, flash: Optional[DvlFlash] = None,
                  beam_tilt_rad: float = BEAM_TILT_RAD, true_speed_of_sound_m_s: Optional[float] = None,
@@ -244,8 +242,7 @@ class Dvl75Emulator:
             self._reset_runtime()
             self._schedule.restart(self._boot_t, 1)
             self._text("Cerulean Sonar DVL-75 (hindrax emulator) booting")
-            self._text(f"Baud rate {self.flash.baud_rate}, speed of sound "
-                       f"{self.flash.speed_of_sound_m_s:.1f} m/s")
+            self._text(f"Baud rate {self.flash.baud_rate}, speed of sound {self.flash.speed_of_sound_m_s:.1f} m/s")
             self._text("Boot complete")
 
     # --- internals --------------------------------------------------------------------------------

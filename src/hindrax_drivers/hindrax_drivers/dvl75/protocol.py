@@ -5,12 +5,11 @@ reverse for the commands a driver sends.  No I/O, no clocks, no ROS.
 
 Source: docs/devices.md §0, §1.2-§1.5 (tags [D3]-[D21] there).
 
-Framing (docs/devices.md §1.2, verified on real captures): ``$`` + sentence id + ``,`` + fields +
-``*`` + two hex digits + CR LF, the checksum the XOR of every byte strictly between ``$`` and ``*``.
-``$DVPDL``, ``$DVEXT`` and ``$GPRMC`` (§1.3) parse into dataclasses with SI field names; ``$DVTXT``
-and bare lines into :class:`DvlText`; any other line (``$DVNVM``, ``IMU:``, ``GPS:$...``) into
-:class:`DvlUnknown`, not an error. Host -> DVL commands (§1.4) are plain ASCII lines without
-checksum, as the BlueOS driver sends them [D17].
+Framing (docs/devices.md §1.2, verified on real captures): ``$`` + sentence id + ``,`` + fields + ``*`` + two hex
+digits + CR LF, the checksum the XOR of every byte strictly between ``$`` and ``*``. ``$DVPDL``, ``$DVEXT`` and
+``$GPRMC`` (§1.3) parse into dataclasses with SI field names; ``$DVTXT`` and bare lines into :class:`DvlText`; any other
+line (``$DVNVM``, ``IMU:``, ``GPS:$...``) into :class:`DvlUnknown`, not an error. Host -> DVL commands (§1.4) are plain
+ASCII lines without checksum, as the BlueOS driver sends them [D17].
 
 Vendor-document errors handled here (docs/devices.md §0 item 2, §1.2): the ``$DVPDL`` example printed
 in Cerulean's documentation ends in ``*22`` although its checksum is ``6E``; this module rejects it,
@@ -86,8 +85,7 @@ class DvlPositionDelta:
         delta_roll_rad, delta_pitch_rad, delta_yaw_rad: fields ``adr, adp, ady``, rad, about X (bow),
             Y (starboard), Z (down).
         delta_x_m, delta_y_m, delta_z_m: fields ``pdx, pdy, pdz``, m, forward / starboard / down.
-        confidence_pct: field ``c``, 0..100 % (0 = none; then every field after ``dtu`` is garbage [D4b]).
-    """
+        confidence_pct: field ``c``, 0..100 % (0 = none; then every field after ``dtu`` is garbage [D4b])."""
 
     time_since_boot_s: float
     delta_time_s: float
@@ -136,8 +134,7 @@ class DvlExtended:
         beam_gain_db: fields 19-22, dB (6..66).
         beam_locked: fields 23-26, valid bottom return per beam.
         beam_velocity_m_s: fields 27-30, m/s along each beam axis, unfiltered.
-        beam_range_m: fields 31-34, m along each beam axis, unfiltered; -1.0 when unlocked.
-    """
+        beam_range_m: fields 31-34, m along each beam axis, unfiltered; -1.0 when unlocked."""
 
     locked: bool
     gps_status: str
@@ -172,8 +169,7 @@ class DvlGprmc:
         latitude_deg, longitude_deg: decimal degrees (+N, +E); None when empty.
         speed_m_s: speed over ground (knots on the wire), m/s; None when empty.
         track_rad: track / heading, rad clockwise from north; None when empty.
-        date_ddmmyy: the date field as received (the DVL always sends ``010120``).
-    """
+        date_ddmmyy: the date field as received (the DVL always sends ``010120``)."""
 
     time_of_day_s: Optional[float]
     valid: bool
@@ -205,8 +201,7 @@ class DvlUnknown:
         sentence_id: sentence id without ``$`` (or ``IMU`` / ``GPS``).
         fields: comma-separated fields after the id (checksum removed).
         line: the whole line, decoded (non-UTF-8 bytes replaced).
-        checksum_ok: True when a ``*hh`` checksum was present and verified, None when absent.
-    """
+        checksum_ok: True when a ``*hh`` checksum was present and verified, None when absent."""
 
     sentence_id: str
     fields: Tuple[str, ...]
@@ -377,8 +372,7 @@ _DVEXT_SCALARS = (("roll_rad", "roll", "%.1f"), ("pitch_rad", "pitch", "%.1f"),
                   ("velocity_east_m_s", "velocity_east", "%.3f"),
                   ("latitude_deg", "latitude", "%.9f"), ("longitude_deg", "longitude", "%.9f"),
                   ("ekf_elapsed_time_s", "elapsed_time", "%.3f"))
-#: $DVEXT fields 15-34, four each (quaternion w x y z, beams A-D): (attribute, field name, parse,
-#: format)
+#: $DVEXT fields 15-34, four each (quaternion w x y z, beams A-D): (attribute, field name, parse, format)
 _DVEXT_FOURS = (("orientation_wxyz", "q", _float, "%.6f".__mod__),
                 ("beam_gain_db", "gain", _float, _fmt_gain), ("beam_locked", "lock", _flag, _tf),
                 ("beam_velocity_m_s", "velocity", _float, "%.4f".__mod__),

@@ -81,8 +81,7 @@ class DvlReport:
         orientation_xyzw: (4,) base_link in ENU, (0, 0, 0, 0) when no attitude.
         orientation_covariance: 9 floats, ``[-1, 0...]`` (unknown).
         rejection: why a report with confidence > 0 failed a plausibility gate ("" when it passed or
-            was never a candidate).
-    """
+            was never a candidate)."""
 
     device_time_ns: Optional[int]
     velocity_valid: bool

@@ -46,8 +46,7 @@ class DvlStreamError:
         line: 1-based number of the line (LF-terminated segment of the stream) where it was detected;
             exact when the stream is fed line by line, else the last line completed by that chunk.
         count: how many (bytes for ``garbage_bytes``, sentences otherwise).
-        reason: one-line human-readable reason.
-    """
+        reason: one-line human-readable reason."""
 
     kind: str
     line: int
@@ -81,8 +80,7 @@ class DvlStreamDecoder:
         records: record type name -> number decoded.
         lines_seen: LF-terminated segments completed so far.
         errors: list of :class:`DvlStreamError` (only with ``keep_errors``).
-        last_error: the most recent :class:`DvlStreamError` or None.
-    """
+        last_error: the most recent :class:`DvlStreamError` or None."""
 
     def __init__(self, max_line_bytes: int = 1024, keep_errors: bool = False) -> None:
         self._framer = DvlLineFramer(max_line_bytes)

@@ -216,8 +216,7 @@ class StepResult:
         wait_s: wait before the next call, s (the datasheet wait after the last step run; 0 = at once).
         done: every step has run (the magnetometer state is :attr:`StartupSequence.mag_available`).
         failure: the start-up attempt failed (one line: the reason); the caller retries it from the beginning.
-        i2c_failure: the failure was a failed I2C transfer (the caller counts it).
-    """
+        i2c_failure: the failure was a failed I2C transfer (the caller counts it)."""
 
     wait_s: float = 0.0
     done: bool = False
@@ -236,8 +235,7 @@ class StartupSequence:
         mag_mode: AK09916 continuous mode (:func:`mag_mode_for_rate`).
         on_magnetometer: called ``(available, reason)`` when the magnetometer is found (True, "") or given up (False,
             one line why).
-        magnetometer_only: run the magnetometer steps alone (no identity check, no reset).
-    """
+        magnetometer_only: run the magnetometer steps alone (no identity check, no reset)."""
 
     def __init__(self, regs: BankedRegisters, mag_device: I2CPort, config: p.ImuConfig, mag_mode_name: str,
                  mag_mode: int, on_magnetometer: Callable[[bool, str], Any], *, magnetometer_only: bool = False):
@@ -400,8 +398,7 @@ class GyroBiasResult:
         gyro_std_rad_s, accel_std_m_s2: (3,) per-axis standard deviations during the window.
         samples: number of samples averaged.
         still: every std below its threshold.
-        message: one line for the diagnostics.
-    """
+        message: one line for the diagnostics."""
 
     bias_rad_s: np.ndarray
     gyro_std_rad_s: np.ndarray
@@ -486,8 +483,7 @@ class FrozenBlockWatch:
     Args:
         frozen_check_samples: bit-identical blocks in a row that trigger the check (``sensors.icm20948.
             frozen_check_samples``; a live sensor's noise changes the low bits of every new sample, and one repeat
-            is a poll that came before the next sample).
-    """
+            is a poll that came before the next sample)."""
 
     def __init__(self, frozen_check_samples: int):
         self.frozen_check_samples = int(frozen_check_samples)

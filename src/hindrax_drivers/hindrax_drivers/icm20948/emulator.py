@@ -209,8 +209,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
         aux_connected: fault switch for the AK09916 (False = it NACKs).
         data_ready_stuck_low: fault switch: INT_STATUS_1.RAW_DATA_0_RDY always reads 0 (the data registers
             still update).
-        samples: number of accel/gyro samples generated.
-    """
+        samples: number of accel/gyro samples generated."""
 
     def __init__(self, truth: ImuTruth, clock: Callable[[], float] = time.monotonic,
                  address: int = p.ADDRESS_AD0_LOW) -> None:

@@ -10,10 +10,9 @@ Why our own code: the available Python packages (Pimoroni ``icm20948``) do I/O i
 conversion code, hard-code one configuration and write a questionable I2C_MST_CTRL value
 (docs/devices.md §4.6); the drivers need a pure, testable layer shared with the emulator.
 
-Facts used that docs/devices.md marks as unverified or that go beyond it are flagged in the
-docstrings: gyro base rate 1125 Hz (§4.4 discrepancy), gyro ODR with the DLPF bypassed (9 kHz,
-datasheet spec table, not in docs/devices.md), INT_STATUS_1 / I2C_MST_STATUS bit positions (datasheet
-register descriptions), temperature room offset 0 (§4.4)."""
+Facts used that docs/devices.md marks as unverified or that go beyond it are flagged in the docstrings: gyro base rate
+1125 Hz (§4.4 discrepancy), gyro ODR with the DLPF bypassed (9 kHz, datasheet spec table, not in docs/devices.md),
+INT_STATUS_1 / I2C_MST_STATUS bit positions (datasheet register descriptions), temperature room offset 0 (§4.4)."""
 
 from __future__ import annotations
 
@@ -222,8 +221,7 @@ class ImuConfig:
     Attributes:
         accel_fs_sel, gyro_fs_sel: full-scale selectors 0..3.
         accel_dlpfcfg, gyro_dlpfcfg: DLPF config 0..7, or None for DLPF bypassed (FCHOICE = 0).
-        accel_smplrt_div: 12-bit accel divider 0..4095. gyro_smplrt_div: 8-bit divider 0..255.
-    """
+        accel_smplrt_div: 12-bit accel divider 0..4095. gyro_smplrt_div: 8-bit divider 0..255."""
 
     accel_fs_sel: int = 0
     gyro_fs_sel: int = 0
@@ -433,8 +431,7 @@ class ImuSample:
         gyro_rad_s: angular rate, shape (3,), rad/s.
         temperature_c: die temperature, degC.
         accel_raw, gyro_raw: int16 counts (x, y, z); temp_raw: int16.
-        accel_saturated, gyro_saturated: some axis at an int16 limit (reading clipped).
-    """
+        accel_saturated, gyro_saturated: some axis at an int16 limit (reading clipped)."""
 
     accel_m_s2: np.ndarray = field(repr=False)
     gyro_rad_s: np.ndarray = field(repr=False)
@@ -479,8 +476,7 @@ class MagSample:
         raw: (hx, hy, hz) int16 counts in the AK09916's own axes.
         data_ready: ST1.DRDY, a new measurement since the last read.
         data_overrun: ST1.DOR, at least one measurement was skipped.
-        overflow: ST2.HOFL, magnetic sensor overflow: the values are not valid.
-    """
+        overflow: ST2.HOFL, magnetic sensor overflow: the values are not valid."""
 
     magnetic_field_t: np.ndarray = field(repr=False)
     raw: tuple[int, int, int]

@@ -232,8 +232,7 @@ def prom_with_crc(word0: int, coefficients: Sequence[int]) -> tuple[int, ...]:
 
     Args:
         word0: product/version and factory bits (bits 11:0; bits 15:12 are replaced by the CRC).
-        coefficients: C1..C6 (6 ints, 0..65535); word 7 (not covered by the CRC) is 0.
-    """
+        coefficients: C1..C6 (6 ints, 0..65535); word 7 (not covered by the CRC) is 0."""
     coeffs = [int(c) for c in coefficients]
     if len(coeffs) != 6:
         raise Ms5837Error(f"need 6 coefficients C1..C6, got {len(coeffs)}")
@@ -462,8 +461,7 @@ class Reading:
         pressure_pa: absolute pressure, Pa.
         temperature_c: temperature, degC (TEMP/100).
         compensation: integer values it was computed from (second order if applied).
-        temperature_in_range: TEMP within the specified -40..85 degC (docs/devices.md §3.4).
-    """
+        temperature_in_range: TEMP within the specified -40..85 degC (docs/devices.md §3.4)."""
 
     pressure_pa: float
     temperature_c: float

@@ -49,8 +49,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
             23-27 MHz, docs/devices.md §5.1) used to decode pulse widths.
         clock: clock for the write log timestamps, s.
         external_clock_hz: frequency used once EXTCLK is latched (None: keep ``oscillator_hz``).
-        output_enable_line: the /OE line (``is_high()``: outputs off), or None (tied low: always enabled).
-    """
+        output_enable_line: the /OE line (``is_high()``: outputs off), or None (tied low: always enabled)."""
 
     def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ, clock: Callable[[], float] = time.monotonic,
                  external_clock_hz: float | None = None, output_enable_line=None) -> None:

@@ -1,11 +1,10 @@
 """NXP PCA9685 16-channel PWM controller and Basic ESC pulse conventions: pure protocol layer.
 
-Registers and bits (MODE1/MODE2, LEDn_ON/OFF_L/H, ALL_LED, PRE_SCALE), the prescale formula,
-pulse width <-> ON/OFF counts, full-ON/full-OFF bits, the sleep / prescale / restart sequence as
-data, and the ESC conventions (1100-1900 us, 1500 us neutral; these limits, shared with the
-configuration check, are defined in :mod:`hindrax_common.base.hardware_limits` and re-exported here).
-Sources: docs/devices.md §5.1 (NXP datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2
-(Blue Robotics Basic ESC [E1]-[E5]).
+Registers and bits (MODE1/MODE2, LEDn_ON/OFF_L/H, ALL_LED, PRE_SCALE), the prescale formula, pulse width <-> ON/OFF
+counts, full-ON/full-OFF bits, the sleep / prescale / restart sequence as data, and the ESC conventions (1100-1900 us,
+1500 us neutral; these limits, shared with the configuration check, are defined in
+:mod:`hindrax_common.base.hardware_limits` and re-exported here). Sources: docs/devices.md §5.1 (NXP datasheet [Q1],
+UM10574 [Q2], Adafruit library [Q3]) and §5.2 (Blue Robotics Basic ESC [E1]-[E5]).
 
 Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an ``smbus2.SMBus`` object,
 hides the register arithmetic, and computes counts from the *requested* frequency; docs/devices.md §5.1 requires using
@@ -125,8 +124,7 @@ class ChannelRegisters:
 
     Attributes:
         on_count, off_count: 12-bit counts 0..4095 at which the output goes high / low.
-        full_on: LEDn_ON_H bit 4. full_off: LEDn_OFF_H bit 4 (takes precedence).
-    """
+        full_on: LEDn_ON_H bit 4. full_off: LEDn_OFF_H bit 4 (takes precedence)."""
 
     on_count: int = 0
     off_count: int = 0
@@ -226,8 +224,7 @@ def set_frequency_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL)
     Returns:
         MODE1 = (mode1 & ~RESTART) | SLEEP; PRE_SCALE = prescale; MODE1 = mode1 (wake), then wait
         :data:`RESTART_DELAY_S`; MODE1 = mode1 | RESTART | AI. PRE_SCALE is only accepted while
-        SLEEP = 1, hence the order.
-    """
+        SLEEP = 1, hence the order."""
     check_prescale(prescale)
     awake = mode1 & ~(MODE1_RESTART | MODE1_SLEEP) & 0xFF
     return [

@@ -64,8 +64,7 @@ class Ping1dTruth:
 
     Attributes:
         altitude_m: true acoustic range from the transducer to the bottom, m (None = no echo).
-        confidence_pct: confidence the device reports for a valid echo, 0..100 %.
-    """
+        confidence_pct: confidence the device reports for a valid echo, 0..100 %."""
 
     altitude_m: Optional[float] = 5.0
     confidence_pct: float = 100.0
@@ -116,8 +115,7 @@ class Ping1dEmulator:
         seed: seed of the fault generator.
     Attributes:
         settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`), streaming (streamed
-        id -> destination device id), received (counts of accepted host messages by id).
-    """
+        id -> destination device id), received (counts of accepted host messages by id)."""
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,
                  true_speed_of_sound_m_s: float = 1500.0, protocol_version: tuple = (1, 0, 0), seed: int = 0) -> None:

@@ -42,9 +42,8 @@ _CHECKSUM = struct.Struct("<H")
 
 
 class Ping1dParseError(ValueError):
-    """Raised for any Ping1D frame or payload that cannot be decoded (wrong start bytes, length
-    mismatch, bad checksum, wrong payload size, unknown message id, out-of-range enum value).
-    Source: docs/devices.md §2.2-§2.4."""
+    """Raised for any Ping1D frame or payload that cannot be decoded (wrong start bytes, length mismatch, bad checksum,
+    wrong payload size, unknown message id, out-of-range enum value). Source: docs/devices.md §2.2-§2.4."""
 
 
 class Ping1dId(IntEnum):
@@ -97,8 +96,7 @@ class Ping1dMessage:
     Attributes:
         message_id: u16 message id.
         payload: payload bytes (may be empty: a legacy request, §2.3).
-        src_device_id, dst_device_id: u8 device ids (0 = not implemented / host; 255 = broadcast).
-    """
+        src_device_id, dst_device_id: u8 device ids (0 = not implemented / host; 255 = broadcast)."""
 
     message_id: int
     payload: bytes = b""
@@ -165,8 +163,7 @@ class Ping1dFramer:
         discarded_bytes: bytes dropped while resynchronising.
         bad_checksums: frames whose checksum did not verify.
         oversize_headers: false starts rejected by the payload-length limit.
-        frames_ok: valid frames returned.
-    """
+        frames_ok: valid frames returned."""
 
     def __init__(self, max_payload_bytes: int = 1024) -> None:
         if max_payload_bytes < 0 or max_payload_bytes > 0xFFFF:
@@ -330,10 +327,9 @@ def _payload(message_id: Ping1dId, note: str, *layout: tuple, tail: Optional[Tup
     """Declare the frozen payload dataclass of ``message_id``, named after it (``SET_RANGE`` ->
     ``SetRange``), and register it in :data:`PAYLOAD_TYPES`.
 
-    ``layout``: one ``(field, struct code, conversion[, default])`` per fixed field, in wire order;
-    ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring
-    gives the wire layout, then ``note``; its sections are of docs/devices.md, §2.4 (the message
-    table) unless it says otherwise."""
+    ``layout``: one ``(field, struct code, conversion[, default])`` per fixed field, in wire order; ``tail``:
+    ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring gives the wire layout, then
+    ``note``; its sections are of docs/devices.md, §2.4 (the message table) unless it says otherwise."""
     fields: list = [(name, _PY_TYPE.get(conv, float), field(default=default[0] if default else MISSING))
                     for name, _, conv, *default in layout]
     if tail is not None:
@@ -344,8 +340,7 @@ def _payload(message_id: Ping1dId, note: str, *layout: tuple, tail: Optional[Tup
     cls = make_dataclass(name, fields, bases=(Ping1dPayload,), frozen=True, namespace={
         "MESSAGE_ID": message_id, "LAYOUT": tuple((code, conv) for _, code, conv, *_ in layout),
         "TAIL": None if tail is None else tail[1], "__module__": __name__,
-        "__doc__": f"id {message_id.value} {message_id.name.lower()} "
-                   f"({', '.join(wire) or 'no payload'}): {note}"})
+        "__doc__": f"id {message_id.value} {message_id.name.lower()} ({', '.join(wire) or 'no payload'}): {note}"})
     PAYLOAD_TYPES[message_id] = cls
     return cls
 

@@ -68,8 +68,7 @@ class Ping1dStreamDecoder:
     Attributes:
         counts: error kind -> total (all keys of :data:`ERROR_KINDS` present).
         messages: payload type name -> number decoded.
-        errors: list of errors (only with ``keep_errors``); last_error: the most recent one or None.
-    """
+        errors: list of errors (only with ``keep_errors``); last_error: the most recent one or None."""
 
     def __init__(self, max_payload_bytes: int = 1024, keep_errors: bool = False) -> None:
         self._framer = Ping1dFramer(max_payload_bytes)

@@ -62,8 +62,7 @@ from .steps import undo_line
 
 __all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "ARMED_REPORTS",
-           "NOT_ARMED",
-           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED", "STARVED_WARN_TICKS"]
+           "NOT_ARMED", "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED", "STARVED_WARN_TICKS"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
