@@ -39,6 +39,25 @@ def sensor_input_qos(depth: int) -> QoSProfile:
     return QoSProfile(depth=int(depth), reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
+def log_at(logger: Any, level: str, text: str) -> None:
+    """Log ``text`` at ``level`` ("debug", "info", "warn", "error") on an rclpy logger.
+
+    rclpy's logger keys its context by the calling line and raises ``ValueError: Logger severity cannot be changed
+    between calls`` when one line logs at two severities (``rclpy.impl.rcutils_logger.RcutilsLogger.log``), so a
+    ``getattr(logger, level)(text)`` crashed the caller the first time a level differed. Each severity is called from
+    a line of its own here. Raises ``ValueError`` for any other level."""
+    if level == "debug":
+        logger.debug(text)
+    elif level == "info":
+        logger.info(text)
+    elif level == "warn":
+        logger.warning(text)
+    elif level == "error":
+        logger.error(text)
+    else:
+        raise ValueError(f"log level {level!r}: not one of debug, info, warn, error")
+
+
 def time_from_ns(ns: int) -> Time:
     """builtin_interfaces/Time from integer nanoseconds (negative values clamp to 0)."""
     ns = max(0, int(ns))
@@ -462,7 +481,7 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
         nodes = [proc.own(factory()) for factory in factories]
         level, text = describe_scheduling(sched)
         if level and nodes:
-            getattr(nodes[0].get_logger(), level)(text)
+            log_at(nodes[0].get_logger(), level, text)
         for node in nodes:
             proc.executor.add_node(node)
         proc.spin()

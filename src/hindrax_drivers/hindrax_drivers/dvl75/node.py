@@ -55,7 +55,8 @@ from hindrax_msgs.msg import Dvl
 
 from hindrax_common.config.typed_sections import SensorsDvl75Section
 from hindrax_common.base.device_clock import DeviceClockSync
-from hindrax_common.node_support.node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
+from hindrax_common.node_support.node_common import (DEFAULT_QOS_DEPTH, declare_frame_ids, log_at, run_node,
+                                                    time_from_ns)
 from hindrax_common.node_support.serial_node import SerialDeviceNode, range_message
 from .protocol import DvlExtended, DvlGprmc, DvlPositionDelta, DvlText, startup_commands
 from .report import DvlReport, DvlReportBuilder, altitude_range_m
@@ -145,7 +146,7 @@ class Dvl75Node(SerialDeviceNode):
                 self._text_lines += 1
                 self._last_text = record.text[:120]
                 level = "warn" if "error" in record.text.lower() else "debug"
-                getattr(self.get_logger(), level)(f"DVL text: {record.text}")
+                log_at(self.get_logger(), level, f"DVL text: {record.text}")
             elif isinstance(record, DvlGprmc):
                 pass  # the DVL's GPS emulation; not used (switched off at start-up)
 

@@ -106,7 +106,7 @@ from hindrax_common.cdr.lean_cdr import wrench_stamped_cdr
 from hindrax_common.node_support.liveness import TickGaps
 from hindrax_common.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_common.node_support.node_common import load_node_config, run_node, sensor_input_qos
+from hindrax_common.node_support.node_common import load_node_config, log_at, run_node, sensor_input_qos
 from hindrax_common.node_support.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
@@ -345,7 +345,7 @@ class IdentificationNode(VehicleNode):
             elif ev.kind == "abort":
                 self.pub_abort.publish(String(data=ev.data[0]))
             elif ev.kind == "log":
-                getattr(log, ev.data[0])(ev.data[1])
+                log_at(log, ev.data[0], ev.data[1])
             elif ev.kind == "warn_throttled":
                 log.warn(ev.data[0], throttle_duration_sec=5.0)
             elif ev.kind == "end":
