@@ -6,8 +6,8 @@ import pytest
 from hindrax_common.config import default_config_path
 from hindrax_sim.graph.record_bag import record_simulated_run
 from hindrax_bringup.recording.reader import BagReader
-from hindrax_bringup.recording.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
-                                                      i2c_transactions, recorded_parsed)
+from hindrax_test_support.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
+                                                 i2c_transactions, recorded_parsed)
 from hindrax_bringup.recording.reader import iter_raw_device_data
 from hindrax_common.testing import ros_context
 

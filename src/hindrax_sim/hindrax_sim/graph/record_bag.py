@@ -12,7 +12,7 @@ raw device data (``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chun
 ground truth (``sim/*``) and ``/clock``.
 
 A clean start and end, so that a replay of the raw data through fresh drivers reproduces the parsed topics
-exactly (:mod:`hindrax_bringup.recording.replay_devices`): simulated time is held at 0 until the recorder
+exactly (``test/support/hindrax_test_support/replay_devices.py``): simulated time is held at 0 until the recorder
 has subscribed to and matched every topic; at the end simulated time is frozen and the recorder is stopped
 only once it has written every message the drivers published. The only driver traffic before the recording
 are the ESC node's constructor writes (PCA9685 configuration and first neutral), inside ``build_graph``.

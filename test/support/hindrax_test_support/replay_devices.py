@@ -55,8 +55,8 @@ from hindrax_common.node_support.node_common import raw_transactions, time_from_
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_common.transport.pty_device import PtyDevice
-from .msgtypes import message_class
-from .reader import BagReader, iter_raw_device_data
+from hindrax_bringup.recording.msgtypes import message_class
+from hindrax_bringup.recording.reader import BagReader, iter_raw_device_data
 
 __all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
            "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed", "strip_stamp"]
