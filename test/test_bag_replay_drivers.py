@@ -7,8 +7,7 @@ from hindrax_common.config import default_config_path
 from hindrax_test_support.record_bag import record_simulated_run
 from hindrax_bringup.recording.reader import BagReader
 from hindrax_test_support.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
-                                                 i2c_transactions, recorded_parsed)
-from hindrax_bringup.recording.reader import iter_raw_device_data
+                                                 i2c_transactions, iter_raw_device_data, recorded_parsed)
 from hindrax_common.testing import ros_context
 
 pytestmark = pytest.mark.ros
