@@ -4,11 +4,10 @@ the drivers re-publish the same parsed messages (same values, same count)."""
 import pytest
 
 from hindrax_common.config import default_config_path
-from hindrax_sim.graph.record_bag import record_simulated_run
+from hindrax_test_support.record_bag import record_simulated_run
 from hindrax_bringup.recording.reader import BagReader
-from hindrax_bringup.recording.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
-                                                      i2c_transactions, recorded_parsed)
-from hindrax_bringup.recording.reader import iter_raw_device_data
+from hindrax_test_support.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
+                                                 i2c_transactions, iter_raw_device_data, recorded_parsed)
 from hindrax_common.testing import ros_context
 
 pytestmark = pytest.mark.ros
@@ -18,8 +17,9 @@ pytestmark = pytest.mark.ros
 # the /clock steps, which a replay cannot reproduce. With it on, every later gyro value differs by the two
 # runs' bias estimates; it is switched off in both runs so that every field is compared exactly.
 OVERRIDES = {"sensors.icm20948.estimate_gyro_bias": False}
-# The committed bag was recorded (python -m hindrax_sim.graph.record_bag) with the vehicle file's driver settings and
-# the same switch; a replay runs the drivers with the recording's configuration (DriverReplay's overrides).
+# The committed bag was recorded (python test/support/hindrax_test_support/record_bag.py) with the vehicle file's
+# driver settings and the same switch; a replay runs the drivers with the recording's configuration (DriverReplay's
+# overrides).
 COMMITTED_BAG_OVERRIDES = OVERRIDES
 
 
@@ -66,7 +66,7 @@ def test_raw_device_data_replayed_through_fresh_drivers_reproduces_the_parsed_to
 
 def test_committed_simulator_bag_replays_through_fresh_drivers():
     """The small bag committed under src/hindrax_bringup/test/data (recorded from the simulator by
-    ``python -m hindrax_sim.graph.record_bag``) drives fresh drivers to the same parsed
+    ``python test/support/hindrax_test_support/record_bag.py``) drives fresh drivers to the same parsed
     messages: the regression guard for any change in a driver's parsing."""
     from pathlib import Path
 
@@ -80,7 +80,7 @@ def test_committed_simulator_bag_replays_through_fresh_drivers():
         finally:
             replay.close()
     # a stale bag (a driver that now reads otherwise) names the device whose recorded reads were not consumed
-    assert replay.hardware.i2c_reads_left() == {}, "rerecord with python -m hindrax_sim.graph.record_bag"
+    assert replay.hardware.i2c_reads_left() == {}, "rerecord: python test/support/hindrax_test_support/record_bag.py"
     assert [n for n, d in replay.hardware.serial.items() if not d.done] == []
     assert compare_parsed(recorded, replay.received) == []
 

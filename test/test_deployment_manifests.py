@@ -38,6 +38,9 @@ ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interf
 #: tools)
 PACKAGES = ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard", "hindrax_fit", "hindrax_sim",
             "hindrax_tools")
+#: the repository's helpers of tests only (test/support, on every test's path through pytest.ini): no package ships
+#: them, so no package.xml names them
+TEST_SUPPORT = {"hindrax_test_support"}
 #: development tools inside a package that drive a higher package (none today; a package dependency back would be
 #: a cycle)
 DEV_TOOLS: set[str] = set()
@@ -79,7 +82,7 @@ def test_each_package_xml_lists_what_its_package_imports():
         # the drivers' tests also drive the graph and the hindrax command (higher packages): a test_depend on them
         # would be a cycle for colcon, which orders packages by test dependencies too
         higher = set(PACKAGES[i + 1:])
-        tests = imports((REPO / "src" / pkg / "test").rglob("*.py")) - {pkg} - higher
+        tests = imports((REPO / "src" / pkg / "test").rglob("*.py")) - {pkg} - higher - TEST_SUPPORT
         missing = sorted(key_of(m) for m in tests if key_of(m) not in run_keys | deps["test_depend"])
         assert not missing, f"{pkg}/package.xml lacks test_depend {missing}"
         # no dependency on a higher package (the order of PACKAGES)

@@ -55,11 +55,10 @@ VEHICLE_PACKAGES = ("hindrax_msgs", "hindrax_common", "hindrax_drivers", "hindra
 #: packages hindrax_drivers was split into, issue 75).
 DRIVER_LEVEL = ("hindrax_common", "hindrax_drivers", "hindrax_bringup")
 
-#: Modules allowed to import node modules: the graph builders (the whole stack in one process; the driver nodes
-#: on replayed device data) and the entry points that start nodes (``hindrax bag play|record``).
+#: Modules allowed to import node modules: the graph builder (the whole stack in one process) and the entry points
+#: that start nodes (``hindrax bag play|record``).
 ENTRY_POINTS = frozenset({
     "hindrax_sim.graph.bringup",
-    "hindrax_bringup.recording.replay_devices",
     "hindrax_onboard.commands.bag.play",
     "hindrax_onboard.commands.bag.record",
 })

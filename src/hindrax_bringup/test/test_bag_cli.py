@@ -16,7 +16,8 @@ from std_msgs.msg import String
 from hindrax_bringup.recording.info import bag_info
 from hindrax_bringup.recording.make_test_bags import STREAMS
 from hindrax_bringup.recording.metadata import read_metadata
-from hindrax_common.testing import burst_qos, child_env, python_executable, ros_context, wait_until
+from hindrax_common.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_test_support.helpers import burst_qos
 from hindrax_onboard.cli import main as cli_main
 
 DATA = Path(__file__).parent / "data"

@@ -11,7 +11,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from hindrax_bringup.recording.make_test_bags import (BAGS, LATENCY_NS, START_NS, STREAMS, messages_per_stream,
                                                       synthetic_messages, write_bag)
 from hindrax_bringup.recording.msgtypes import message_class
-from hindrax_bringup.recording.reader import BagReader, iter_raw_device_data
+from hindrax_bringup.recording.reader import BagReader
+from hindrax_test_support.replay_devices import iter_raw_device_data
 
 DATA = Path(__file__).parent / "data"
 

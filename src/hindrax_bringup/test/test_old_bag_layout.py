@@ -9,7 +9,7 @@ from mcap_ros2.writer import Writer
 from hindrax_common.cdr import msgdefs
 from hindrax_bringup.recording.msgtypes import from_decoded
 from hindrax_bringup.recording.reader import BagReader
-from hindrax_bringup.recording.replay_devices import recorded_parsed
+from hindrax_test_support.replay_devices import recorded_parsed
 from hindrax_msgs.msg import ThrusterPwm
 from tf2_msgs.msg import TFMessage
 

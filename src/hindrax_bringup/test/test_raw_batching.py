@@ -5,7 +5,7 @@ import pytest
 
 from hindrax_common.node_support.node_common import (RAW_BATCH_REGISTER, RAW_I2C_PERIOD_S, RawDataPublisher,
                                                       raw_transactions)
-from hindrax_bringup.recording.replay_devices import i2c_transactions
+from hindrax_test_support.replay_devices import i2c_transactions
 from hindrax_msgs.msg import RawDeviceData
 
 READ, WRITE = RawDeviceData.DIRECTION_DEVICE_TO_HOST, RawDeviceData.DIRECTION_HOST_TO_DEVICE
@@ -142,7 +142,7 @@ def test_truncated_batch_is_an_error():
 
 
 def test_unbatch_raw_gives_one_message_per_transaction():
-    from hindrax_common.node_support.node_common import unbatch_raw
+    from hindrax_test_support.helpers import unbatch_raw
 
     node = _Node()
     raw = RawDataPublisher(node, "icm20948")

@@ -20,7 +20,8 @@ from hindrax_common.process.conditions import ConditionTimeout
 from hindrax_common.config import default_config_path
 from hindrax_bringup.recording.reader import BagReader
 from hindrax_bringup.recording.recover import is_complete, iter_file_records, recover_bag
-from hindrax_common.testing import burst_qos, child_env, python_executable, ros_context, wait_until
+from hindrax_common.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_test_support.helpers import burst_qos
 from hindrax_msgs.msg import RawDeviceData
 
 pytestmark = pytest.mark.ros

@@ -16,7 +16,8 @@ import sys
 import pytest
 
 from hindrax_common.process.scheduling import PRIORITY_ENV, requested_priority
-from hindrax_common.testing import child_env, may_set_fifo
+from hindrax_common.testing import child_env
+from hindrax_test_support.helpers import may_set_fifo
 
 CHILD = r"""
 import json, os, threading

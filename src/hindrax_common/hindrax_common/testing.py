@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import resource
 import signal
 import subprocess
 import sys
@@ -18,7 +17,6 @@ from typing import Iterator
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hindrax_msgs.msg import ThrusterPwm
 
@@ -70,24 +68,6 @@ def interrupt(proc: subprocess.Popen, timeout_s: float) -> int:
     has not ended within ``timeout_s`` seconds."""
     proc.send_signal(signal.SIGINT)
     return proc.wait(timeout=timeout_s)
-
-
-def may_set_fifo(priority: int) -> bool:
-    """Whether this test's own user may set ``SCHED_FIFO`` at ``priority`` (sched(7), "Privileges and resource
-    limits"): root (``CAP_SYS_NICE``), or an ``RLIMIT_RTPRIO`` at least the priority."""
-    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= priority
-
-
-def burst_qos() -> QoSProfile:
-    """Publisher QoS for a test that publishes a numbered burst to another process and counts it there: reliable,
-    keep-all, transient-local.
-
-    ``publisher.get_subscription_count() > 0`` says only that the writer has matched the reader; the reader may
-    match the writer later, and a volatile reader then loses what was published in between (Fast-DDS issues
-    2641 and 3009). A transient-local reader (the recorder subscribes so when every publisher offers it,
-    ``recording.qos``) receives the writer's history when it matches, so the whole burst arrives either way."""
-    return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def python_executable() -> str:

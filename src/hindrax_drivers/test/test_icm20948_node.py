@@ -17,7 +17,7 @@ from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.icm20948.core import STILL_STD_FACTOR, GyroBias
 from hindrax_drivers.icm20948.node import Icm20948Node
-from hindrax_common.node_support.node_common import unbatch_raw
+from hindrax_test_support.helpers import unbatch_raw
 from hindrax_common.testing import config_parameters, wait_until
 from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData

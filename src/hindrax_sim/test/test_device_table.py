@@ -16,7 +16,7 @@ from hindrax_bringup.layout.composition import GROUPS, NODE_CLASSES
 from hindrax_common.config import default_config_path, load_config
 from hindrax_bringup.layout.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, EmulatedDevices
 from hindrax_bringup.layout.health import STATUS_OF_NODE
-from hindrax_bringup.recording import replay_devices
+from hindrax_test_support import replay_devices
 from hindrax_common.testing import ros_context
 from hindrax_sim.graph.bringup import build_graph
 from hindrax_sim.hardware import VirtualHardware

@@ -13,7 +13,8 @@ from hindrax_common.config import default_config_path, load_config
 from hindrax_common.process.conditions import wait_until
 from hindrax_bringup.layout.emulated_devices import I2C_DEVICES, SERIAL_DEVICES
 from hindrax_common.process.scheduling import HARDWARE_STAND_IN_PRIORITY
-from hindrax_common.testing import child_env, may_set_fifo
+from hindrax_common.testing import child_env
+from hindrax_test_support.helpers import may_set_fifo
 from hindrax_common.transport.socket_i2c import SOCKET_ENV, SocketI2CBus
 from hindrax_sim.live_pool import LivePool
 

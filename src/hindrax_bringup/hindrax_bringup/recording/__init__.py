@@ -6,7 +6,7 @@ Pure cores (no ROS runtime):
 - :mod:`.metadata`: ``metadata.yaml`` (version 9) as typed objects;
 - :mod:`.writer`: :class:`~.writer.BagWriter` (chunks, compression, splitting, fsync per chunk);
   :mod:`.writer_thread`: one writer thread in front of it;
-- :mod:`.reader`: raw/decoded messages in log-time order, ``iter_raw_device_data`` for emulators;
+- :mod:`.reader`: raw/decoded messages in log-time order;
 - :mod:`.recover`: rebuild truncated files and metadata.yaml; :mod:`.info`: bag summaries;
 - :mod:`.playback`: the player's timing; :mod:`.selection`: which topics to record;
 - :mod:`.make_test_bags`: the small synthetic bags under ``test/data``.

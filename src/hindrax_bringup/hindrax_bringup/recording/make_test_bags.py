@@ -7,7 +7,7 @@ The synthetic streams (:data:`STREAMS`, :func:`synthetic_messages`, :func:`write
 surging sinusoidally at the stack's nominal rates) give the recorder benchmark and the writer tests a known,
 fixed load. The bag recorded from the virtual pool through the real drivers (``sim_drivers_3s``) needs the
 simulator, which lives in hindrax_sim (dependencies flow hindrax_msgs <- hindrax_bringup <- ... <- hindrax_sim):
-it is written by :mod:`hindrax_sim.graph.record_bag`."""
+it is written by ``test/support/hindrax_test_support/record_bag.py``."""
 from __future__ import annotations
 
 import argparse

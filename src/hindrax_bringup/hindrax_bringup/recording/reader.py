@@ -1,4 +1,4 @@
-"""Reading bags: raw CDR messages in log-time order, decoded messages, raw device data for emulators.
+"""Reading bags: raw CDR messages in log-time order, decoded messages.
 
 A *bag* is a rosbag2 directory (metadata.yaml + ``*.mcap``) or a single ``.mcap`` file. Files are read
 in the order of ``relative_file_paths`` (split files are consecutive in time); a directory without a
@@ -7,8 +7,7 @@ usable metadata.yaml falls back to its ``*.mcap`` files sorted by their ``_<n>``
 - :class:`BagReader` ``.messages(topics, start_ns, end_ns)`` yields :class:`RawMessage` (CDR bytes
   unchanged) in ascending log time, using the MCAP chunk indexes;
 - ``.decoded(...)`` decodes with ``mcap_ros2`` from the bag's own ``ros2msg`` schemas, so custom types
-  decode without their Python package;
-- :func:`iter_raw_device_data` gives a device emulator the ``hindrax_msgs/RawDeviceData`` of one device.
+  decode without their Python package.
 
 A file without a summary (recorder killed, not yet recovered) is read sequentially up to its last
 complete record (:func:`hindrax_bringup.recording.recover.iter_file_records`) and flagged in
@@ -29,8 +28,6 @@ from hindrax_common.cdr import msgdefs
 from . import recover as _recover
 from .metadata import MetadataError, read_metadata
 from .msgtypes import TypeNotInstalledError, message_class
-
-RAW_DEVICE_DATA_TYPE = "hindrax_msgs/msg/RawDeviceData"
 
 
 class BagError(ValueError):
@@ -266,28 +263,3 @@ def _sorted_stream_messages(f: Path, wanted: set[str] | None, start_ns: int | No
              and (start_ns is None or m.log_time >= start_ns)
              and (end_ns is None or m.log_time < end_ns)]
     yield from sorted(found, key=lambda r: r.log_time_ns)
-
-
-def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tuple[int, Any]]:
-    """``(t_ns, hindrax_msgs.msg.RawDeviceData)`` of one device, in the order they were recorded.
-
-    For device emulators replaying a pool bag through the drivers (docs/architecture.md §6-7). Every topic of type
-    ``hindrax_msgs/msg/RawDeviceData`` is read (merged in log-time order) and messages whose
-    ``device_name`` equals ``device_name`` are yielded. ``t_ns`` is the message's ``header.stamp`` (the
-    time the driver received or sent the bytes, ROS time) in ns, or the bag log time when the stamp is
-    zero. Both directions (DIRECTION_DEVICE_TO_HOST / HOST_TO_DEVICE) are yielded; filter on
-    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path."""
-    from rclpy.serialization import deserialize_message
-
-    from hindrax_msgs.msg import RawDeviceData
-
-    reader = BagReader(bag_path)
-    topics = [t for t, c in reader.channels.items() if c.type == RAW_DEVICE_DATA_TYPE]
-    if not topics:
-        return
-    for m in reader.messages(topics):
-        msg = deserialize_message(m.data, RawDeviceData)
-        if msg.device_name != device_name:
-            continue
-        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        yield (stamp_ns if stamp_ns > 0 else m.log_time_ns), msg

@@ -347,15 +347,6 @@ def raw_transactions(msg: Any) -> list[tuple[int, int, int, bytes]]:
     return out
 
 
-def unbatch_raw(msg: Any) -> list:
-    """One RawDeviceData per I2C transaction of ``msg`` (itself when it is not a batch; header, device and
-    transport copied): for tools and tests that look at single transactions."""
-    if int(msg.i2c_register) != RAW_BATCH_REGISTER:
-        return [msg]
-    return [RawDeviceData(header=msg.header, device_name=msg.device_name, transport=msg.transport, direction=d,
-                          i2c_address=a, i2c_register=r, data=data) for d, a, r, data in raw_transactions(msg)]
-
-
 class StuckDetector:
     """Flags a sensor whose readings stay bit-identical for ``limit`` consecutive samples.
 

@@ -51,18 +51,6 @@ def _bodies() -> list[tuple[list[float], list[float], float]]:
     return bodies
 
 
-def nbody_energy(bodies: list[tuple[list[float], list[float], float]]) -> float:
-    """Total energy (kinetic + potential) of ``bodies`` (as :func:`_bodies`) in their units: -0.169075164 at the
-    start and -0.169087605 after 1000 steps, the Benchmarks Game's published output for that program (the tests'
-    check that the workload is the computation the published timings are of)."""
-    e = 0.0
-    for i, (r, v, m) in enumerate(bodies):
-        e += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        for r2, _, m2 in bodies[i + 1:]:
-            e -= m * m2 / math.sqrt((r[0] - r2[0]) ** 2 + (r[1] - r2[1]) ** 2 + (r[2] - r2[2]) ** 2)
-    return e
-
-
 def _advance(bodies: list[tuple[list[float], list[float], float]], steps: int, dt: float = 0.01) -> None:
     """``steps`` semi-implicit Euler steps of ``dt`` years: every pair's velocity change, then every position."""
     pairs = [(bodies[i], bodies[j]) for i in range(len(bodies)) for j in range(i + 1, len(bodies))]

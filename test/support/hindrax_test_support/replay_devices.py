@@ -38,7 +38,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -55,11 +55,11 @@ from hindrax_common.node_support.node_common import raw_transactions, time_from_
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_common.transport.pty_device import PtyDevice
-from .msgtypes import message_class
-from .reader import BagReader, iter_raw_device_data
+from hindrax_bringup.recording.msgtypes import message_class
+from hindrax_bringup.recording.reader import BagReader
 
-__all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
-           "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed", "strip_stamp"]
+__all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay", "PARSED_TOPICS", "I2C_STAMPED",
+           "iter_raw_device_data", "serial_chunks", "i2c_transactions", "compare_parsed", "strip_stamp"]
 
 #: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_common.base.devices.DEVICES`), with the device
 #: whose raw data they are parsed from.
@@ -69,6 +69,23 @@ PARSED_TOPICS: dict[str, str] = {t: d.name for d in device_table.DEVICES for t i
 I2C_STAMPED = frozenset(t for d in device_table.DEVICES if d.transport == device_table.I2C for t in d.topics)
 
 _NACK = errno.EREMOTEIO  # 121, what i2c-dev returns for an unanswered address
+
+
+def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tuple[int, Any]]:
+    """``(t_ns, hindrax_msgs.msg.RawDeviceData)`` of one device, in the order they were recorded.
+
+    Every topic of type ``hindrax_msgs/msg/RawDeviceData`` is read (merged in log-time order) and messages whose
+    ``device_name`` equals ``device_name`` are yielded. ``t_ns`` is the message's ``header.stamp`` (the
+    time the driver received or sent the bytes, ROS time) in ns, or the bag log time when the stamp is
+    zero. Both directions (DIRECTION_DEVICE_TO_HOST / HOST_TO_DEVICE) are yielded; filter on
+    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path."""
+    reader = BagReader(bag_path)
+    topics = [t for t, c in reader.channels.items() if c.type == "hindrax_msgs/msg/RawDeviceData"]
+    for m in reader.messages(topics) if topics else ():
+        msg = deserialize_message(m.data, RawDeviceData)
+        if msg.device_name == device_name:
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            yield (stamp_ns if stamp_ns > 0 else m.log_time_ns), msg
 
 
 def serial_chunks(items: Iterable[tuple[int, Any]]) -> tuple[list[tuple[int, bytes]], list[tuple[int, bytes]]]:

@@ -1,6 +1,6 @@
 """Record the driver test bag from the virtual pool: ``sim_drivers_3s`` under ``src/hindrax_bringup/test/data/``.
 
-Usage: ``python -m hindrax_sim.graph.record_bag [--out DIR]`` (default: the repository's
+Usage: ``python test/support/hindrax_test_support/record_bag.py [--out DIR]`` (default: the repository's
 ``src/hindrax_bringup/test/data``; the synthetic bags are :mod:`hindrax_bringup.recording.make_test_bags`).
 
 Content: the whole driver graph on the virtual pool (:func:`hindrax_sim.graph.bringup.build_graph` with ``sim=True``:
@@ -12,14 +12,15 @@ raw device data (``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chun
 ground truth (``sim/*``) and ``/clock``.
 
 A clean start and end, so that a replay of the raw data through fresh drivers reproduces the parsed topics
-exactly (:mod:`hindrax_bringup.recording.replay_devices`): simulated time is held at 0 until the recorder
+exactly (:mod:`.replay_devices`): simulated time is held at 0 until the recorder
 has subscribed to and matched every topic; at the end simulated time is frozen and the recorder is stopped
 only once it has written every message the drivers published. The only driver traffic before the recording
 are the ESC node's constructor writes (PCA9685 configuration and first neutral), inside ``build_graph``.
 
 Simulated content is deterministic for a seed, but the exact message count is not (how the executor interleaves the
 driver timers with /clock steps varies with machine load), so tests check properties, not counts fixed in advance. It
-lives here, not in hindrax_bringup, so that the drivers do not import the simulator."""
+lives with the tests: only they and this bag use it; not in hindrax_bringup, so that the drivers do not import the
+simulator."""
 from __future__ import annotations
 
 import argparse
@@ -36,7 +37,7 @@ from hindrax_bringup.recording.make_test_bags import default_output_dir, write_b
 from hindrax_bringup.recording.reader import BagReader
 from hindrax_common.config import default_config_path
 
-from .bringup import build_graph
+from hindrax_sim.graph.bringup import build_graph
 
 __all__ = ["SIM_BAGS", "SIM_SEED", "START_POSITION_NED_M", "record_simulated_run", "write_sim_bag", "main"]
 

@@ -1,0 +1,9 @@
+"""Helpers only tests use, kept out of ``src`` so that no package ships them (issue 75, point 6).
+
+On the import path of every test through pytest.ini's ``pythonpath`` (``test/support``). What tests and the ``make
+bench`` benchmarks share stays in :mod:`hindrax_common.testing`, which the benchmarks import.
+
+- :mod:`.replay_devices`: the driver nodes on a bag's recorded raw device data (docs/architecture.md §7);
+  :mod:`.record_bag` records the bag of the virtual pool they replay (``sim_drivers_3s``).
+- :mod:`.helpers`: small helpers of a few tests (real-time priority, a burst's QoS, unbatching raw data).
+"""
