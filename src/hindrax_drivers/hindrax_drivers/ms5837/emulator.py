@@ -38,26 +38,16 @@ def _closest_monotonic(f: Callable[[int], int], target: float | Fraction, lo: in
     answer): the bracket is found by doubling steps out from it, then bisected; as ``key`` is monotonic the pair
     around its crossing is unique, so the answer is the one without a hint, in a few evaluations when the target
     moved little."""
-    key = key or f
+    key, a, b, step = key or f, lo, hi, 1
     if hint is not None and lo < hint < hi:
         a = b = hint
-        step = 1
-        if key(hint) < target:
-            while b < hi and key(b) < target:
-                a, b, step = b, min(b + step, hi), 2 * step
-            if key(b) < target:
-                return hi
-        else:
-            while a > lo and key(a) >= target:
-                a, b, step = max(a - step, lo), a, 2 * step
-            if key(a) >= target:
-                return lo
-    else:
-        if key(hi) < target:
-            return hi
-        if key(lo) >= target:
-            return lo
-        a, b = lo, hi
+        up = key(hint) < target
+        while (b < hi and key(b) < target) if up else (a > lo and key(a) >= target):
+            a, b, step = (b, min(b + step, hi), 2 * step) if up else (max(a - step, lo), a, 2 * step)
+    if key(b) < target:
+        return hi
+    if key(a) >= target:
+        return lo
     # invariant: key(a) < target <= key(b)
     while b - a > 1:
         mid = (a + b) // 2
@@ -103,11 +93,8 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
     def temp_of(d2: int) -> int:
         return p.compensate(reference_d1, d2, calibration, variant, apply_second_order).compensation.temp
 
-    def unrounded(d2: int) -> Fraction:
-        return p.unrounded_temp(d2, calibration, variant, apply_second_order)
-
     d2 = _closest_monotonic(temp_of, Fraction(temperature_c) * 100, 0, p.ADC_MAX, hint and hint[1],
-                            unrounded if apply_second_order else None)
+                            (lambda d: p.unrounded_temp(d, calibration, variant)) if apply_second_order else None)
     target_p = pressure_pa * p.pressure_counts_per_pa(variant)
 
     def p_of(d1: int) -> int:

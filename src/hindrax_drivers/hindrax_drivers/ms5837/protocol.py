@@ -406,44 +406,32 @@ def first_order(d1: int, d2: int, calibration: Calibration, variant: Variant) ->
     return Compensation(dt=dt, temp=temp, off=off, sens=sens, p=p)
 
 
-#: Ti = k dT^2 / 2^s as (k, s) per (variant, TEMP < 2000) (docs/devices.md §3.5).
-_TI = {(Variant.MS5837_30BA, True): (3, 33), (Variant.MS5837_30BA, False): (2, 37),
-       (Variant.MS5837_02BA, True): (11, 35), (Variant.MS5837_02BA, False): (0, 0)}
+#: (Ti, OFFi, SENSi) per (variant, TEMP < 2000), each (k, s): k x^2 / 2^s, x = dT for Ti, TEMP - 2000 for the others
+#: (docs/devices.md §3.5; the 30BA below -1500 adds to OFFi and SENSi, :func:`_second_order_terms`)
+_SECOND_ORDER = {(Variant.MS5837_30BA, True): ((3, 33), (3, 1), (5, 3)),
+                 (Variant.MS5837_30BA, False): ((2, 37), (1, 4), (0, 0)),
+                 (Variant.MS5837_02BA, True): ((11, 35), (31, 3), (63, 5)),
+                 (Variant.MS5837_02BA, False): ((0, 0), (0, 0), (0, 0))}
 
 
 def _second_order_terms(dt: int, temp: int, variant: Variant) -> tuple[int, int, int]:
-    """(Ti, OFFi, SENSi) per docs/devices.md §3.5."""
-    k, s = _TI[variant, temp < 2000]
-    ti = k * dt * dt // (1 << s)
-    if variant is Variant.MS5837_30BA:
-        if temp < 2000:
-            offi = 3 * (temp - 2000) ** 2 // 2
-            sensi = 5 * (temp - 2000) ** 2 // 8
-            if temp < -1500:
-                offi += 7 * (temp + 1500) ** 2
-                sensi += 4 * (temp + 1500) ** 2
-        else:
-            offi = (temp - 2000) ** 2 // 16
-            sensi = 0
-    elif temp < 2000:
-        offi = 31 * (temp - 2000) ** 2 // 8
-        sensi = 63 * (temp - 2000) ** 2 // 32
-    else:
-        offi = sensi = 0
+    """(Ti, OFFi, SENSi) per docs/devices.md §3.5, floor division as the datasheet's integers."""
+    (kt, st), (ko, so), (ks, ss) = _SECOND_ORDER[variant, temp < 2000]
+    t2 = (temp - 2000) ** 2
+    ti, offi, sensi = kt * dt * dt // (1 << st), ko * t2 // (1 << so), ks * t2 // (1 << ss)
+    if variant is Variant.MS5837_30BA and temp < -1500:
+        offi += 7 * (temp + 1500) ** 2
+        sensi += 4 * (temp + 1500) ** 2
     return ti, offi, sensi
 
 
 def unrounded_temp(d2: int, calibration: Calibration, variant: Variant, apply_second_order: bool = True) -> Fraction:
     """TEMP (TEMP2 with second order) of ``d2`` without the floors of docs/devices.md §3.4-3.5, 0.01 degC, exact.
-
-    The rounded TEMP2 = TEMP - Ti is not monotonic in D2: where Ti steps up between two steps of TEMP it falls back
-    one count (30BA, about 59 degC: 5895 at D2 8078415, 5896 at 8078416, 5895 again at 8078575). This curve is
-    strictly increasing for C6 > 0 (the dT^2 terms' slope stays below C6/2^23 over the 24-bit range for C6 >= 4096;
-    the datasheet examples have 26146 and 28165, §3.7), so it has one crossing per temperature: the emulator's
-    inversion finds D2 on it (§3.8)."""
+    Unlike the rounded TEMP2, which falls back a count where Ti steps up between two steps of TEMP, strictly increasing
+    in D2 for C6 >= 4096 (§3.7: 26146, 28165): one D2 per temperature for the emulator's inversion (§3.8)."""
     dt = d2 - calibration.c5 * 256
     temp = 2000 + Fraction(dt * calibration.c6, 1 << 23)
-    k, s = _TI[Variant(variant), temp < 2000] if apply_second_order else (0, 0)
+    k, s = _SECOND_ORDER[Variant(variant), temp < 2000][0] if apply_second_order else (0, 0)
     return temp - Fraction(k * dt * dt, 1 << s)
 
 
