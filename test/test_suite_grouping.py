@@ -15,8 +15,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-#: what in a test module's source starts real-time vehicle processes or the live pool
-STARTS_REAL_TIME = re.compile(r"running_layout\(|LivePool\(|ProcessRunner\(|\"rehearse\"")
+#: what in a test module's source starts real-time vehicle processes, the live pool, or a vehicle graph whose devices
+#: run on the wall clock (test_ident_vehicle_graph.py: starved beside a launch, its campaign stopped)
+STARTS_REAL_TIME = re.compile(r"running_layout\(|LivePool\(|ProcessRunner\(|\"rehearse\"|use_clock\(time\.monotonic\)")
 #: modules whose process runner starts no real-time process: its own unit tests (plain Python children), the
 #: gateway's tests (the gateway alone, no priority), the launch-file checks (command lines only, nothing started)
 #: and the rehearsal's refusals (a bad argument or a busy domain: refused before it starts anything)

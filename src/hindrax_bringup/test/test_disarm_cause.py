@@ -50,6 +50,8 @@ def test_a_guard_error_while_disarmed_is_no_cause_and_an_esc_disarm_names_its_ow
     ("output guard", "ESC output state unknown: the PCA9685 cannot be written or read back (I2C fault)",
      "check the PCA9685"),
     ("supervisor", "operator e-stop (supervisor/estop)", "hindrax reset, then hindrax arm"),
+    ("output guard", "heartbeat not trusted: supervisor/heartbeat publisher not identified yet (discovery has not "
+     "named its node): trusted once the graph names it 'supervisor'", "wait a few seconds"),
     ("ESC", "disarmed", "hindrax arm when ready"),
     ("ESC", "something new", "hindrax health, then hindrax arm"),
 ])

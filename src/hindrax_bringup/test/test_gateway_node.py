@@ -89,6 +89,31 @@ def test_a_goal_that_is_not_accepted_fails_on_the_topside_with_its_cause(frames,
     assert seen == ["aborted"]
 
 
+def test_a_service_answering_after_2_5_s_is_relayed_with_the_default_patience():
+    """An internal service slow under load (controller/enable: "no answer within 2 s" in a loaded suite) is relayed
+    with the default ``call_timeout_s`` (4 s: below the 5 s that ``hindrax arm`` and ``hindrax ident status`` wait,
+    so a silent service is still reported by the gateway, not by the command giving up)."""
+    import itertools
+    import threading
+    from types import SimpleNamespace
+
+    from rclpy.serialization import serialize_message
+    from std_srvs.srv import SetBool
+
+    from hindrax_bringup.gateway.internal import DEFAULT_CALL_TIMEOUT_S
+    from hindrax_bringup.gateway.node import Gateway
+
+    def answer_late(head, payload=b""):
+        reply = ({"id": head["id"], "ok": True}, serialize_message(SetBool.Response(success=True, message="released")))
+        threading.Timer(2.5, lambda: gw._pending[head["id"]].set_result(reply)).start()
+        return True
+
+    gw = SimpleNamespace(_ids=itertools.count(1), _pending={}, channel=SimpleNamespace(send=answer_late),
+                         settings=SimpleNamespace(call_timeout_s=DEFAULT_CALL_TIMEOUT_S))
+    response, why = Gateway.call(gw, "controller/enable", SetBool.Request(data=False), SetBool)
+    assert why == "" and response.message == "released"
+
+
 def test_a_second_answer_to_one_call_is_dropped_and_the_reader_reads_on():
     """The internal side answering one call twice (a fault on the channel) leaves the first answer
     with the caller and the channel's reader thread reading the frames after it."""

@@ -76,7 +76,20 @@ PUBLISHER_TABLE = {
     "a dead forger still in the graph": (["forger", "supervisor"], 1, "node 'forger'"),
     "none live": (["supervisor"], 0, "no live publisher"),
     "none visible": ([], None, "no live publisher"),
+    "a publisher discovery has not named yet": (["_NODE_NAME_UNKNOWN_"], 1, "not identified yet"),
+    "a forger beside one not named yet": (["_NODE_NAME_UNKNOWN_", "forger"], 1, "node 'forger'"),
 }
+
+
+def test_a_publisher_not_named_yet_is_not_trusted_nor_called_forged_and_clears_when_named():
+    """An endpoint seen before its participant's node names (the DDS placeholder ``_NODE_NAME_UNKNOWN_``, a loaded
+    machine's discovery: an arm refused as "forged" in a CI run) is not the supervisor yet: a fault, so nothing arms
+    on it, but not a forgery, and gone at the first check after discovery names it."""
+    ident = HeartbeatIdentity("supervisor/heartbeat", "supervisor")
+    assert ident.on_beat(beat(A, 1), False)
+    out = ident.on_publishers(["_NODE_NAME_UNKNOWN_"], 1)
+    assert out and "not identified yet" in out and "forged" not in out and "_NODE_NAME_UNKNOWN_" not in out
+    assert ident.on_publishers(["supervisor"], 1) == ""
 
 
 @pytest.mark.parametrize("case", list(PUBLISHER_TABLE), ids=list(PUBLISHER_TABLE))

@@ -11,7 +11,7 @@ channel ends (the topside process is gone), and the topside process ends when it
 
 Parameters (read here, for both processes): the vehicle file (``vehicle.name``: the namespace; the sections the
 bounds need), ``topside_domain_id`` (int, 0-101), ``topside_discovery_range`` (``LOCALHOST``, ``SUBNET``,
-``SYSTEM_DEFAULT``, ``OFF``), ``call_timeout_s`` (0.1-30 s, default 2). A bad value ends the start with one line
+``SYSTEM_DEFAULT``, ``OFF``), ``call_timeout_s`` (0.1-30 s, default 4). A bad value ends the start with one line
 naming key, value and allowed range (exit status 1)."""
 from __future__ import annotations
 
@@ -43,8 +43,10 @@ __all__ = ["BOUNDS_SECTIONS", "DISCOVERY_RANGES", "GatewaySettings", "InternalSi
 
 #: allowed values of ``topside_discovery_range`` (Jazzy's ``ROS_AUTOMATIC_DISCOVERY_RANGE``)
 DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")
-#: default longest wait for an internal service's answer, s
-DEFAULT_CALL_TIMEOUT_S = 2.0
+#: default longest wait for an internal service's answer, s: patience, not a safety bound (the call goes on inside
+#: and the e-stop has its own thread); 2 s gave "no answer" for controller/enable under a loaded suite; below the 5 s
+#: of ``hindrax arm`` and ``ident status``, so the operator gets the gateway's reason rather than the command's silence
+DEFAULT_CALL_TIMEOUT_S = 4.0
 #: the vehicle file's sections the gateway reads: its name, and what the request bounds need
 BOUNDS_SECTIONS = ("vehicle", "identification", "supervisor", "limits", "pool", "hydrodynamics", "thrusters", "esc")
 #: the relay of these topics takes best-effort publishers too (odometry is often published best effort)

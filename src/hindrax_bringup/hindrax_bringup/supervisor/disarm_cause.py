@@ -25,6 +25,8 @@ _NEXT_STEPS: tuple[tuple[tuple[str, ...], str], ...] = (
                          "vehicle's computer, then hindrax reset, hindrax arm"),
     (("esc output state silent", "no esc heartbeat"),
      "check the ESC process (hindrax health; the launch respawns it), then hindrax arm"),
+    (("not identified yet",), "discovery has not named a heartbeat's publisher yet (a loaded machine): wait a "
+                              "few seconds, then hindrax arm"),
     (("no supervisor heartbeat", "supervisor heartbeat"),
      "check the supervisor process (hindrax health), then hindrax arm"),
     (("output state unknown", "i2c", "pca9685", "guard cannot act", "watchdog on /oe", "hardware watchdog"),

@@ -136,11 +136,13 @@ class HeartbeatIdentity:
     (:meth:`on_beat`, with its own armed state). :attr:`fault` is '' or the reason, naming the topic.
 
     Faults: a number of live publishers other than one (a forger or a bag player beside the peer; none), a publisher
-    with another node name, a beat that is not a Heartbeat or has ``boot_id`` or ``seq`` 0, a ``seq`` not greater than
-    the last accepted one of the same ``boot_id`` (a replay or a repeat), a ``boot_id`` change while armed (a forger or
-    a replay of another boot taking over a dead peer's topic). The publisher faults hold while the graph shows them; a
-    beat fault holds until a beat is accepted while not armed (while armed, it stays until the receiver has disarmed). A
-    new ``boot_id`` while not armed is a restart of the peer: its sequence starts again."""
+    with another node name, a publisher not named yet (:data:`UNNAMED_NODE`, seen before its participant's node names
+    arrived: no evidence of a forger, but not trusted until discovery names it), a beat that is not a Heartbeat or has
+    ``boot_id`` or ``seq`` 0, a ``seq`` not greater than the last accepted one of the same ``boot_id`` (a replay or a
+    repeat), a ``boot_id`` change while armed (a forger or a replay of another boot taking over a dead peer's topic).
+    The publisher faults hold while the graph shows them; a beat fault holds until a beat is accepted while not armed
+    (while armed, it stays until the receiver has disarmed). A new ``boot_id`` while not armed is a restart of the
+    peer: its sequence starts again."""
 
     topic: str
     node_name: str
@@ -163,13 +165,16 @@ class HeartbeatIdentity:
         "more than one" (a dead duplicate stops counting after its lease in both modes). Returns :attr:`fault`."""
         names = sorted(node_names)
         count = len(names) if alive is None else int(alive)
-        strangers = sorted({n for n in names if n != self.node_name})
+        strangers = sorted({n for n in names if n not in (self.node_name, UNNAMED_NODE)})
         if strangers:
             self.publisher_fault = (f"{self.topic} published by node {', '.join(map(repr, strangers))}, only "
                                     f"{self.node_name!r} may publish it: a forged or replayed heartbeat")
         elif count > 1:
             self.publisher_fault = (f"{count} live publishers on {self.topic}, only one {self.node_name!r} may "
                                     "publish it: a forged or replayed heartbeat")
+        elif UNNAMED_NODE in names:
+            self.publisher_fault = (f"{self.topic} publisher not identified yet (discovery has not named its node): "
+                                    f"trusted once the graph names it {self.node_name!r}")
         elif count < 1 and not (simulated and names):
             self.publisher_fault = f"no live publisher on {self.topic}"
         else:

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Sequence
+from fractions import Fraction
+from typing import Any, Callable, Sequence
 
 from . import protocol as p
 
@@ -30,33 +31,27 @@ __all__ = ["from_config", "Ms5837Emulator", "invert_to_raw", "TruthSource"]
 TruthSource = Callable[[float], "tuple[float, float]"]
 
 
-def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int, hint: int | None = None) -> int:
-    """Integer x in [lo, hi] whose non-decreasing f(x) is closest to target (bisection). ``hint``: a guess (e.g. the
-    previous answer): the bracket is found by doubling steps out from it, then bisected; for a non-decreasing f the
-    answer is the one without a hint, in a few evaluations when the target moved little."""
+def _closest_monotonic(f: Callable[[int], int], target: float | Fraction, lo: int, hi: int, hint: int | None = None,
+                       key: Callable[[int], Any] | None = None) -> int:
+    """Integer x in [lo, hi] near where the non-decreasing ``key`` (default ``f``) crosses target: of the two
+    integers around the crossing, the one whose f(x) is closer (a tie: the upper). ``hint``: a guess (e.g. the previous
+    answer): the bracket is found by doubling steps out from it, then bisected; as ``key`` is monotonic the pair
+    around its crossing is unique, so the answer is the one without a hint, in a few evaluations when the target
+    moved little."""
+    key, a, b, step = key or f, lo, hi, 1
     if hint is not None and lo < hint < hi:
         a = b = hint
-        step = 1
-        if f(hint) < target:
-            while b < hi and f(b) < target:
-                a, b, step = b, min(b + step, hi), 2 * step
-            if f(b) < target:
-                return hi
-        else:
-            while a > lo and f(a) >= target:
-                a, b, step = max(a - step, lo), a, 2 * step
-            if f(a) >= target:
-                return lo
-    else:
-        if f(hi) < target:
-            return hi
-        if f(lo) >= target:
-            return lo
-        a, b = lo, hi
-    # invariant: f(a) < target <= f(b)
+        up = key(hint) < target
+        while (b < hi and key(b) < target) if up else (a > lo and key(a) >= target):
+            a, b, step = (b, min(b + step, hi), 2 * step) if up else (max(a - step, lo), a, 2 * step)
+    if key(b) < target:
+        return hi
+    if key(a) >= target:
+        return lo
+    # invariant: key(a) < target <= key(b)
     while b - a > 1:
         mid = (a + b) // 2
-        if f(mid) < target:
+        if key(mid) < target:
             a = mid
         else:
             b = mid
@@ -67,11 +62,14 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
                   apply_second_order: bool = True, hint: tuple[int, int] | None = None) -> tuple[int, int]:
     """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
 
-    Implements docs/devices.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
-    ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts. Instead of the
-    closed-form estimate plus +-1 adjustment we bisect on the exact integer forward model
-    (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and also covers the second-order
-    branches. Both are clamped to 24 bits, so targets outside the representable range saturate.
+    Implements docs/devices.md §3.8: D2 is chosen so that TEMP is closest to ``temperature_c * 100``; then D1 so
+    that P (P2) is closest to the pressure in output counts. Instead of the closed-form estimate plus +-1 adjustment
+    we bisect on the exact integer forward model (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives
+    the same answer and also covers the second-order branches. TEMP2 is not monotonic in D2 (it falls back a count
+    where Ti steps up), so several D2 can give the closest TEMP2: with second order D2 is the count next to where the
+    unrounded TEMP2 (:func:`~hindrax_drivers.ms5837.protocol.unrounded_temp`, strictly increasing) crosses the
+    request, the one of the two whose TEMP2 is closer: what a part at that temperature reads, one D2 whatever the
+    hint. Both are clamped to 24 bits, so targets outside the representable range saturate.
 
     Args:
         pressure_pa: absolute pressure, Pa.
@@ -84,7 +82,7 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
     Returns:
         (D1, D2), each 0..2^24-1. The round trip error is within half an output LSB
         (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with the second-order
-        model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a value.
+        model within one TEMP2 step (0.01 degC) plus the D2 step.
 
     Raises ``Ms5837Error``: non-finite inputs."""
     if not all(map(lambda v: v == v and abs(v) != float("inf"), (pressure_pa, temperature_c))):
@@ -95,7 +93,8 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
     def temp_of(d2: int) -> int:
         return p.compensate(reference_d1, d2, calibration, variant, apply_second_order).compensation.temp
 
-    d2 = _closest_monotonic(temp_of, temperature_c * 100.0, 0, p.ADC_MAX, hint and hint[1])
+    d2 = _closest_monotonic(temp_of, Fraction(temperature_c) * 100, 0, p.ADC_MAX, hint and hint[1],
+                            (lambda d: p.unrounded_temp(d, calibration, variant)) if apply_second_order else None)
     target_p = pressure_pa * p.pressure_counts_per_pa(variant)
 
     def p_of(d1: int) -> int:

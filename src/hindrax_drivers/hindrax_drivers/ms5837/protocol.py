@@ -17,6 +17,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field
+from fractions import Fraction
 from typing import Sequence
 
 __all__ = ["Ms5837Error", "Variant", "ADDRESS", "CMD_RESET", "CMD_ADC_READ", "CMD_PROM_READ_BASE",
@@ -28,7 +29,7 @@ __all__ = ["Ms5837Error", "Variant", "ADDRESS", "CMD_RESET", "CMD_ADC_READ", "CM
            "convert_d1_command", "convert_d2_command", "prom_read_command", "decode_command", "conversion_time_s",
            "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word", "crc4", "prom_with_crc", "Calibration",
            "detect_variant", "Compensation", "Reading", "first_order", "second_order", "compensate",
-           "pressure_pa_from_counts", "pressure_counts_per_pa", "depth_m"]
+           "pressure_pa_from_counts", "pressure_counts_per_pa", "depth_m", "unrounded_temp"]
 
 
 class Ms5837Error(ValueError):
@@ -405,28 +406,33 @@ def first_order(d1: int, d2: int, calibration: Calibration, variant: Variant) ->
     return Compensation(dt=dt, temp=temp, off=off, sens=sens, p=p)
 
 
+#: (Ti, OFFi, SENSi) per (variant, TEMP < 2000), each (k, s): k x^2 / 2^s, x = dT for Ti, TEMP - 2000 for the others
+#: (docs/devices.md §3.5; the 30BA below -1500 adds to OFFi and SENSi, :func:`_second_order_terms`)
+_SECOND_ORDER = {(Variant.MS5837_30BA, True): ((3, 33), (3, 1), (5, 3)),
+                 (Variant.MS5837_30BA, False): ((2, 37), (1, 4), (0, 0)),
+                 (Variant.MS5837_02BA, True): ((11, 35), (31, 3), (63, 5)),
+                 (Variant.MS5837_02BA, False): ((0, 0), (0, 0), (0, 0))}
+
+
 def _second_order_terms(dt: int, temp: int, variant: Variant) -> tuple[int, int, int]:
-    """(Ti, OFFi, SENSi) per docs/devices.md §3.5."""
-    if variant is Variant.MS5837_30BA:
-        if temp < 2000:
-            ti = 3 * dt * dt // (1 << 33)
-            offi = 3 * (temp - 2000) ** 2 // 2
-            sensi = 5 * (temp - 2000) ** 2 // 8
-            if temp < -1500:
-                offi += 7 * (temp + 1500) ** 2
-                sensi += 4 * (temp + 1500) ** 2
-        else:
-            ti = 2 * dt * dt // (1 << 37)
-            offi = (temp - 2000) ** 2 // 16
-            sensi = 0
-    else:
-        if temp < 2000:
-            ti = 11 * dt * dt // (1 << 35)
-            offi = 31 * (temp - 2000) ** 2 // 8
-            sensi = 63 * (temp - 2000) ** 2 // 32
-        else:
-            ti = offi = sensi = 0
+    """(Ti, OFFi, SENSi) per docs/devices.md §3.5, floor division as the datasheet's integers."""
+    (kt, st), (ko, so), (ks, ss) = _SECOND_ORDER[variant, temp < 2000]
+    t2 = (temp - 2000) ** 2
+    ti, offi, sensi = kt * dt * dt // (1 << st), ko * t2 // (1 << so), ks * t2 // (1 << ss)
+    if variant is Variant.MS5837_30BA and temp < -1500:
+        offi += 7 * (temp + 1500) ** 2
+        sensi += 4 * (temp + 1500) ** 2
     return ti, offi, sensi
+
+
+def unrounded_temp(d2: int, calibration: Calibration, variant: Variant, apply_second_order: bool = True) -> Fraction:
+    """TEMP (TEMP2 with second order) of ``d2`` without the floors of docs/devices.md §3.4-3.5, 0.01 degC, exact.
+    Unlike the rounded TEMP2, which falls back a count where Ti steps up between two steps of TEMP, strictly increasing
+    in D2 for C6 >= 4096 (§3.7: 26146, 28165): one D2 per temperature for the emulator's inversion (§3.8)."""
+    dt = d2 - calibration.c5 * 256
+    temp = 2000 + Fraction(dt * calibration.c6, 1 << 23)
+    k, s = _SECOND_ORDER[Variant(variant), temp < 2000][0] if apply_second_order else (0, 0)
+    return temp - Fraction(k * dt * dt, 1 << s)
 
 
 def second_order(d1: int, first: Compensation, variant: Variant) -> Compensation:

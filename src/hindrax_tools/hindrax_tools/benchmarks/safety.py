@@ -577,7 +577,11 @@ class _Layout:
                 return fut.result()
             except ConditionTimeout:
                 client.remove_pending_request(fut)
-        raise ConditionTimeout(f"no answer from {client.srv_name} after {attempts} attempts")
+        name = client.srv_name.strip("/").split("/")[0]  # the serving process (esc/set_armed, supervisor/reset)
+        p = self.procs.get(name)
+        state = "not started" if p is None else "running" if p.poll() is None else f"exited {p.returncode}"
+        raise ConditionTimeout(f"no answer from {client.srv_name} after {attempts} attempts of {timeout:g} s; its "
+                               f"process {state}, its last log line {self._last_log_line(name, '')!r}")
 
     def armed_at_1700(self) -> None:
         """(Re)start what is not running, arm (retrying while the ESC still refuses), command 1700 us until it is
