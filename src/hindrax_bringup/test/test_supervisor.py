@@ -48,6 +48,8 @@ def test_limits_from_the_shipped_configuration():
     lim = SupervisorLimits.from_config(load_config(default_config_path()))
     assert lim.cage_min_ne == (0.1, 0.1) and lim.cage_max_ne == (9.9, 5.9)  # 10 x 6 m pool, 0.1 m margin
     assert lim.start_position_ne == (2.0, 3.0) and lim.max_depth_m == 1.65
+    assert lim.clock_stall_timeout_s == 3.0  # its default: supervisor.rate_window_s
+    assert SupervisorLimits.from_config(load_config(default_config_path()), 30.0).clock_stall_timeout_s == 30.0
 
 
 def test_supervisor_limits_must_be_wider_than_the_identification_limits():
@@ -80,6 +82,18 @@ def test_nothing_trips_while_disarmed_and_each_limit_trips_once_armed():
         assert feed(c) == ""  # latched: reported once
         c.reset()
         assert c.tripped == ""
+
+
+def test_ros_time_standing_still_beyond_the_timeout_trips_only_while_armed():
+    """clock_stall_timeout_s 2 s: ROS time still for 2 s of steady time (or less) does not trip, 2.01 s does; while
+    disarmed no stall trips (the other checks are off then too)."""
+    c = SupervisorCore(limits(clock_stall_timeout_s=2.0))
+    assert c.stall_check(1e6) == "" and c.tripped == ""
+    c.set_armed(0.0, True)
+    assert c.stall_check(1.99) == "" and c.stall_check(2.0) == "" and c.tripped == ""
+    reason = c.stall_check(2.01)
+    assert reason == "ROS time stalled for 2.0 s while armed: the supervisor's ROS-time checks are blind"
+    assert c.tripped == reason and c.stall_check(3.0) == ""  # latched: reported once
 
 
 def test_dead_reckoning_and_cage():
@@ -490,7 +504,7 @@ def test_supervisor_takes_the_latched_esc_state_and_disarms_a_tripped_arming():
             sub.callback = lambda m: (on_esc(m), taken.append(m))  # noqa: E731 - the supervisor's, then noted
             pub.publish(state(ThrusterPwm.OUTPUT_UNKNOWN, False))
             wait_until(lambda: taken, 10, spin, "unknown delivered")
-            assert sup.core.armed and sup.esc_armed  # unknown after armed: still armed
+            assert sup.core.armed  # unknown after armed: still armed
             sup.core.trip("test breach")
             wait_until(lambda: requests == [False], 10, spin, "disarm requested")
             pub.publish(state(ThrusterPwm.OUTPUT_NEUTRAL, False))

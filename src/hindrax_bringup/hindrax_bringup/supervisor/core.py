@@ -29,6 +29,8 @@ Checks, all only while the ESC is armed (a vehicle on the bench or at the surfac
 * **cage**: the dead-reckoned horizontal position inside the pool box (``pool.length_m`` north x
   ``pool.width_m`` east, origin at the pool corner) shrunk by ``supervisor.cage_margin_m`` on every side;
 * **run time**: armed for at most ``supervisor.max_run_time_s``;
+* **ROS time standing still** for ``clock_stall_timeout_s`` of steady time (the node's measure,
+  :meth:`SupervisorCore.stall_check`): every check on ROS time would be blind;
 * **operator e-stop** and **abort requests** from other nodes (:meth:`SupervisorCore.trip`).
 
 Position (kept simple, and said so): DVL dead reckoning from ``pool.start_position_ned_m`` (where the operator
@@ -95,10 +97,12 @@ class SupervisorLimits:
     max_sample_age_s: float = math.inf
     max_identical_s: float = math.inf
     reaction_time_s: float = math.inf
+    clock_stall_timeout_s: float = math.inf
 
     @classmethod
-    def from_config(cls, cfg: Any) -> "SupervisorLimits":
-        """From a :class:`~hindrax_common.config.VehicleConfig` (``supervisor.*`` and ``pool.*`` keys)."""
+    def from_config(cls, cfg: Any, clock_stall_timeout_s: float | None = None) -> "SupervisorLimits":
+        """From a :class:`~hindrax_common.config.VehicleConfig` (``supervisor.*`` and ``pool.*`` keys) and the node
+        parameter ``clock_stall_timeout_s`` (s; None: its default ``supervisor.rate_window_s``)."""
         g = cfg.get
         margin = float(g("supervisor.cage_margin_m"))
         start = g("pool.start_position_ned_m")
@@ -114,7 +118,8 @@ class SupervisorLimits:
                    start_heading_rad=float(g("pool.start_heading_rad")),
                    max_sample_age_s=float(g("supervisor.max_sample_age_s")),
                    max_identical_s=float(g("supervisor.max_identical_s")),
-                   reaction_time_s=float(g("supervisor.reaction_time_s")))
+                   reaction_time_s=float(g("supervisor.reaction_time_s")),
+                   clock_stall_timeout_s=float(clock_stall_timeout_s or g("supervisor.rate_window_s")))
 
 
 @dataclass
@@ -333,6 +338,15 @@ class SupervisorCore:
         return ""
 
     # ------------------------------------------------------------------ periodic
+    def stall_check(self, stalled_for_s: float) -> str:
+        """ROS time has stood still for ``stalled_for_s`` of steady time (s; the node's
+        :class:`~hindrax_common.node_support.liveness.ClockStepMonitor`): armed and beyond
+        ``limits.clock_stall_timeout_s`` is a breach, for every check on ROS time is blind. Returns a new breach."""
+        if stalled_for_s <= self.limits.clock_stall_timeout_s:
+            return ""
+        return self._breach(f"ROS time stalled for {stalled_for_s:.1f} s while armed: the supervisor's ROS-time "
+                            "checks are blind")
+
     def rate_hz(self, sensor: str, t_s: float) -> float:
         """Messages per second of ``sensor`` over the window ending at ``t_s``."""
         dq = self._stamps[sensor]

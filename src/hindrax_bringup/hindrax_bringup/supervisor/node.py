@@ -45,8 +45,7 @@ Time
     of ROS time is detected at the next check or sample, whichever reads the time first, reported (``/diagnostics``
     warning ``clock_step``) and the stored times are shifted by the step, so no check goes blind and a sample taken
     after the step is not shifted again; ROS time standing still for ``clock_stall_timeout_s`` (default
-    ``supervisor.rate_window_s``) of steady time while armed trips ("ROS time stalled": every ROS-time check would
-    be blind).
+    ``supervisor.rate_window_s``) of steady time while armed trips (:meth:`.core.SupervisorCore.stall_check`).
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``);
     the read-only node parameter ``clock_stall_timeout_s``."""
@@ -99,22 +98,20 @@ class SupervisorNode(VehicleNode):
     def __init__(self, **kwargs: Any):
         super().__init__("supervisor", **kwargs)
         cfg = load_node_config(self, ("supervisor", "pool"))
-        self.core = SupervisorCore(SupervisorLimits.from_config(cfg))
+        # ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
+        self.core = SupervisorCore(SupervisorLimits.from_config(cfg, float(declare_node_parameter(
+            self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT, cfg.supervisor.rate_window_s))))
         #: why the thrust last stopped, for the operator (``disarm_cause`` of the status)
         self.causes = DisarmCauses()
         self._decode_imu = cdr_decoder(Imu)
         self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
         self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
-        self.esc_armed = False
         self.last_breach_time_s: float | None = None
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
         self.heartbeat = HeartbeatPublisher(self, "supervisor")
         self.clock_monitor = ClockStepMonitor(self._now_s)
-        #: ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
-        self.clock_stall_timeout_s = float(declare_node_parameter(self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT,
-                                                                  cfg.supervisor.rate_window_s))
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
         # the sensors best effort (sensor_input_qos): a lost sample only lowers the rate the check counts
         self.create_subscription(Dvl, "dvl/data", self.on_dvl, sensor_input_qos(10))
@@ -181,9 +178,8 @@ class SupervisorNode(VehicleNode):
             self.diag.count("esc_state_malformed")
             state = (OUTPUT_UNKNOWN, False)
         armed = armed_after(self.core.armed, *state)
-        if armed != self.esc_armed:
+        if armed != self.core.armed:
             self._status_dirty = True
-        self.esc_armed = armed
         self._cause(lambda: self.causes.on_armed(armed, next((kv.value for kv in msg.values if kv.key == "reason"),
                                                               "")))
         self.core.set_armed(self._sample_time_s(), armed)
@@ -244,11 +240,9 @@ class SupervisorNode(VehicleNode):
     def on_check(self) -> None:
         self.tick_gaps.tick()
         self._sample_time_s()  # a backward step of ROS time: re-base first
-        if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
-            self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
-                                        "armed: the supervisor's ROS-time checks are blind"))
+        self._handle(self.core.stall_check(self.clock_monitor.stalled_for_s()))
         self._handle(self.core.check(self._now_s()))
-        if self.core.tripped and self.esc_armed:
+        if self.core.tripped and self.core.armed:
             self._disarm()
         if self._status_dirty:
             self._publish_status()
