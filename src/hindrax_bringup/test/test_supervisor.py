@@ -93,6 +93,22 @@ def test_ros_time_standing_still_beyond_the_timeout_trips_only_while_armed():
     assert c.tripped == reason and c.stall_check(3.0) == ""  # latched: reported once
 
 
+def test_a_disarm_is_asked_at_a_breach_and_repeated_every_0_2_s_while_the_esc_stays_armed():
+    c = SupervisorCore(limits())
+    c.set_armed(0.0, True)
+    assert not c.disarm_due(5.0)  # armed, not tripped: nothing to ask
+    c.trip("operator e-stop")
+    assert c.disarm_due(5.0, breach=True)
+    assert not c.disarm_due(5.19) and c.disarm_due(5.2)  # DISARM_RETRY_S 0.2 s of steady time after the last ask
+    assert not c.disarm_due(5.3) and c.disarm_due(5.45)
+    c.set_armed(6.0, False)
+    assert not c.disarm_due(7.0)  # disarmed: done
+    c.set_armed(7.0, True)  # re-armed while tripped: at once
+    assert c.disarm_due(7.0)
+    c.shift_time(-100.0)  # ROS time stepped back: the steady-time repeats go on
+    assert c.disarm_due(7.2)
+
+
 def test_dead_reckoning_and_cage():
     """Heading 90 deg (east), 0.5 m/s surge for 5 s from (2, 3): 2.5 m east -> (2, 5.5), inside; 1 s more ->
     east 6.0, beyond the 5.9 m cage edge (hand arithmetic)."""

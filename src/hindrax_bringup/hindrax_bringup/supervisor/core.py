@@ -50,11 +50,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["SENSORS", "SupervisorLimits", "SupervisorCore", "tilt_from_specific_force"]
+__all__ = ["DISARM_RETRY_S", "SENSORS", "SupervisorLimits", "SupervisorCore", "tilt_from_specific_force"]
 
 #: Watched sensors, with the topic each one is measured on (the node's subscriptions).
 SENSORS: dict[str, str] = {"dvl": "dvl/data", "altimeter": "ping/altitude", "pressure": "pressure/depth",
                            "imu": "imu/data_raw"}
+#: A disarm request is repeated this often while the ESC still reports armed after a breach, s (steady clock).
+DISARM_RETRY_S = 0.2
 #: Longest gap between two DVL velocities that is integrated, s.
 MAX_DEAD_RECKONING_GAP_S = 1.0
 #: An accelerometer reading whose magnitude is outside this fraction of g is no tilt reference (the vehicle is
@@ -148,6 +150,8 @@ class SupervisorCore:
     not_alive: dict = field(default_factory=dict)
     not_alive_reason: dict = field(default_factory=dict)
     _identical: dict = field(default_factory=dict)
+    #: steady time (s) of the last disarm request (:meth:`disarm_due`)
+    disarm_asked_s: float = -math.inf
 
     def __post_init__(self) -> None:
         self.position_ne = np.array(self.limits.start_position_ne, dtype=float)
@@ -176,6 +180,15 @@ class SupervisorCore:
     def reset(self) -> None:
         """Clear the latched breach (operator, after the cause is understood)."""
         self.tripped = ""
+
+    def disarm_due(self, steady_s: float, breach: bool = False) -> bool:
+        """Is a disarm request to the ESC due at steady time ``steady_s`` (s)? At a new breach (``breach``) at once,
+        armed or not; then while tripped and the ESC reports armed every :data:`DISARM_RETRY_S`, for a lost request
+        or a re-arm. Steady time: a ROS time that steps back or stands still must not hold the repeats off."""
+        if not breach and not (self.tripped and self.armed and steady_s - self.disarm_asked_s >= DISARM_RETRY_S):
+            return False
+        self.disarm_asked_s = steady_s
+        return True
 
     def _breach(self, reason: str) -> str:
         if not self.armed:

@@ -51,7 +51,7 @@ Configuration
     the read-only node parameter ``clock_stall_timeout_s``."""
 from __future__ import annotations
 
-import math
+import time
 from typing import Any
 
 import numpy as np
@@ -81,8 +81,6 @@ from .disarm_cause import DisarmCauses
 
 __all__ = ["SupervisorNode", "main"]
 
-#: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
-DISARM_RETRY_S = 0.2
 #: QoS depth of ``imu/data_raw``: 0.5 s at 102 Hz, room for an executor held up on a loaded machine (a sample lost
 #: in the queue lowers the rate the ``supervisor.min_rate.imu_hz`` check sees)
 IMU_QUEUE_DEPTH = 50
@@ -107,7 +105,6 @@ class SupervisorNode(VehicleNode):
         self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
         self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
         self.last_breach_time_s: float | None = None
-        self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
         self.heartbeat = HeartbeatPublisher(self, "supervisor")
@@ -183,8 +180,7 @@ class SupervisorNode(VehicleNode):
         self._cause(lambda: self.causes.on_armed(armed, next((kv.value for kv in msg.values if kv.key == "reason"),
                                                               "")))
         self.core.set_armed(self._sample_time_s(), armed)
-        if armed and self.core.tripped:
-            self._disarm()
+        self._disarm()
 
     def on_guard(self, data: bytes) -> None:
         """A ``guard/heartbeat`` (its CDR bytes): its reason while it silences the outputs names a disarm
@@ -204,11 +200,11 @@ class SupervisorNode(VehicleNode):
 
     def on_abort(self, msg: String) -> None:
         self._cause(lambda: self.causes.on_starved(msg.data))  # the starvation behind an earlier stop, if it is one
-        self._handle(self.core.trip(f"abort requested: {msg.data}"), force=True)
+        self._handle(self.core.trip(f"abort requested: {msg.data}"))
 
     def on_estop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         new = self.core.trip("operator e-stop (supervisor/estop)")
-        self._handle(new, force=True)
+        self._handle(new)
         response.success = True
         was = "tripped" if new else "already tripped"
         response.message = f"{was}: {self.core.tripped}; disarm requested"
@@ -242,8 +238,7 @@ class SupervisorNode(VehicleNode):
         self._sample_time_s()  # a backward step of ROS time: re-base first
         self._handle(self.core.stall_check(self.clock_monitor.stalled_for_s()))
         self._handle(self.core.check(self._now_s()))
-        if self.core.tripped and self.core.armed:
-            self._disarm()
+        self._disarm()
         if self._status_dirty:
             self._publish_status()
         self._publish_heartbeat()
@@ -253,9 +248,8 @@ class SupervisorNode(VehicleNode):
         self.heartbeat.publish(not tripped, tripped or "within the envelope")
 
     # ------------------------------------------------------------------ breach
-    def _handle(self, reason: str, force: bool = False) -> None:
-        """A new breach (non-empty ``reason``): disarm, report. ``force``: disarm even if the ESC is not
-        known to be armed (e-stop, abort)."""
+    def _handle(self, reason: str) -> None:
+        """A new breach (non-empty ``reason``): disarm (even if the ESC is not known to be armed), report."""
         if not reason:
             return
         self.causes.on_trip(reason)
@@ -265,14 +259,13 @@ class SupervisorNode(VehicleNode):
         self.get_logger().error(f"supervisor breach: {reason}; disarming the ESC")
         self._status_dirty = True
         self._publish_heartbeat()  # the ESC and the guard act on it at once
-        self._disarm(force=True)
+        self._disarm(breach=True)
         self._publish_status()
 
-    def _disarm(self, force: bool = False) -> None:
-        now = self._now_s()
-        if not force and now - self._last_disarm_request_s < DISARM_RETRY_S:
+    def _disarm(self, breach: bool = False) -> None:
+        """``esc/set_armed(arm=False)`` when the core says it is due (:meth:`.core.SupervisorCore.disarm_due`)."""
+        if not self.core.disarm_due(time.monotonic(), breach):
             return
-        self._last_disarm_request_s = now
         if not self.esc_client.service_is_ready():
             self.get_logger().error("esc/set_armed not available: cannot disarm", throttle_duration_sec=1.0)
             return
