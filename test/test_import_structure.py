@@ -43,6 +43,7 @@ import ast
 from pathlib import Path
 
 import pytest
+from hindrax_test_support.packages import setup_kwargs
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The Python packages, lowest first (hindrax_msgs, the generated interfaces, is below them all).
@@ -241,24 +242,6 @@ def test_entry_points_exist(graph):
 
 
 # ------------------------------------------------------------------------------------------------ packages
-def setup_kwargs(pkg: str) -> dict:
-    """The keyword arguments ``src/<pkg>/setup.py`` passes to setuptools.setup (as colcon's ``setup.py install``)."""
-    import os
-    import runpy
-    from unittest import mock
-
-    captured: dict = {}
-    cwd = os.getcwd()
-    os.chdir(ROOT / "src" / pkg)
-    try:
-        with mock.patch("setuptools.setup", lambda **kw: captured.update(kw)), \
-                mock.patch("sys.argv", ["setup.py", "install"]):
-            runpy.run_path("setup.py", run_name="__main__")
-    finally:
-        os.chdir(cwd)
-    return captured
-
-
 def package_of(module: str) -> str:
     return module.split(".", 1)[0]
 

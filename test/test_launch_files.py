@@ -10,34 +10,18 @@ that is installed, include arguments are declared by the included file, and cond
 """
 from __future__ import annotations
 
-import os
 import re
-import runpy
 import shlex
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from unittest import mock
 
 import pytest
 import yaml
+from hindrax_test_support.packages import setup_kwargs
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("hindrax_common", "hindrax_drivers", "hindrax_bringup", "hindrax_onboard", "hindrax_fit", "hindrax_sim",
             "hindrax_tools")
-
-
-def setup_kwargs(pkg: str) -> dict:
-    """The keyword arguments a package's setup.py passes to setuptools.setup (as `setup.py install` sees them)."""
-    captured = {}
-    cwd = os.getcwd()
-    os.chdir(REPO / "src" / pkg)
-    try:
-        with mock.patch("setuptools.setup", lambda **kw: captured.update(kw)), \
-                mock.patch("sys.argv", ["setup.py", "install"]):
-            runpy.run_path("setup.py", run_name="__main__")
-    finally:
-        os.chdir(cwd)
-    return captured
 
 
 @pytest.fixture(scope="module")

@@ -231,7 +231,7 @@ def test_bringup_passes_its_safety_timeouts_as_read_only_parameters_ros2_param_g
             esc, guard, supervisor = (graph.nodes[n] for n in ("esc", "output_guard", "supervisor"))
             assert (esc.peers.timeout_s, esc.steady_watchdog_s) == (2.0, 30.0)
             assert guard.timeout_s == guard.core.timeout_s == guard.esc_age.max_step_s == 2.0
-            assert supervisor.clock_stall_timeout_s == 30.0
+            assert supervisor.core.limits.clock_stall_timeout_s == 30.0
             r = set_param(call, "esc", "heartbeat_timeout_s",
                           ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.2))
             assert not r.successful and "read-only" in r.reason

@@ -14,21 +14,18 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from hindrax_common.base import frames
 from hindrax_common.config import default_config_path, load_config
-from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-from hindrax_drivers.pca9685.node import EscNode
 from hindrax_bringup.supervisor.core import SupervisorCore, SupervisorLimits, tilt_from_specific_force
 from hindrax_bringup.supervisor.node import SupervisorNode
-from hindrax_common.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
-from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import config_parameters, ros_context, wait_until
 from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
+from hindrax_test_support.safety_graph import SafetyGraph
 
 TICK_US = 1.24
 PERIOD_S = 1 / 50.0  # esc.output_rate_hz
@@ -48,6 +45,8 @@ def test_limits_from_the_shipped_configuration():
     lim = SupervisorLimits.from_config(load_config(default_config_path()))
     assert lim.cage_min_ne == (0.1, 0.1) and lim.cage_max_ne == (9.9, 5.9)  # 10 x 6 m pool, 0.1 m margin
     assert lim.start_position_ne == (2.0, 3.0) and lim.max_depth_m == 1.65
+    assert lim.clock_stall_timeout_s == 3.0  # its default: supervisor.rate_window_s
+    assert SupervisorLimits.from_config(load_config(default_config_path()), 30.0).clock_stall_timeout_s == 30.0
 
 
 def test_supervisor_limits_must_be_wider_than_the_identification_limits():
@@ -80,6 +79,34 @@ def test_nothing_trips_while_disarmed_and_each_limit_trips_once_armed():
         assert feed(c) == ""  # latched: reported once
         c.reset()
         assert c.tripped == ""
+
+
+def test_ros_time_standing_still_beyond_the_timeout_trips_only_while_armed():
+    """clock_stall_timeout_s 2 s: ROS time still for 2 s of steady time (or less) does not trip, 2.01 s does; while
+    disarmed no stall trips (the other checks are off then too)."""
+    c = SupervisorCore(limits(clock_stall_timeout_s=2.0))
+    assert c.stall_check(1e6) == "" and c.tripped == ""
+    c.set_armed(0.0, True)
+    assert c.stall_check(1.99) == "" and c.stall_check(2.0) == "" and c.tripped == ""
+    reason = c.stall_check(2.01)
+    assert reason == "ROS time stalled for 2.0 s while armed: the supervisor's ROS-time checks are blind"
+    assert c.tripped == reason and c.stall_check(3.0) == ""  # latched: reported once
+
+
+def test_a_disarm_is_asked_at_a_breach_and_repeated_every_0_2_s_while_the_esc_stays_armed():
+    c = SupervisorCore(limits())
+    c.set_armed(0.0, True)
+    assert not c.disarm_due(5.0)  # armed, not tripped: nothing to ask
+    c.trip("operator e-stop")
+    assert c.disarm_due(5.0, breach=True)
+    assert not c.disarm_due(5.19) and c.disarm_due(5.2)  # DISARM_RETRY_S 0.2 s of steady time after the last ask
+    assert not c.disarm_due(5.3) and c.disarm_due(5.45)
+    c.set_armed(6.0, False)
+    assert not c.disarm_due(7.0)  # disarmed: done
+    c.set_armed(7.0, True)  # re-armed while tripped: at once
+    assert c.disarm_due(7.0)
+    c.shift_time(-100.0)  # ROS time stepped back: the steady-time repeats go on
+    assert c.disarm_due(7.2)
 
 
 def test_dead_reckoning_and_cage():
@@ -205,60 +232,28 @@ def test_dvl_without_dvext_uses_the_imu_tilt_or_trips():
 # ------------------------------------------------------------------ graph: every breach -> neutral on the chip
 @pytest.fixture
 def graph():
+    """The ESC and the supervisor (:class:`~hindrax_test_support.safety_graph.SafetyGraph`) with the e-stop client,
+    ``supervisor/abort`` and :attr:`step` publishing the sensors from :attr:`state`."""
+    over = {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True, "esc.watchdog_timeout_s": 5.0,
+            "supervisor.rate_window_s": 1.0, "supervisor.max_run_time_s": 30.0}
     with ros_context() as ctx:
-        emu = Pca9685Emulator()
-        sim = [Parameter("use_sim_time", value=True)]
-        over = {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True, "esc.watchdog_timeout_s": 5.0,
-                "supervisor.rate_window_s": 1.0, "supervisor.max_run_time_s": 30.0}
-        esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=config_parameters(over) + sim)
-        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(over) + sim)
-        probe = rclpy.create_node("probe", context=ctx)
-        SafetyHeartbeats(probe, supervisor=None)  # the output guard healthy (the supervisor is real)
-        ex = SingleThreadedExecutor(context=ctx)
-        for n in (esc, sup, probe):
-            ex.add_node(n)
-        allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
-        pubs = {"clock": probe.create_publisher(Clock, "/clock", 10),
-                "cmd": allocation.pub,
-                "dvl": probe.create_publisher(Dvl, "dvl/data", 10),
-                "alt": probe.create_publisher(Range, "ping/altitude", 10),
-                "depth": probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
-                "imu": probe.create_publisher(Imu, "imu/data_raw", 10),
-                "abort": probe.create_publisher(String, "supervisor/abort", 10)}
-        arm = probe.create_client(SetArmed, "esc/set_armed")
-        estop = probe.create_client(Trigger, "supervisor/estop")
-        reset = probe.create_client(Trigger, "supervisor/reset")
-        statuses = []
-        probe.create_subscription(DiagnosticStatus, "supervisor/status", statuses.append, 10)
-        g = dict(ns=1_000_000_000, emu=emu, esc=esc, sup=sup, ex=ex, pubs=pubs, statuses=statuses,
-                 state=dict(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set()))
-
-        def spin_idle():
-            """Run callbacks until none is ready (as hindrax_sim.graph.bringup.Graph.spin_until_idle)."""
-            from rclpy.executors import ShutdownException, TimeoutException
-
-            for _ in range(10_000):
-                try:
-                    handler, _entity, _node = ex.wait_for_ready_callbacks(0.0)
-                except (TimeoutException, ShutdownException):
-                    return
-                handler()
-
+        g = SafetyGraph(ctx, over)
+        g.pubs["abort"] = g.probe.create_publisher(String, "supervisor/abort", 10)
+        g.estop = g.probe.create_client(Trigger, "supervisor/estop")
+        g.state = dict(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set())
         rng = np.random.default_rng(7)
 
         def noise(std, n=None):
             """A sensor's noise; none (bit-identical samples) with the state's ``frozen``."""
-            return 0.0 * rng.normal(0.0, std, n) if g["state"].get("frozen") else rng.normal(0.0, std, n)
+            return 0.0 * rng.normal(0.0, std, n) if g.state.get("frozen") else rng.normal(0.0, std, n)
 
         def step(dt_s=0.01):
             """Publish the sensors for this instant (stamped now, with a little noise as real sensors have: the
             supervisor takes stale or bit-identical streams as dead), then advance /clock by dt_s and let every node
             run."""
-            st = g["state"]
-            t_ms = (g["ns"] // 1_000_000)
-            stamp = Clock().clock
-            stamp.sec, stamp.nanosec = divmod(g["ns"] - st.get("stamp_lag_ns", 0), 1_000_000_000)
-            if t_ms % 100 == 0:
+            st, pubs = g.state, g.pubs
+            stamp = g.stamp(st.get("stamp_lag_ns", 0))
+            if (g.ns // 1_000_000) % 100 == 0:
                 if "dvl" not in st["quiet"]:
                     m = Dvl(velocity_valid=True)
                     m.header.stamp = stamp
@@ -285,53 +280,25 @@ def graph():
                                        -9.81 * math.cos(st.get("imu_roll", st["roll"]))]) + noise(0.01, 3)
                 imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = (float(x) for x in f)
                 pubs["imu"].publish(imu)
-            g["ns"] += int(dt_s * 1e9)
-            c = Clock()
-            c.clock.sec, c.clock.nanosec = divmod(g["ns"], 1_000_000_000)
-            pubs["clock"].publish(c)
-            ex.spin_once(timeout_sec=0.01)
-            spin_idle()
+            g.advance(dt_s)
 
-        def call(client, request):
-            fut = client.call_async(request)
-            wait_until(fut.done, 5, lambda: ex.spin_once(timeout_sec=0.01), "service answer")
-            return fut.result()
-
-        g.update(step=step, call=call, arm=arm, estop=estop, reset=reset, spin_idle=spin_idle)
-        wait_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()) and arm.service_is_ready()
-                   and estop.service_is_ready() and sup.esc_client.service_is_ready(), 10, step, "graph ready")
+        g.step = step
+        g.wait_ready(step, g.estop.service_is_ready)
         yield g
-        ex.shutdown()
-        for n in (allocation.node, probe, sup, esc):
-            n.destroy_node()
-
-
-def wire(emu):
-    return np.array([emu.pulse_width_us(c) for c in range(8)])
+        g.close()
 
 
 def sim_s(g):
-    return g["ns"] * 1e-9
+    return g.ns * 1e-9
 
 
 def arm_and_thrust(g):
     """Reset the supervisor, arm, and command 1700 us until it is on the wire and the supervisor sees armed."""
-    g["call"](g["reset"], Trigger.Request())
-    st = g["state"]
-    st.clear()
-    st.update(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set())
-    g["sup"].core.position_ne = np.array(g["sup"].core.limits.start_position_ne)
-    for _ in range(120):  # 1.2 s of sensors: a whole rate window before arming
-        g["step"]()
-    # the ESC's shortest time at neutral with the guard's OK (GUARD_CONFIRM_S, steady clock; simulated time held)
-    wait_until(lambda: g["esc"].arming_remaining_s() == 0.0, 5, lambda: g["ex"].spin_once(timeout_sec=0.01),
-               "ESC time at neutral")
-    assert g["call"](g["arm"], SetArmed.Request(arm=True)).success
-
-    def go():
-        g["pubs"]["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
-        g["step"]()
-    wait_until(lambda: wire(g["emu"])[0] > 1690 and g["sup"].core.armed, 10, go, "thrust on the wire")
+    g.call(g.reset, Trigger.Request())
+    g.state.clear()
+    g.state.update(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set())
+    g.sup.core.position_ne = np.array(g.sup.core.limits.start_position_ne)
+    g.arm_with_thrust(g.step)
 
 
 def until_neutral(g, keep_commanding=True, max_steps=400):
@@ -340,13 +307,13 @@ def until_neutral(g, keep_commanding=True, max_steps=400):
     what it was posted: it runs on wall time while /clock is held, and on a loaded machine (a fresh clone's suite,
     2 workers on 2 cores) a starved thread let 28 slices of 1 ms pass before its neutral write landed."""
     for _ in range(max_steps):
-        assert g["esc"].link.worker.wait_idle(5.0), "the ESC's chip thread hangs"
-        if np.allclose(wire(g["emu"]), 1500.0, atol=TICK_US):
+        assert g.esc.link.worker.wait_idle(5.0), "the ESC's chip thread hangs"
+        if np.allclose(g.wire(), 1500.0, atol=TICK_US):
             return sim_s(g)
         if keep_commanding:
-            g["pubs"]["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
-        g["step"](0.001)
-    raise AssertionError(f"not neutral: {wire(g['emu'])}")
+            g.pubs["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+        g.step(0.001)
+    raise AssertionError(f"not neutral: {g.wire()}")
 
 
 @pytest.mark.ros
@@ -355,17 +322,17 @@ def until_neutral(g, keep_commanding=True, max_steps=400):
 def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, breach):
     g = graph
     arm_and_thrust(g)
-    st = g["state"]
+    st = g.state
     breach_at = None
     if breach == "estop":
         breach_at = sim_s(g)
-        res = g["call"](g["estop"], Trigger.Request())
+        res = g.call(g.estop, Trigger.Request())
         assert res.success
     elif breach == "abort":
         breach_at = sim_s(g)
-        g["pubs"]["abort"].publish(String(data="limits.max_depth_m"))
+        g.pubs["abort"].publish(String(data="limits.max_depth_m"))
     elif breach == "run_time":
-        g["sup"].core.armed_since_s -= 29.9  # 0.1 s of simulated time before supervisor.max_run_time_s
+        g.sup.core.armed_since_s -= 29.9  # 0.1 s of simulated time before supervisor.max_run_time_s
     else:
         st.update({"depth": dict(depth=1.7), "altitude": dict(alt=0.1), "attitude": dict(roll=1.2),
                    "cage": dict(v=(0.0, 0.0)), "sensor_rate": dict(quiet={"depth"}),
@@ -374,31 +341,31 @@ def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, brea
                    # $DVPDL without $DVEXT (no attitude) while the IMU says 60 deg of roll
                    "no_dvext_roll": dict(quiet={"dvext"}, imu_roll=math.radians(60.0))}[breach])
         if breach == "cage":
-            g["sup"].core.position_ne = np.array([9.95, 3.0])  # beyond the 9.9 m north cage edge
+            g.sup.core.position_ne = np.array([9.95, 3.0])  # beyond the 9.9 m north cage edge
             st["v"] = (0.01, 0.0)
     # step in 1 ms slices while commanding thrust, until the supervisor trips
     for _ in range(3000):
-        if g["sup"].core.tripped:
+        if g.sup.core.tripped:
             break
-        g["pubs"]["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
-        g["step"](0.001)
-    assert g["sup"].core.tripped, breach
-    trip_s = g["sup"].last_breach_time_s
+        g.pubs["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+        g.step(0.001)
+    assert g.sup.core.tripped, breach
+    trip_s = g.sup.last_breach_time_s
     neutral_s = until_neutral(g)
     assert neutral_s - trip_s <= PERIOD_S + 1e-9, (breach, neutral_s - trip_s)
     if breach_at is not None:
         assert neutral_s - breach_at <= PERIOD_S + 1e-9
-    assert not g["esc"].armed
-    wait_until(lambda: g["statuses"] and g["statuses"][-1].level == DiagnosticStatus.ERROR, 5, g["step"], "status")
+    assert not g.esc.armed
+    wait_until(lambda: g.statuses and g.statuses[-1].level == DiagnosticStatus.ERROR, 5, g.step, "status")
     expected_words = {"depth": "depth 1.70 m", "altitude": "altitude 0.10 m", "attitude": "roll 1.20",
                       "cage": "outside the cage", "sensor_rate": "pressure/depth", "run_time": "max_run_time_s",
                       "estop": "e-stop", "abort": "limits.max_depth_m",
                       "stale_frozen": "samples not alive: stamped 3600", "no_dvext_roll": "roll 1.05 rad beyond "
                       "supervisor.max_roll_rad 1 (IMU accelerometer (no fresh DVL attitude))"}[breach]
-    assert expected_words in g["statuses"][-1].message
+    assert expected_words in g.statuses[-1].message
     # latched: re-arming is undone by the supervisor until it is reset
-    g["esc"].on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
-    wait_until(lambda: not g["esc"].armed, 5, g["step"], "disarmed again while tripped")
+    g.esc.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+    wait_until(lambda: not g.esc.armed, 5, g.step, "disarmed again while tripped")
 
 
 # ------------------------------------------------------------------ system clock: the same callbacks as with sim time
@@ -490,7 +457,7 @@ def test_supervisor_takes_the_latched_esc_state_and_disarms_a_tripped_arming():
             sub.callback = lambda m: (on_esc(m), taken.append(m))  # noqa: E731 - the supervisor's, then noted
             pub.publish(state(ThrusterPwm.OUTPUT_UNKNOWN, False))
             wait_until(lambda: taken, 10, spin, "unknown delivered")
-            assert sup.core.armed and sup.esc_armed  # unknown after armed: still armed
+            assert sup.core.armed  # unknown after armed: still armed
             sup.core.trip("test breach")
             wait_until(lambda: requests == [False], 10, spin, "disarm requested")
             pub.publish(state(ThrusterPwm.OUTPUT_NEUTRAL, False))

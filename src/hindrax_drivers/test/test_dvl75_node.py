@@ -5,7 +5,6 @@ position deltas over dtu, 1 us times; $DVEXT: cm altitude, 0.1 deg attitude, 1e-
 frame definitions of docs/devices.md §1.5 / REP-103, and from rigid-body kinematics for the lever arm.
 Every wait is on a condition with a deadline.
 """
-import contextlib
 import dataclasses
 import math
 import random
@@ -14,12 +13,9 @@ import time
 
 import numpy as np
 import pytest
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Range
 
 from hindrax_common.config import default_config_path
@@ -30,8 +26,8 @@ from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl, forma
 from hindrax_drivers.dvl75.report import DvlReportBuilder
 from hindrax_drivers.dvl75.stream import DvlStreamDecoder
 from hindrax_common.base.frames import quaternion_from_euler_ned, quaternion_marine_to_ros
-from hindrax_common.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
-                                     ros_context, wait_until)
+from hindrax_common.testing import (child_env, config_parameters, python_executable,
+                                     wait_until)
 from hindrax_common.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl, RawDeviceData
 
@@ -50,7 +46,8 @@ def stamp_s(header) -> float:
 
 
 class Rig:
-    """Emulator on a pty, the node under test, and a probe node subscribed to every output topic."""
+    """Emulator on a pty, the node under test, and the probe's subscriptions to every output topic (the ``rig``
+    fixture, conftest.py, adds the probe and the executor)."""
 
     def __init__(self, ctx, truth, overrides=None, extra_params=(), clock=time.time, rate_hz=RATE_HZ,
                  start_disconnected=False):
@@ -66,36 +63,17 @@ class Rig:
         self.dev = PtyDevice(self.emu, clock=emulator_clock)
         if start_disconnected:
             self.dev.disconnect()  # the device is plugged in later: nothing is lost to discovery
-        if not any(p.name == "stuck_limit_samples" for p in extra_params):
-            # a constant truth gives bit-identical reports (a real DVL's never are): only the stuck test
-            # below may see the stuck detector fire, so the others run with a limit of 50 s at 20 Hz
-            extra_params = [*extra_params, Parameter("stuck_limit_samples", value=1000)]
-        params = config_parameters({"sensors.dvl75.port": self.dev.path, **(overrides or {})}) + list(extra_params)
-        self.node = Dvl75Node(context=ctx, parameter_overrides=params)
-        self.probe = rclpy.create_node("probe", context=ctx)
-        self.data, self.twist, self.altitude, self.raw, self.diag = [], [], [], [], []
+        params = config_parameters({"sensors.dvl75.port": self.dev.path, **(overrides or {})})
+        self.start(ctx, Dvl75Node(context=ctx, parameter_overrides=params + self.quiet_stuck_detector(extra_params)),
+                   "hindrax/dvl75")
+        self.data, self.twist, self.altitude = [], [], []
         self.probe.create_subscription(Dvl, "dvl/data", self._stamped(self.data), 50)
         self.probe.create_subscription(TwistWithCovarianceStamped, "dvl/twist", self._stamped(self.twist), 50)
         self.probe.create_subscription(Range, "dvl/altitude", self._stamped(self.altitude), 50)
-        self.probe.create_subscription(RawDeviceData, "raw/dvl75", self.raw.append, 200)
-        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
-        self.ex = SingleThreadedExecutor(context=ctx)
-        self.ex.add_node(self.node)
-        self.ex.add_node(self.probe)
+        self.raw = self.collect(RawDeviceData, "raw/dvl75", 200)
 
     def _stamped(self, sink):
         return lambda m: sink.append((m, time.time()))
-
-    def _on_diag(self, msg):
-        for st in msg.status:
-            if st.name == "hindrax/dvl75":
-                self.diag.append(st)
-
-    def spin(self):
-        self.ex.spin_once(timeout_sec=0.01)
-
-    def wait(self, predicate, timeout_s=10.0, message="condition"):
-        return wait_until(predicate, timeout_s, self.spin, message)
 
     def valid(self):
         return [m for m, _ in self.data if m.velocity_valid]
@@ -105,20 +83,8 @@ class Rig:
         return {kv.key: kv.value for kv in st.values}
 
     def close(self):
-        self.ex.shutdown()
-        self.node.destroy_node()
-        self.probe.destroy_node()
+        super().close()
         self.dev.close()
-
-
-@contextlib.contextmanager
-def rig(truth, **kwargs):
-    with ros_context() as ctx:
-        r = Rig(ctx, truth, **kwargs)
-        try:
-            yield r
-        finally:
-            r.close()
 
 
 STEADY = DvlTruth(velocity_frd_m_s=(0.3, -0.2, 0.05), altitude_m=4.0, roll_rad=0.1, pitch_rad=-0.05, yaw_rad=1.0)
@@ -127,191 +93,191 @@ STEADY = DvlTruth(velocity_frd_m_s=(0.3, -0.2, 0.05), altitude_m=4.0, roll_rad=0
 # --------------------------------------------------------------------------------------------- node, through the pty
 
 
-def test_startup_commands_and_published_values_match_truth():
+def test_startup_commands_and_published_values_match_truth(rig):
     overrides = {"sensors.dvl75.sensor_orientation_rpy_rad": [math.radians(a) for a in (1.0, -2.0, 45.0)],
                  "sensors.dvl75.speed_of_sound_m_s": 1500.0}
-    with rig(STEADY, overrides=overrides, start_disconnected=True) as r:
-        r.wait(lambda: r.node.raw.publisher.get_subscription_count() and r.node.pub_data.get_subscription_count()
-               and r.diag and r.diag[-1].level == DiagnosticStatus.ERROR, message="probe matched")
-        assert r.diag_values()["state"] == "disconnected" and r.diag_values()["open_failures"] != "0"
-        r.dev.reconnect()
-        r.wait(lambda: len(r.valid()) >= 5 and len(r.twist) >= 5 and len(r.altitude) >= 5
-               and "CONFIGURATION" in r.emu.commands_received, message="DVL data and the whole start-up sequence")
-        # start-up commands seen by the device (docs/devices.md §0 item 1, §1.4; orientation sent in degrees)
-        cmds = r.emu.commands_received
-        for expected in ("SEND-DVPDL ON", "SEND-DVEXT ON", "SET-SENSOR-ORIENTATION 1,-2,45", "SET-SPEED-OF-SOUND 1500"):
-            assert expected in cmds, cmds
-        assert r.emu.flash.send_dvpdl and r.emu.flash.speed_of_sound_m_s == 1500.0
-        assert np.allclose(r.emu.flash.sensor_orientation_rad, np.radians([1.0, -2.0, 45.0]))
+    r = rig(STEADY, overrides=overrides, start_disconnected=True)
+    r.wait(lambda: r.node.raw.publisher.get_subscription_count() and r.node.pub_data.get_subscription_count()
+           and r.diag and r.diag[-1].level == DiagnosticStatus.ERROR, message="probe matched")
+    assert r.diag_values()["state"] == "disconnected" and r.diag_values()["open_failures"] != "0"
+    r.dev.reconnect()
+    r.wait(lambda: len(r.valid()) >= 5 and len(r.twist) >= 5 and len(r.altitude) >= 5
+           and "CONFIGURATION" in r.emu.commands_received, message="DVL data and the whole start-up sequence")
+    # start-up commands seen by the device (docs/devices.md §0 item 1, §1.4; orientation sent in degrees)
+    cmds = r.emu.commands_received
+    for expected in ("SEND-DVPDL ON", "SEND-DVEXT ON", "SET-SENSOR-ORIENTATION 1,-2,45", "SET-SPEED-OF-SOUND 1500"):
+        assert expected in cmds, cmds
+    assert r.emu.flash.send_dvpdl and r.emu.flash.speed_of_sound_m_s == 1500.0
+    assert np.allclose(r.emu.flash.sensor_orientation_rad, np.radians([1.0, -2.0, 45.0]))
 
-        m = r.valid()[-1]
-        assert m.header.frame_id == "base_link"
-        # FRD (0.3, -0.2, 0.05) -> base_link FLU (0.3, 0.2, -0.05) (REP-103)
-        assert [m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z] == pytest.approx([0.3, 0.2, -0.05], abs=VEL_TOL)
-        assert [m.delta_position_m.x, m.delta_position_m.y, m.delta_position_m.z] == pytest.approx(
-            [0.3 * DT_S, 0.2 * DT_S, -0.05 * DT_S], abs=0.0005 + 1e-9)
-        assert m.delta_time_s == pytest.approx(DT_S, abs=1e-9)
-        assert m.confidence_percent == 100.0 and m.bottom_lock
-        assert list(m.velocity_covariance) == pytest.approx([0.02 ** 2, 0, 0, 0, 0.02 ** 2, 0, 0, 0, 0.02 ** 2])
-        # vertical altitude over a flat bottom: along-axis (cm) projected with the 0.1 deg attitude
-        assert m.altitude_m == pytest.approx(4.0, abs=0.006)
-        # orientation: FLU body in ENU (docs/devices.md §1.5), the REP-103 form of the NED/FRD truth
-        q_expected = quaternion_marine_to_ros(quaternion_from_euler_ned([0.1, -0.05, 1.0]))
-        q = np.array([m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w])
-        assert min(np.abs(q - q_expected).max(), np.abs(q + q_expected).max()) < 2e-5
-        assert m.orientation_covariance[0] == -1.0
-        assert all(m.beam_lock) and all(rng > 4.0 for rng in m.beam_range_m)  # slant > vertical
+    m = r.valid()[-1]
+    assert m.header.frame_id == "base_link"
+    # FRD (0.3, -0.2, 0.05) -> base_link FLU (0.3, 0.2, -0.05) (REP-103)
+    assert [m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z] == pytest.approx([0.3, 0.2, -0.05], abs=VEL_TOL)
+    assert [m.delta_position_m.x, m.delta_position_m.y, m.delta_position_m.z] == pytest.approx(
+        [0.3 * DT_S, 0.2 * DT_S, -0.05 * DT_S], abs=0.0005 + 1e-9)
+    assert m.delta_time_s == pytest.approx(DT_S, abs=1e-9)
+    assert m.confidence_percent == 100.0 and m.bottom_lock
+    assert list(m.velocity_covariance) == pytest.approx([0.02 ** 2, 0, 0, 0, 0.02 ** 2, 0, 0, 0, 0.02 ** 2])
+    # vertical altitude over a flat bottom: along-axis (cm) projected with the 0.1 deg attitude
+    assert m.altitude_m == pytest.approx(4.0, abs=0.006)
+    # orientation: FLU body in ENU (docs/devices.md §1.5), the REP-103 form of the NED/FRD truth
+    q_expected = quaternion_marine_to_ros(quaternion_from_euler_ned([0.1, -0.05, 1.0]))
+    q = np.array([m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w])
+    assert min(np.abs(q - q_expected).max(), np.abs(q + q_expected).max()) < 2e-5
+    assert m.orientation_covariance[0] == -1.0
+    assert all(m.beam_lock) and all(rng > 4.0 for rng in m.beam_range_m)  # slant > vertical
 
-        tw, _ = r.twist[-1]
-        assert tw.header.frame_id == "base_link"
-        assert [tw.twist.twist.linear.x, tw.twist.twist.linear.y, tw.twist.twist.linear.z] == pytest.approx(
-            [0.3, 0.2, -0.05], abs=VEL_TOL)
-        cov = np.array(tw.twist.covariance).reshape(6, 6)
-        assert np.allclose(cov[:3, :3], np.eye(3) * 0.02 ** 2)
-        assert np.allclose(np.diag(cov)[3:], -1.0) and np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
+    tw, _ = r.twist[-1]
+    assert tw.header.frame_id == "base_link"
+    assert [tw.twist.twist.linear.x, tw.twist.twist.linear.y, tw.twist.twist.linear.z] == pytest.approx(
+        [0.3, 0.2, -0.05], abs=VEL_TOL)
+    cov = np.array(tw.twist.covariance).reshape(6, 6)
+    assert np.allclose(cov[:3, :3], np.eye(3) * 0.02 ** 2)
+    assert np.allclose(np.diag(cov)[3:], -1.0) and np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
 
-        rng, _ = r.altitude[-1]
-        assert rng.header.frame_id == "dvl_link" and rng.radiation_type == Range.ULTRASOUND
-        assert rng.range == pytest.approx(4.0 / (math.cos(0.1) * math.cos(0.05)), abs=0.0051)
-        assert (rng.min_range, rng.max_range) == pytest.approx((0.3, 40.0))
+    rng, _ = r.altitude[-1]
+    assert rng.header.frame_id == "dvl_link" and rng.radiation_type == Range.ULTRASOUND
+    assert rng.range == pytest.approx(4.0 / (math.cos(0.1) * math.cos(0.05)), abs=0.0051)
+    assert (rng.min_range, rng.max_range) == pytest.approx((0.3, 40.0))
 
-        # raw traffic in both directions
-        def joined(direction):
-            return b"".join(bytes(x.data) for x in r.raw if x.direction == direction)
+    # raw traffic in both directions
+    def joined(direction):
+        return b"".join(bytes(x.data) for x in r.raw if x.direction == direction)
 
-        r.wait(lambda: b"$DVPDL," in joined(RawDeviceData.DIRECTION_DEVICE_TO_HOST), message="raw rx")
-        tx = joined(RawDeviceData.DIRECTION_HOST_TO_DEVICE)
-        assert tx.startswith(b"SEND-DVPDL ON\r\nSEND-DVEXT ON\r\n") and b"SET-SPEED-OF-SOUND 1500\r\n" in tx
-        assert all(x.device_name == "dvl75" and x.transport == RawDeviceData.TRANSPORT_SERIAL for x in r.raw)
+    r.wait(lambda: b"$DVPDL," in joined(RawDeviceData.DIRECTION_DEVICE_TO_HOST), message="raw rx")
+    tx = joined(RawDeviceData.DIRECTION_HOST_TO_DEVICE)
+    assert tx.startswith(b"SEND-DVPDL ON\r\nSEND-DVEXT ON\r\n") and b"SET-SPEED-OF-SOUND 1500\r\n" in tx
+    assert all(x.device_name == "dvl75" and x.transport == RawDeviceData.TRANSPORT_SERIAL for x in r.raw)
 
 
-def test_stamps_are_the_dvl_time_of_validity_mapped_to_ros_time():
+def test_stamps_are_the_dvl_time_of_validity_mapped_to_ros_time(rig):
     """Emulator clock = ROS (system) time, boot at its first poll: $DVPDL tu = k * dtu exactly, so the
     time of validity of the mean velocity is boot + k*dtu - dtu/2. The node's stamp may exceed it only by
     the smallest transport latency (min filter); a receive-time stamp would sit >= dtu/2 later."""
-    with rig(STEADY) as r:
-        r.wait(lambda: len(r.valid()) >= 20, message="DVL data")
-        boot = r.first_poll_s[0]
-        for m, received in [(m, t) for m, t in r.data if m.velocity_valid][-15:]:
-            s = stamp_s(m.header)
-            phase = (s - boot + DT_S / 2) / DT_S
-            residual = (phase - round(phase)) * DT_S
-            assert -0.001 <= residual <= 0.010, residual
-            assert s < received - DT_S / 2 + 0.010
+    r = rig(STEADY)
+    r.wait(lambda: len(r.valid()) >= 20, message="DVL data")
+    boot = r.first_poll_s[0]
+    for m, received in [(m, t) for m, t in r.data if m.velocity_valid][-15:]:
+        s = stamp_s(m.header)
+        phase = (s - boot + DT_S / 2) / DT_S
+        residual = (phase - round(phase)) * DT_S
+        assert -0.001 <= residual <= 0.010, residual
+        assert s < received - DT_S / 2 + 0.010
 
 
-def test_beam_velocity_signs_follow_the_motion():
+def test_beam_velocity_signs_follow_the_motion(rig):
     """Dvl.beam_velocity_m_s is + away from the transducer: moving forward, the bow beam (D) closes on the
     bottom (negative) and the stern beam (B) opens (positive); port/starboard see no along-beam motion."""
-    with rig(DvlTruth(velocity_frd_m_s=(0.4, 0.0, 0.0), altitude_m=3.0)) as r:
-        r.wait(lambda: len(r.valid()) >= 3, message="DVL data")
-        a, b, c, d = r.valid()[-1].beam_velocity_m_s
-        assert d < -0.1 and b > 0.1 and abs(a) < 1e-3 and abs(c) < 1e-3
-        assert d == pytest.approx(-b, abs=2e-4)
+    r = rig(DvlTruth(velocity_frd_m_s=(0.4, 0.0, 0.0), altitude_m=3.0))
+    r.wait(lambda: len(r.valid()) >= 3, message="DVL data")
+    a, b, c, d = r.valid()[-1].beam_velocity_m_s
+    assert d < -0.1 and b > 0.1 and abs(a) < 1e-3 and abs(c) < 1e-3
+    assert d == pytest.approx(-b, abs=2e-4)
 
 
-def test_unlocked_or_zero_confidence_dvl_publishes_no_velocity():
-    with rig(STEADY) as r:
-        r.wait(lambda: len(r.valid()) >= 3, message="locked data")
-        with r.dev.lock:
-            r.emu.set_unlocked(True)
-        r.wait(lambda: len(r.data) and not r.data[-1][0].velocity_valid, message="first unlocked report")
-        first_invalid = len(r.data) - 1
-        r.wait(lambda: len(r.data) >= first_invalid + 6 and len(r.altitude) >= 3
-               and math.isinf(r.altitude[-1][0].range), message="unlocked reports")
-        t_unlock = stamp_s(r.data[first_invalid][0].header)
-        for k, (m, _) in enumerate(r.data[first_invalid:]):
-            assert not m.velocity_valid and m.confidence_percent == 0.0
-            v = [m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z]
-            d = [m.delta_position_m.x, m.delta_position_m.y, m.delta_position_m.z]
-            assert all(math.isnan(x) for x in v + d) and m.velocity_covariance[0] == -1.0
-            if k:  # lock, altitude and beams come from the latest $DVEXT: one ping cycle later
-                assert not m.bottom_lock and not any(m.beam_lock)
-                assert all(math.isnan(x) for x in [m.altitude_m] + list(m.beam_range_m))
-        assert all(stamp_s(tw.header) < t_unlock for tw, _ in r.twist)  # no twist from an unlocked report
-        assert math.isinf(r.altitude[-1][0].range) and r.altitude[-1][0].range > 0  # REP-117 "no detection"
+def test_unlocked_or_zero_confidence_dvl_publishes_no_velocity(rig):
+    r = rig(STEADY)
+    r.wait(lambda: len(r.valid()) >= 3, message="locked data")
+    with r.dev.lock:
+        r.emu.set_unlocked(True)
+    r.wait(lambda: len(r.data) and not r.data[-1][0].velocity_valid, message="first unlocked report")
+    first_invalid = len(r.data) - 1
+    r.wait(lambda: len(r.data) >= first_invalid + 6 and len(r.altitude) >= 3
+           and math.isinf(r.altitude[-1][0].range), message="unlocked reports")
+    t_unlock = stamp_s(r.data[first_invalid][0].header)
+    for k, (m, _) in enumerate(r.data[first_invalid:]):
+        assert not m.velocity_valid and m.confidence_percent == 0.0
+        v = [m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z]
+        d = [m.delta_position_m.x, m.delta_position_m.y, m.delta_position_m.z]
+        assert all(math.isnan(x) for x in v + d) and m.velocity_covariance[0] == -1.0
+        if k:  # lock, altitude and beams come from the latest $DVEXT: one ping cycle later
+            assert not m.bottom_lock and not any(m.beam_lock)
+            assert all(math.isnan(x) for x in [m.altitude_m] + list(m.beam_range_m))
+    assert all(stamp_s(tw.header) < t_unlock for tw, _ in r.twist)  # no twist from an unlocked report
+    assert math.isinf(r.altitude[-1][0].range) and r.altitude[-1][0].range > 0  # REP-117 "no detection"
 
-        # locked but confidence 0: still no velocity
-        with r.dev.lock:
-            r.emu.set_unlocked(False)
-            r.emu.set_zero_confidence(True)
-        r.wait(lambda: r.data[-1][0].bottom_lock and r.data[-1][0].confidence_percent == 0.0, message="c=0")
-        n_twist, n_data = len(r.twist), len(r.data)
-        r.wait(lambda: len(r.data) >= n_data + 5, message="more c=0 reports")
-        assert not any(m.velocity_valid for m, _ in r.data[n_data:])
-        assert all(stamp_s(tw.header) < stamp_s(r.data[n_data][0].header) for tw, _ in r.twist)
-        # and back
-        with r.dev.lock:
-            r.emu.set_zero_confidence(False)
-        r.wait(lambda: len(r.twist) > n_twist and r.data[-1][0].velocity_valid, message="valid again")
+    # locked but confidence 0: still no velocity
+    with r.dev.lock:
+        r.emu.set_unlocked(False)
+        r.emu.set_zero_confidence(True)
+    r.wait(lambda: r.data[-1][0].bottom_lock and r.data[-1][0].confidence_percent == 0.0, message="c=0")
+    n_twist, n_data = len(r.twist), len(r.data)
+    r.wait(lambda: len(r.data) >= n_data + 5, message="more c=0 reports")
+    assert not any(m.velocity_valid for m, _ in r.data[n_data:])
+    assert all(stamp_s(tw.header) < stamp_s(r.data[n_data][0].header) for tw, _ in r.twist)
+    # and back
+    with r.dev.lock:
+        r.emu.set_zero_confidence(False)
+    r.wait(lambda: len(r.twist) > n_twist and r.data[-1][0].velocity_valid, message="valid again")
 
 
 def _diag_until(r, predicate, timeout_s=5.0, message="diagnostics"):
     return r.wait(lambda: r.diag and predicate(r.diag_values()), timeout_s, message)
 
 
-def test_garbage_bad_checksums_truncated_lines_and_unknown_sentences_are_counted_not_fatal():
-    with rig(STEADY) as r:
-        # wait until the start-up sequence (ending with CONFIGURATION, answered in free text) is over
-        r.wait(lambda: r.node.commands.sequences_completed >= 1 and len(r.valid()) >= 3, message="steady")
-        r.wait(lambda: r.node.decoder.records.get("DvlText", 0) >= 18 and len(r.valid()) >= 6, message="config dump")
-        with r.dev.lock:
-            r.emu.faults.inject_garbage(n_bytes=40)  # 0x80-0xFF line noise
-            r.emu.faults.truncate(2)
-            r.emu.faults.corrupt_checksum(3)
-            r.emu.faults.inject_garbage(data=format_sentence("DVNVM,SPEED-OF-SOUND=1481"))  # unknown sentence
-        _diag_until(r, lambda v: v.get("errors.bad_checksum") == "3" and v.get("errors.truncated") == "2"
-                    and v.get("errors.unknown_sentence") == "1", message="error counters")
-        v = r.diag_values()
-        assert int(v["errors.garbage_bytes"]) >= 40 and "errors.malformed" not in v
-        # a storm of arbitrary bytes (any value, including '$', '*', CR, LF) does not stop the node either
-        rng = random.Random(7)
-        with r.dev.lock:
-            r.emu.faults.inject_garbage(data=bytes(rng.randrange(256) for _ in range(3000)))
-        n = len(r.valid())
-        r.wait(lambda: len(r.valid()) >= n + 10, message="data after the faults")
-        m = r.valid()[-1]
-        assert [m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z] == pytest.approx([0.3, 0.2, -0.05], abs=VEL_TOL)
-        assert "internal_error" not in r.node.diag.counts()
-        assert r.node.transport.status().callback_errors == 0
+def test_garbage_bad_checksums_truncated_lines_and_unknown_sentences_are_counted_not_fatal(rig):
+    r = rig(STEADY)
+    # wait until the start-up sequence (ending with CONFIGURATION, answered in free text) is over
+    r.wait(lambda: r.node.commands.sequences_completed >= 1 and len(r.valid()) >= 3, message="steady")
+    r.wait(lambda: r.node.decoder.records.get("DvlText", 0) >= 18 and len(r.valid()) >= 6, message="config dump")
+    with r.dev.lock:
+        r.emu.faults.inject_garbage(n_bytes=40)  # 0x80-0xFF line noise
+        r.emu.faults.truncate(2)
+        r.emu.faults.corrupt_checksum(3)
+        r.emu.faults.inject_garbage(data=format_sentence("DVNVM,SPEED-OF-SOUND=1481"))  # unknown sentence
+    _diag_until(r, lambda v: v.get("errors.bad_checksum") == "3" and v.get("errors.truncated") == "2"
+                and v.get("errors.unknown_sentence") == "1", message="error counters")
+    v = r.diag_values()
+    assert int(v["errors.garbage_bytes"]) >= 40 and "errors.malformed" not in v
+    # a storm of arbitrary bytes (any value, including '$', '*', CR, LF) does not stop the node either
+    rng = random.Random(7)
+    with r.dev.lock:
+        r.emu.faults.inject_garbage(data=bytes(rng.randrange(256) for _ in range(3000)))
+    n = len(r.valid())
+    r.wait(lambda: len(r.valid()) >= n + 10, message="data after the faults")
+    m = r.valid()[-1]
+    assert [m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z] == pytest.approx([0.3, 0.2, -0.05], abs=VEL_TOL)
+    assert "internal_error" not in r.node.diag.counts()
+    assert r.node.transport.status().callback_errors == 0
 
 
-def test_device_disappears_and_comes_back_node_reconnects_at_the_next_attempt_and_resends_startup():
-    with rig(STEADY) as r:
-        r.wait(lambda: len(r.valid()) >= 3, message="data")
-        assert r.emu.commands_received.count("SEND-DVPDL ON") == 1
-        r.dev.disconnect()
-        with r.dev.lock:
-            r.emu.flash.send_dvpdl = False  # a DVL at factory settings comes back: the node must re-enable it
-        _diag_until(r, lambda v: v["state"] == "reconnecting", message="reconnecting in diagnostics")
-        assert r.diag[-1].level == DiagnosticStatus.ERROR
-        failures = r.node.transport.status().open_failures
-        r.dev.reconnect()
-        # reconnected at the first open attempt after the device came back (at most one was under way), i.e.
-        # within one backoff period (1 s); counted in attempts because a loaded CI can miss a wall-clock deadline
-        _diag_until(r, lambda v: v["state"] == "connected" and v["reconnects"] == "1", timeout_s=30.0,
-                    message="reconnected")
-        assert r.node.transport.status().open_failures <= failures + 1
-        assert "reconnected" in r.diag[-1].message
-        n = len(r.valid())
-        r.wait(lambda: r.emu.commands_received.count("SEND-DVPDL ON") == 2 and len(r.valid()) >= n + 3,
-               message="start-up resent and data flowing")
+def test_device_disappears_and_comes_back_node_reconnects_at_the_next_attempt_and_resends_startup(rig):
+    r = rig(STEADY)
+    r.wait(lambda: len(r.valid()) >= 3, message="data")
+    assert r.emu.commands_received.count("SEND-DVPDL ON") == 1
+    r.dev.disconnect()
+    with r.dev.lock:
+        r.emu.flash.send_dvpdl = False  # a DVL at factory settings comes back: the node must re-enable it
+    _diag_until(r, lambda v: v["state"] == "reconnecting", message="reconnecting in diagnostics")
+    assert r.diag[-1].level == DiagnosticStatus.ERROR
+    failures = r.node.transport.status().open_failures
+    r.dev.reconnect()
+    # reconnected at the first open attempt after the device came back (at most one was under way), i.e.
+    # within one backoff period (1 s); counted in attempts because a loaded CI can miss a wall-clock deadline
+    _diag_until(r, lambda v: v["state"] == "connected" and v["reconnects"] == "1", timeout_s=30.0,
+                message="reconnected")
+    assert r.node.transport.status().open_failures <= failures + 1
+    assert "reconnected" in r.diag[-1].message
+    n = len(r.valid())
+    r.wait(lambda: r.emu.commands_received.count("SEND-DVPDL ON") == 2 and len(r.valid()) >= n + 3,
+           message="start-up resent and data flowing")
 
 
-def test_dvpdl_switched_off_behind_the_drivers_back_is_switched_on_again():
+def test_dvpdl_switched_off_behind_the_drivers_back_is_switched_on_again(rig):
     """$DVEXT flowing without $DVPDL (e.g. a DVL reset to factory defaults, docs/devices.md §0 item 1): the node
     keeps publishing dvl/data from $DVEXT with no velocity, warns, and resends its start-up commands."""
-    with rig(STEADY) as r:
-        r.wait(lambda: len(r.valid()) >= 3 and r.node.commands.sequences_completed >= 1, message="data")
-        with r.dev.lock:
-            r.emu.flash.send_dvpdl = False
-        r.wait(lambda: r.data and r.data[-1][0].bottom_lock and math.isnan(r.data[-1][0].delta_time_s),
-               message="reports from $DVEXT alone")
-        assert not r.data[-1][0].velocity_valid and r.data[-1][0].altitude_m == pytest.approx(4.0, abs=0.006)
-        r.wait(lambda: r.emu.commands_received.count("SEND-DVPDL ON") >= 2, 8.0, "start-up resent")
-        n = len(r.valid())
-        r.wait(lambda: len(r.valid()) >= n + 3, message="velocity again")
-        assert r.node.diag.counts().get("startup_resends", 0) >= 1
+    r = rig(STEADY)
+    r.wait(lambda: len(r.valid()) >= 3 and r.node.commands.sequences_completed >= 1, message="data")
+    with r.dev.lock:
+        r.emu.flash.send_dvpdl = False
+    r.wait(lambda: r.data and r.data[-1][0].bottom_lock and math.isnan(r.data[-1][0].delta_time_s),
+           message="reports from $DVEXT alone")
+    assert not r.data[-1][0].velocity_valid and r.data[-1][0].altitude_m == pytest.approx(4.0, abs=0.006)
+    r.wait(lambda: r.emu.commands_received.count("SEND-DVPDL ON") >= 2, 8.0, "start-up resent")
+    n = len(r.valid())
+    r.wait(lambda: len(r.valid()) >= n + 3, message="velocity again")
+    assert r.node.diag.counts().get("startup_resends", 0) >= 1
 
 
 def _moving_truth(t):
@@ -319,107 +285,84 @@ def _moving_truth(t):
                     altitude_m=3.0 + 0.2 * math.sin(t), roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.5 * math.sin(t))
 
 
-def test_stuck_sensor_is_an_error_and_its_velocity_and_altitude_are_withdrawn():
-    with rig(_moving_truth, extra_params=[Parameter("stuck_limit_samples", value=10)]) as r:
-        r.wait(lambda: len(r.valid()) >= 15, message="data")
-        assert not r.node.stuck
-        with r.dev.lock:
-            r.emu.faults.set_stuck(True)
-        r.wait(lambda: "dvext" in r.node._stuck_now and "dvpdl" in r.node._stuck_now, 5.0, "stuck detected")
-        detected_ns = r.node.now_ns()  # at or after the detection of both sentences
-        n_data, n_alt = len(r.data), len(r.altitude)
-        r.wait(lambda: len(r.data) >= n_data + 5 and r.diag and "stuck" in r.diag[-1].message, 5.0,
-               "stuck reports and the stuck error in diagnostics")
-        assert r.diag[-1].level == DiagnosticStatus.ERROR
-        assert r.node.stuck  # still frozen: from the first withdrawn report on, none has a velocity
-        first = next(i for i in range(n_data, len(r.data)) if not r.data[i][0].velocity_valid)
-        assert first < len(r.data) - 3  # (reports published before the detection may arrive after n_data)
-        assert not any(m.velocity_valid for m, _ in r.data[first:])
-        assert all(math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0 for m, _ in r.data[first:])
-        assert all(stamp_s(tw.header) < stamp_s(r.data[first][0].header) for tw, _ in r.twist)  # no twist since
-        assert not [a for a, _ in r.altitude if stamp_s(a.header) * 1e9 > detected_ns + 1e3]  # no altitude since
-        with r.dev.lock:
-            r.emu.faults.set_stuck(False)
-        r.wait(lambda: not r.node.stuck, message="stuck cleared")
-        n = len(r.valid())
-        r.wait(lambda: len(r.valid()) >= n + 3 and len(r.altitude) > n_alt + 2, message="valid data again")
-        r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 5.0, "error cleared")
+def test_stuck_sensor_is_an_error_and_its_velocity_and_altitude_are_withdrawn(rig):
+    r = rig(_moving_truth, extra_params=[Parameter("stuck_limit_samples", value=10)])
+    r.wait(lambda: len(r.valid()) >= 15, message="data")
+    assert not r.node.stuck
+    with r.dev.lock:
+        r.emu.faults.set_stuck(True)
+    r.wait(lambda: "dvext" in r.node._stuck_now and "dvpdl" in r.node._stuck_now, 5.0, "stuck detected")
+    detected_ns = r.node.now_ns()  # at or after the detection of both sentences
+    n_data, n_alt = len(r.data), len(r.altitude)
+    r.wait(lambda: len(r.data) >= n_data + 5 and r.diag and "stuck" in r.diag[-1].message, 5.0,
+           "stuck reports and the stuck error in diagnostics")
+    assert r.diag[-1].level == DiagnosticStatus.ERROR
+    assert r.node.stuck  # still frozen: from the first withdrawn report on, none has a velocity
+    first = next(i for i in range(n_data, len(r.data)) if not r.data[i][0].velocity_valid)
+    assert first < len(r.data) - 3  # (reports published before the detection may arrive after n_data)
+    assert not any(m.velocity_valid for m, _ in r.data[first:])
+    assert all(math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0 for m, _ in r.data[first:])
+    assert all(stamp_s(tw.header) < stamp_s(r.data[first][0].header) for tw, _ in r.twist)  # no twist since
+    assert not [a for a, _ in r.altitude if stamp_s(a.header) * 1e9 > detected_ns + 1e3]  # no altitude since
+    with r.dev.lock:
+        r.emu.faults.set_stuck(False)
+    r.wait(lambda: not r.node.stuck, message="stuck cleared")
+    n = len(r.valid())
+    r.wait(lambda: len(r.valid()) >= n + 3 and len(r.altitude) > n_alt + 2, message="valid data again")
+    r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 5.0, "error cleared")
 
 
-def test_implausible_but_checksum_valid_dvpdl_is_published_not_valid_with_an_error():
+def test_implausible_but_checksum_valid_dvpdl_is_published_not_valid_with_an_error(rig):
     """$DVPDL with 999.999 m over 0.1 s (9999.99 m/s) and with a 1 us interval (1e306 m/s from a 1e300 m
     field): both pass the XOR checksum and the parser; the gates sensors.dvl75.max_speed_m_s (4.1 m/s) and
     min_interval_s (25 ms) of the vehicle file publish them with velocity_valid false and raise ERROR."""
-    with rig(STEADY) as r:
-        r.wait(lambda: len(r.valid()) >= 3 and r.node.commands.sequences_completed >= 1, message="data")
-        tu = time.time() - r.first_poll_s[0]  # the emulator's clock: after every $DVPDL sent so far
-        bad = [format_dvpdl(_pdl(time_since_boot_s=tu, delta_time_s=0.1, delta_x_m=999.999)),
-               format_dvpdl(_pdl(time_since_boot_s=tu + 1e-6, delta_time_s=1e-6, delta_x_m=1e300))]
-        assert all(parse_line(line.strip()).confidence_pct == 100 for line in bad)  # checksum and fields parse
-        with r.dev.lock:
-            r.emu.faults.inject_garbage(data=b"".join(bad))
-        r.wait(lambda: r.node.diag.counts().get("implausible_velocity", 0) >= 2, message="both rejected")
-        r.wait(lambda: any(st.level == DiagnosticStatus.ERROR and "implausible" in st.message for st in r.diag),
-               5.0, "ERROR in diagnostics")
-        def rejected_reports():
-            return [m for m, _ in r.data if m.confidence_percent == 100.0
-                    and any(abs(m.delta_time_s - dt) < 1e-6 * dt for dt in (0.1, 1e-6))]
+    r = rig(STEADY)
+    r.wait(lambda: len(r.valid()) >= 3 and r.node.commands.sequences_completed >= 1, message="data")
+    tu = time.time() - r.first_poll_s[0]  # the emulator's clock: after every $DVPDL sent so far
+    bad = [format_dvpdl(_pdl(time_since_boot_s=tu, delta_time_s=0.1, delta_x_m=999.999)),
+           format_dvpdl(_pdl(time_since_boot_s=tu + 1e-6, delta_time_s=1e-6, delta_x_m=1e300))]
+    assert all(parse_line(line.strip()).confidence_pct == 100 for line in bad)  # checksum and fields parse
+    with r.dev.lock:
+        r.emu.faults.inject_garbage(data=b"".join(bad))
+    r.wait(lambda: r.node.diag.counts().get("implausible_velocity", 0) >= 2, message="both rejected")
+    r.wait(lambda: any(st.level == DiagnosticStatus.ERROR and "implausible" in st.message for st in r.diag),
+           5.0, "ERROR in diagnostics")
+    def rejected_reports():
+        return [m for m, _ in r.data if m.confidence_percent == 100.0
+                and any(abs(m.delta_time_s - dt) < 1e-6 * dt for dt in (0.1, 1e-6))]
 
-        rejected = r.wait(lambda: len(rejected_reports()) == 2 and rejected_reports(), 5.0, "both reports received")
-        assert all(not m.velocity_valid and math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0
-                   for m in rejected)
-        assert all(abs(tw.twist.twist.linear.x) < 1.0 for tw, _ in r.twist)  # no twist from them
-        n = len(r.valid())
-        r.wait(lambda: len(r.valid()) >= n + 3, message="plausible data again")
-        r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 8.0, "error cleared 2 s after the last rejection")
+    rejected = r.wait(lambda: len(rejected_reports()) == 2 and rejected_reports(), 5.0, "both reports received")
+    assert all(not m.velocity_valid and math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0
+               for m in rejected)
+    assert all(abs(tw.twist.twist.linear.x) < 1.0 for tw, _ in r.twist)  # no twist from them
+    n = len(r.valid())
+    r.wait(lambda: len(r.valid()) >= n + 3, message="plausible data again")
+    r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 8.0, "error cleared 2 s after the last rejection")
 
 
-def test_use_sim_time_stamps_follow_the_clock_topic():
+def test_use_sim_time_stamps_follow_the_clock_topic(rig):
     sim = {"t": 1000.0}
-    with ros_context() as ctx:
-        r = Rig(ctx, STEADY, clock=lambda: sim["t"], extra_params=[Parameter("use_sim_time", value=True)])
-        try:
-            clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
-            m0 = time.monotonic()
-
-            def tick():
-                sim["t"] = 1000.0 + (time.monotonic() - m0)
-                ns = int(sim["t"] * 1e9)
-                clock_pub.publish(Clock(clock=rclpy.time.Time(nanoseconds=ns).to_msg()))
-                r.spin()
-
-            wait_until(lambda: len(r.valid()) >= 5 and stamp_s(r.valid()[-1].header) > 1000.0, 10, tick, "sim data")
-            wait_until(lambda: len(r.altitude) >= 3 and stamp_s(r.altitude[-1][0].header) > 1000.0, 10, tick, "range")
-            for stamp in (stamp_s(r.valid()[-1].header), stamp_s(r.altitude[-1][0].header)):
-                assert 1000.0 < stamp <= sim["t"] + 1e-6  # simulated time, not the wall clock (~1.7e9 s)
-        finally:
-            r.close()
+    r = rig(STEADY, clock=lambda: sim["t"], extra_params=[Parameter("use_sim_time", value=True)])
+    tick = r.wall_clock_ticker(sim)
+    wait_until(lambda: len(r.valid()) >= 5 and stamp_s(r.valid()[-1].header) > 1000.0, 10, tick, "sim data")
+    wait_until(lambda: len(r.altitude) >= 3 and stamp_s(r.altitude[-1][0].header) > 1000.0, 10, tick, "range")
+    for stamp in (stamp_s(r.valid()[-1].header), stamp_s(r.altitude[-1][0].header)):
+        assert 1000.0 < stamp <= sim["t"] + 1e-6  # simulated time, not the wall clock (~1.7e9 s)
 
 
 # --------------------------------------------------------------------------------------------- the process entry point
 
 
-def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint():
+def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint(node_process):
     emu = Dvl75Emulator(STEADY, rate_hz=RATE_HZ)
     dev = PtyDevice(emu)
     cmd = [python_executable(), "-m", "hindrax_drivers.dvl75.node", "--ros-args", "--params-file",
            str(default_config_path()), "-p", f"sensors.dvl75.port:={dev.path}",
            "-p", "stuck_limit_samples:=100000"]  # constant truth: identical reports, however slow the start
     try:
-        with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc, \
-                ros_context() as ctx:
-            probe = rclpy.create_node("probe_main", context=ctx)
-            got = []
-            probe.create_subscription(Dvl, "dvl/data", got.append, 10)
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(probe)
-            wait_until(lambda: sum(m.velocity_valid for m in got) >= 3 or proc.poll() is not None, 30,
-                       lambda: ex.spin_once(timeout_sec=0.05), "data from the node process")
-            assert proc.poll() is None, proc.stderr.read()
-            assert "SEND-DVPDL ON" in emu.commands_received
-            ex.shutdown()
-            probe.destroy_node()
-            assert interrupt(proc, 15) == 0
+        node_process(cmd, Dvl, "dvl/data", lambda got: sum(m.velocity_valid for m in got) >= 3,
+                     "data from the node process")
+        assert "SEND-DVPDL ON" in emu.commands_received
     finally:
         dev.close()
 
@@ -565,11 +508,11 @@ def test_stream_decoder_counts_are_exact_and_independent_of_chunking():
         assert [type(x).__name__ for x in recs].count("DvlExtended") == 1
 
 
-def test_frame_ids_are_parameters_with_rep103_defaults():
+def test_frame_ids_are_parameters_with_rep103_defaults(rig):
     """``frame_id`` (the beam's Range) and ``base_frame_id`` (velocity) set by parameter reach every header."""
     frames = [Parameter("frame_id", value="dvl_down"), Parameter("base_frame_id", value="hull")]
-    with rig(STEADY, extra_params=frames) as r:
-        r.wait(lambda: len(r.valid()) >= 2 and len(r.twist) >= 2 and len(r.altitude) >= 2, message="DVL data")
-        assert {m.header.frame_id for m in r.valid()} == {"hull"}
-        assert {m.header.frame_id for m, _ in r.twist} == {"hull"}
-        assert {m.header.frame_id for m, _ in r.altitude} == {"dvl_down"}
+    r = rig(STEADY, extra_params=frames)
+    r.wait(lambda: len(r.valid()) >= 2 and len(r.twist) >= 2 and len(r.altitude) >= 2, message="DVL data")
+    assert {m.header.frame_id for m in r.valid()} == {"hull"}
+    assert {m.header.frame_id for m, _ in r.twist} == {"hull"}
+    assert {m.header.frame_id for m, _ in r.altitude} == {"dvl_down"}

@@ -12,7 +12,7 @@ import pytest
 from smbus2 import i2c_msg
 
 from hindrax_drivers.icm20948 import protocol as icm
-from hindrax_drivers.icm20948.core import imu_config_from_settings
+from hindrax_drivers.icm20948.core import BankedRegisters, imu_config_from_settings
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.ms5837 import protocol as ms
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
@@ -355,7 +355,10 @@ def icm_setup(path: str):
         writes += icm.mag_master_sequence(config)
     else:
         writes += icm.mag_bypass_sequence()
-    dev.write_sequence(icm.flatten_writes(writes))
+    regs = BankedRegisters(dev)  # the driver's register access, as its start-up runs the writes
+    for w in writes:
+        regs.write(w.register, w.value)
+        clock.sleep(w.delay_after_s)
     dev.write_byte_data(icm.REG_BANK_SEL_ADDRESS, icm.bank_select_value(0))
     return clock, emulator, bus, dev, config
 

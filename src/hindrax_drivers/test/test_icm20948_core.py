@@ -167,6 +167,51 @@ def test_banked_registers_select_a_bank_only_when_it_changes_or_is_unknown():
     regs.read(p.WHO_AM_I)
     bank_writes = [v for r, v in dev.writes if r == 0x7F]
     assert bank_writes == [0x00, 0x20, 0x20, 0x00, 0x00]  # REG_BANK_SEL bits 5:4 (docs/devices.md §4.1)
+    with pytest.raises(ValueError, match="CNTL2 is not an ICM-20948 register"):
+        regs.write(p.AK_CNTL2, 1)  # an AK09916 register has no user bank
+
+
+def on_the_bus(writes, bank=None):
+    """The (register, value) pairs the driver's :class:`BankedRegisters` puts on the bus for ``writes``, as the
+    start-up's write steps run them, with ``bank`` known selected before (None: unknown)."""
+    dev = RecordingDevice()
+    regs = BankedRegisters(dev)
+    if bank is not None:
+        regs.select_bank(bank)
+        dev.writes.clear()
+    for w in writes:
+        regs.write(w.register, w.value)
+    return dev.writes
+
+
+# ---------------------------------------------------------------------------------------------- sequences (§4.3, §4.6)
+def test_reset_wake_sequence_reselects_bank_after_reset():
+    assert on_the_bus(p.reset_wake_sequence()) == [(0x7F, 0x00), (0x06, 0x80), (0x7F, 0x00), (0x06, 0x01),
+                                                    (0x07, 0x00)]
+    assert p.reset_wake_sequence()[0].delay_after_s >= 0.010
+
+
+def test_configure_sequence_in_bank_2():
+    cfg = p.ImuConfig(accel_fs_sel=2, gyro_fs_sel=3, accel_dlpfcfg=4, gyro_dlpfcfg=2, accel_smplrt_div=0x2AB,
+                      gyro_smplrt_div=7)
+    assert on_the_bus(p.configure_sequence(cfg), bank=0) == [
+        (0x7F, 0x20), (0x00, 7), (0x01, (2 << 3) | (3 << 1) | 1), (0x10, 0x02), (0x11, 0xAB),
+        (0x14, (4 << 3) | (2 << 1) | 1)]
+    assert on_the_bus(p.configure_sequence(cfg), bank=2)[0] == (0x00, 7)
+
+
+def test_mag_sequences():
+    cfg = p.ImuConfig()
+    flat = on_the_bus(p.mag_master_sequence(cfg))
+    # §4.6(b): BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = 0x20; SLV0 writes; SLV0 read 0x8C/0x10/0x89.
+    assert flat[:6] == [(0x7F, 0x00), (0x0F, 0x00), (0x7F, 0x30), (0x01, 0x17), (0x7F, 0x00), (0x03, 0x20)]
+    assert flat[-4:] == [(0x05, 0x00), (0x03, 0x8C), (0x04, 0x10), (0x05, 0x89)]
+    assert [(0x03, 0x0C), (0x04, 0x32), (0x06, 0x01), (0x05, 0x81)] == flat[8:12]
+    assert [(0x03, 0x0C), (0x04, 0x31), (0x06, 0x08), (0x05, 0x81)] == flat[13:17]
+    assert on_the_bus(p.mag_bypass_sequence()) == [(0x7F, 0x00), (0x03, 0x00), (0x0F, 0x02)]
+    assert [(w.register, w.value) for w in p.ak09916_direct_init_writes(0x08)] == [(0x32, 0x01), (0x31, 0x08)]
+    with pytest.raises(p.Icm20948Error):
+        p.mag_master_sequence(cfg, mode=0x03)
 
 
 # ---------------------------------------------------------------------------------------------- per-poll decisions

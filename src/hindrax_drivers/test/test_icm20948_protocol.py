@@ -11,9 +11,10 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from hindrax_drivers.icm20948 import protocol as icm
+from hindrax_drivers.icm20948.core import BankedRegisters
 from hindrax_drivers.icm20948.emulator import Ak09916Emulator, Icm20948Emulator
 from hindrax_common.transport.emulated_i2c import EmulatedI2CBus, ManualClock
-from hindrax_common.transport.i2c import RegisterWrite
+from hindrax_common.transport.i2c import I2CDevice
 
 G = 9.80665
 
@@ -78,43 +79,6 @@ def test_output_data_rates():
     assert icm.gyro_odr_hz(4, 1, 3) == 225.0
     assert icm.gyro_odr_hz(4, 1, 0) == 1125.0         # divider ignored for DLPFCFG 0 and 7
     assert icm.gyro_odr_hz(4, 1, 7) == 1125.0
-
-
-# ----------------------------------------------------------------------------- sequences (§4.3, §4.6)
-def pairs(writes):
-    return [(w.register, w.value) for w in writes]
-
-
-def test_reset_wake_sequence_reselects_bank_after_reset():
-    flat = icm.flatten_writes(icm.reset_wake_sequence())
-    assert pairs(flat) == [(0x7F, 0x00), (0x06, 0x80), (0x7F, 0x00), (0x06, 0x01), (0x07, 0x00)]
-    assert flat[1].delay_after_s >= 0.010
-    assert all(isinstance(w, RegisterWrite) for w in flat)
-
-
-def test_configure_sequence_in_bank_2():
-    cfg = icm.ImuConfig(accel_fs_sel=2, gyro_fs_sel=3, accel_dlpfcfg=4, gyro_dlpfcfg=2,
-                        accel_smplrt_div=0x2AB, gyro_smplrt_div=7)
-    flat = icm.flatten_writes(icm.configure_sequence(cfg), current_bank=0)
-    assert pairs(flat) == [(0x7F, 0x20), (0x00, 7), (0x01, (2 << 3) | (3 << 1) | 1),
-                           (0x10, 0x02), (0x11, 0xAB), (0x14, (4 << 3) | (2 << 1) | 1)]
-    assert pairs(icm.flatten_writes(icm.configure_sequence(cfg), current_bank=2))[0] == (0x00, 7)
-
-
-def test_mag_sequences():
-    cfg = icm.ImuConfig()
-    flat = pairs(icm.flatten_writes(icm.mag_master_sequence(cfg)))
-    # §4.6(b): BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = 0x20; SLV0 writes; SLV0 read 0x8C/0x10/0x89.
-    assert flat[:6] == [(0x7F, 0x00), (0x0F, 0x00), (0x7F, 0x30), (0x01, 0x17), (0x7F, 0x00), (0x03, 0x20)]
-    assert flat[-4:] == [(0x05, 0x00), (0x03, 0x8C), (0x04, 0x10), (0x05, 0x89)]
-    assert [(0x03, 0x0C), (0x04, 0x32), (0x06, 0x01), (0x05, 0x81)] == flat[8:12]
-    assert [(0x03, 0x0C), (0x04, 0x31), (0x06, 0x08), (0x05, 0x81)] == flat[13:17]
-    assert pairs(icm.flatten_writes(icm.mag_bypass_sequence())) == [(0x7F, 0x00), (0x03, 0x00), (0x0F, 0x02)]
-    assert pairs(icm.ak09916_direct_init_writes(0x08)) == [(0x32, 0x01), (0x31, 0x08)]
-    with pytest.raises(icm.Icm20948Error):
-        icm.mag_master_sequence(cfg, mode=0x03)
-    with pytest.raises(icm.Icm20948Error):
-        icm.flatten_writes([icm.BankedWrite(icm.AK_CNTL2, 1)])
 
 
 # ----------------------------------------------------------------------------- conversions (§4.4, §4.5, §4.7)
@@ -313,8 +277,9 @@ def test_ak09916_overflow_sets_hofl():
 
 def master_setup(bus, clock, emu):
     bus.write_byte_data(0x68, 0x06, 0x01)
-    for w in icm.flatten_writes([*icm.mag_master_sequence(icm.ImuConfig())], current_bank=0):
-        bus.write_byte_data(0x68, w.register, w.value)
+    regs = BankedRegisters(I2CDevice(bus, 0x68, "icm20948", backoff_s=0.0))  # the driver's register access
+    for w in icm.mag_master_sequence(icm.ImuConfig()):
+        regs.write(w.register, w.value)
         clock.advance(w.delay_after_s)
     bus.write_byte_data(0x68, 0x7F, 0x00)
 

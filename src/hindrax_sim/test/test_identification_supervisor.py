@@ -8,25 +8,18 @@ the depth reads 1.58 m: beyond ``limits.max_depth_m`` (1.5, the identification's
 """
 import numpy as np
 import pytest
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.action import ActionClient
-from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
 from rclpy.parameter import Parameter
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 
 from hindrax_common.config import default_config_path, load_config
-from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-from hindrax_drivers.pca9685.node import EscNode
-from hindrax_bringup.supervisor.node import SupervisorNode
-from hindrax_common.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
-from hindrax_common.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_common.testing import ros_context, wait_until
 from hindrax_onboard.identification.online.node import IdentificationNode
 from hindrax_msgs.action import RunIdentification
+from hindrax_test_support.safety_graph import SafetyGraph
 from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
@@ -44,45 +37,24 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
     rho_g = cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2
     port_z = float(f["sensors.ms5837.position_frd_m"][2])  # the pressure port below the body origin, m (level)
     with ros_context() as ctx:
-        emu = Pca9685Emulator()
-        sim = [Parameter("use_sim_time", value=True)]
-        esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
-                      parameter_overrides=config_parameters(OVERRIDES) + sim)
-        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(OVERRIDES) + sim)
-        ident = IdentificationNode(config=cfg, context=ctx, parameter_overrides=sim)
-        probe = rclpy.create_node("probe", context=ctx)
-        SafetyHeartbeats(probe, supervisor=None)  # the output guard healthy (the supervisor is real)
-        ex = SingleThreadedExecutor(context=ctx)
-        for n in (esc, sup, ident, probe):
-            ex.add_node(n)
-        allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
-        pubs = {"clock": probe.create_publisher(Clock, "/clock", 10),
-                "cmd": allocation.pub,
-                "dvl": probe.create_publisher(Dvl, "dvl/data", 10),
-                "alt": probe.create_publisher(Range, "ping/altitude", 10),
-                "depth": probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
-                "pressure": probe.create_publisher(FluidPressure, "pressure/fluid_pressure", 10),
-                "imu": probe.create_publisher(Imu, "imu/data_raw", 10)}
+        g = SafetyGraph(ctx, OVERRIDES)
+        ident = g.add(IdentificationNode(config=cfg, context=ctx, parameter_overrides=[
+            Parameter("use_sim_time", value=True)]))
+        esc, sup, pubs = g.esc, g.sup, g.pubs
+        pressure = g.probe.create_publisher(FluidPressure, "pressure/fluid_pressure", 10)
         aborts: list = []
-        statuses: list = []
         phases: list = []
-        probe.create_subscription(String, "supervisor/abort", aborts.append, 10)
-        probe.create_subscription(DiagnosticStatus, "supervisor/status", statuses.append, 10)
-        probe.create_subscription(ManeuverStatus, "identification/status", phases.append, 100)
-        arm = probe.create_client(SetArmed, "esc/set_armed")
-        reset = probe.create_client(Trigger, "supervisor/reset")
-        action = ActionClient(probe, RunIdentification, "run_identification")
-        clock = {"ns": 1_000_000_000, "depth": 0.5}
-
+        g.probe.create_subscription(String, "supervisor/abort", aborts.append, 10)
+        g.probe.create_subscription(ManeuverStatus, "identification/status", phases.append, 100)
+        action = ActionClient(g.probe, RunIdentification, "run_identification")
+        depth = {"m": 0.5}
         rng = np.random.default_rng(3)
 
         def step(dt_s: float = 0.01) -> None:
             """Publish the sensors for this instant (IMU 100 Hz, the others 10 Hz; stamped now, with a little noise as
             real sensors have: the supervisor takes bit-identical streams as frozen), advance /clock, run callbacks."""
-            ns = clock["ns"]
-            stamp = Clock().clock
-            stamp.sec, stamp.nanosec = divmod(ns, 1_000_000_000)
-            if (ns // 1_000_000) % 100 == 0:
+            stamp = g.stamp()
+            if (g.ns // 1_000_000) % 100 == 0:
                 m = Dvl(velocity_valid=True)
                 m.header.stamp = stamp
                 m.orientation.w = 1.0  # level, heading north
@@ -93,32 +65,16 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
                 pubs["alt"].publish(r)
                 d = PoseWithCovarianceStamped()
                 d.header.stamp = stamp
-                d.pose.pose.position.z = -clock["depth"] + float(rng.normal(0.0, 1e-3))
+                d.pose.pose.position.z = -depth["m"] + float(rng.normal(0.0, 1e-3))
                 pubs["depth"].publish(d)
-                p = FluidPressure(fluid_pressure=f["environment.surface_pressure_pa"]
-                                  + rho_g * (clock["depth"] + port_z))
+                p = FluidPressure(fluid_pressure=f["environment.surface_pressure_pa"] + rho_g * (depth["m"] + port_z))
                 p.header.stamp = stamp
-                pubs["pressure"].publish(p)
+                pressure.publish(p)
             imu = Imu()
             imu.header.stamp = stamp
             imu.linear_acceleration.z = cfg.environment.gravity_m_s2 + float(rng.normal(0.0, 0.01))
             pubs["imu"].publish(imu)
-            clock["ns"] += int(dt_s * 1e9)
-            c = Clock()
-            c.clock.sec, c.clock.nanosec = divmod(clock["ns"], 1_000_000_000)
-            pubs["clock"].publish(c)
-            ex.spin_once(timeout_sec=0.01)
-            for _ in range(10_000):  # then every callback that is ready (as bringup's spin_until_idle)
-                try:
-                    handler, _entity, _node = ex.wait_for_ready_callbacks(0.0)
-                except (TimeoutException, ShutdownException):
-                    break
-                handler()
-
-        def call(client, request):
-            fut = client.call_async(request)
-            wait_until(fut.done, 10, step, "service answer")
-            return fut.result()
+            g.advance(dt_s)
 
         def thrust() -> None:
             pubs["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
@@ -126,18 +82,8 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
 
         try:
             # fluid_pressure has no reader before a goal (the identification node subscribes to it on acceptance)
-            wait_until(lambda: all(p.get_subscription_count() > 0 for k, p in pubs.items() if k != "pressure")
-                       and arm.service_is_ready()
-                       and reset.service_is_ready() and sup.esc_client.service_is_ready()
-                       and action.server_is_ready(), 30, step, "graph ready")
-            for _ in range(120):  # a whole supervisor rate window of sensors before arming
-                step()
-            # the ESC's shortest time at neutral with the guard's OK (GUARD_CONFIRM_S, steady clock; time held)
-            wait_until(lambda: esc.arming_remaining_s() == 0.0, 5, lambda: ex.spin_once(timeout_sec=0.01),
-                       "ESC time at neutral")
-            assert call(arm, SetArmed.Request(arm=True)).success
-            wait_until(lambda: ident.core.armed and sup.core.armed and emu.pulse_width_us(0) > 1690, 10, thrust,
-                       "armed, thrust on the wire")
+            g.wait_ready(step, action.server_is_ready)
+            g.arm_with_thrust(step, lambda: ident.core.armed)
             goal = action.send_goal_async(RunIdentification.Goal(dofs=["heave"]))
             wait_until(goal.done, 10, step, "goal answer")
             handle = goal.result()
@@ -150,7 +96,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             if end == "cancel":
                 handle.cancel_goal_async()
             else:
-                clock["depth"] = 1.58
+                depth["m"] = 1.58
             result = handle.get_result_async()
             wait_until(result.done, 30, step, "the action's end")
             message = result.result().result.message
@@ -166,15 +112,13 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             wait_until(lambda: aborts and sup.core.tripped, 10, step, "the supervisor tripped")
             assert [a.data for a in aborts] == [message]  # once, with the executive's reason
             assert sup.core.tripped == f"abort requested: {message}"
-            wait_until(lambda: not esc.armed and np.allclose([emu.pulse_width_us(c) for c in range(8)], 1500.0,
-                                                             atol=TICK_US), 10, thrust, "ESC disarmed, neutral")
-            wait_until(lambda: statuses and statuses[-1].level == DiagnosticStatus.ERROR, 10, step, "status")
-            assert message in statuses[-1].message
+            wait_until(lambda: not esc.armed and np.allclose(g.wire(), 1500.0, atol=TICK_US), 10, thrust,
+                       "ESC disarmed, neutral")
+            wait_until(lambda: g.statuses and g.statuses[-1].level == DiagnosticStatus.ERROR, 10, step, "status")
+            assert message in g.statuses[-1].message
             # tripped: a re-arm is undone until the supervisor is reset
             esc.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
             wait_until(lambda: not esc.armed, 10, step, "disarmed again while tripped")
             assert sup.core.tripped
         finally:
-            ex.shutdown()
-            for n in (allocation.node, probe, ident, sup, esc):
-                n.destroy_node()
+            g.close()

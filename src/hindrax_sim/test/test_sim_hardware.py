@@ -3,12 +3,10 @@ import threading
 
 import numpy as np
 import pytest
-import serial
 
 from hindrax_common.config import default_config_path, load_config
 from hindrax_drivers.dvl75 import protocol as dvl
 from hindrax_drivers.pca9685 import protocol as pca
-from hindrax_common.testing import wait_until
 from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_common.transport.i2c import I2CDevice
 from hindrax_common.transport.pty_device import PtyDevice
@@ -43,30 +41,14 @@ def test_pca9685_registers_drive_the_simulated_thrusters(hw):
     assert abs(sim.nu[5]) < 0.02  # T1+T2 with the symmetric layout: no yaw
 
 
-def test_dvl_emulator_on_a_pty_reports_the_simulated_velocity(hw):
+def test_dvl_emulator_on_a_pty_reports_the_simulated_velocity(hw, dvl_reports):
     sim, vh, cfg = hw
     sim.reset(position_ned_m=[5.0, 3.0, 0.9], nu=[0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
-    port = serial.serial_for_url(vh.ports["dvl75"], baudrate=115200, timeout=0.05)
-    try:
-        port.write(b"SEND-DVPDL ON\n")
-        framer = dvl.DvlLineFramer()
-        records = []
-
-        def poll():
-            sim.advance(0.02)
-            for line in framer.feed(port.read(4096)):
-                try:
-                    records.append(dvl.parse_line(line))
-                except dvl.DvlParseError:
-                    pass
-
-        wait_until(lambda: any(isinstance(r, dvl.DvlPositionDelta) for r in records), 20, poll, "$DVPDL report")
-        deltas = [r for r in records if isinstance(r, dvl.DvlPositionDelta)]
-        v = deltas[-1].velocity_frd_m_s()
-        assert v is not None and abs(v[0] - sim.nu[0]) < 0.1  # 5 % scale noise + 0.01 m/s, plus decay
-    finally:
-        port.close()
-
+    records = dvl_reports(sim, vh, lambda rs: any(isinstance(r, dvl.DvlPositionDelta) for r in rs), "$DVPDL report",
+                          b"SEND-DVPDL ON\n")
+    deltas = [r for r in records if isinstance(r, dvl.DvlPositionDelta)]
+    v = deltas[-1].velocity_frd_m_s()
+    assert v is not None and abs(v[0] - sim.nu[0]) < 0.1  # 5 % scale noise + 0.01 m/s, plus decay
 
 
 def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample(hw):

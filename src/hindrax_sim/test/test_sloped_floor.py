@@ -88,12 +88,9 @@ def test_floor_gradient_out_of_range_is_one_line(cfg):
         truth_from_mapping(cfg, {"disturbances": {"floor": {"gradient": [0.9, 0.0]}}})
 
 
-def test_dvl_emulator_reports_the_simulated_beam_ranges():
+def test_dvl_emulator_reports_the_simulated_beam_ranges(dvl_reports):
     """Through the emulator on a pty and the driver's parser: $DVEXT carries the sloped floor's beam ranges."""
-    import serial
-
     from hindrax_drivers.dvl75 import protocol as dvl
-    from hindrax_common.testing import wait_until
     from hindrax_sim.hardware import VirtualHardware
 
     vehicle = load_config(default_config_path())
@@ -101,23 +98,8 @@ def test_dvl_emulator_reports_the_simulated_beam_ranges():
     vh = VirtualHardware(sim, sim.config)
     try:
         sim.reset(position_ned_m=[5.0, 3.0, 1.0])
-        port = serial.serial_for_url(vh.ports["dvl75"], baudrate=115200, timeout=0.05)
-        framer = dvl.DvlLineFramer()
-        records = []
-
-        def poll():
-            sim.advance(0.02)
-            for line in framer.feed(port.read(4096)):
-                try:
-                    records.append(dvl.parse_line(line))
-                except dvl.DvlParseError:
-                    pass
-
-        try:
-            wait_until(lambda: any(isinstance(r, dvl.DvlExtended) and r.locked for r in records), 20, poll,
-                       "$DVEXT report with lock")
-        finally:
-            port.close()
+        records = dvl_reports(sim, vh, lambda rs: any(isinstance(r, dvl.DvlExtended) and r.locked for r in rs),
+                              "$DVEXT report with lock")
         ext = [r for r in records if isinstance(r, dvl.DvlExtended) and r.locked][-1]
         port_b, stern, starboard, bow = ext.beam_range_m
         p = sim.position_ned_m + np.asarray(vehicle.sensors.dvl75.position_frd_m)

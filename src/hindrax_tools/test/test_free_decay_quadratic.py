@@ -1,7 +1,7 @@
 """Free decay with quadratic damping: ``hindrax ident free-decay --model quadratic`` and the ODE fit.
 
 Records are generated here by an independent integrator (classical fixed-step Runge-Kutta 4 with 20 sub-steps per
-sample, written in this file) of M x'' + b1 x' + b2 |x'| x' + k x = 0 ([SmallROV] eq. 12 with the spring
+sample: hindrax_test_support.decay) of M x'' + b1 x' + b2 |x'| x' + k x = 0 ([SmallROV] eq. 12 with the spring
 of [Hindrax-AM] eq. 1), released from rest; the fit under test uses scipy's solve_ivp. Conditions: the
 [Hindrax-AM] Table 5 rig (k_eq 659.9 N/m, m_b 0.39 kg, added mass 0.82 kg, A 20 mm, 330 Hz, 10 s) with
 a quadratic damping of the [SmallROV] Table 10 order (b2 a few N s^2/m^2 for a body of this size) and a
@@ -18,29 +18,9 @@ import pytest
 from hindrax_tools import cli
 from hindrax_onboard.estimation.free_decay import fit_quadratic_free_decay
 from hindrax_onboard.estimation.least_squares import EstimationError
+from hindrax_test_support.decay import rk4_decay
 
 K, MB, MAD, B1, B2, AMP, V = 659.9, 0.39, 0.82, 0.4, 5.0, 0.02, 0.00056
-
-
-def rk4_decay(k, M, b1, b2, x0, duration_s, fs_hz, substeps=20):
-    """Samples (t, x, v, a) of the free decay from rest at x0, by fixed-step RK4 (independent of scipy)."""
-    def f(x, v):
-        return v, -(k * x + b1 * v + b2 * abs(v) * v) / M
-
-    n = int(round(duration_s * fs_hz))
-    h = 1.0 / fs_hz / substeps
-    x, v = x0, 0.0
-    xs, vs, acc = np.empty(n), np.empty(n), np.empty(n)
-    for i in range(n):
-        xs[i], vs[i], acc[i] = x, v, f(x, v)[1]
-        for _ in range(substeps):
-            k1 = f(x, v)
-            k2 = f(x + 0.5 * h * k1[0], v + 0.5 * h * k1[1])
-            k3 = f(x + 0.5 * h * k2[0], v + 0.5 * h * k2[1])
-            k4 = f(x + h * k3[0], v + h * k3[1])
-            x += h / 6.0 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-            v += h / 6.0 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-    return np.arange(n) / fs_hz, xs, vs, acc
 
 
 def _csv(path, seed=3):

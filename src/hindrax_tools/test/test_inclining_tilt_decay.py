@@ -3,8 +3,8 @@
 Inclining: a test mass at known arms tilts a vehicle of known restoring C; the tilts are computed by hand here from
 w d cos(phi) = C sin(phi) + M0 (exact equilibrium, solved by bisection in this file), plus 0.05 deg of IMU noise.
 Tilt decay: the configured Hindrax roll (rigid 0.4831 kg m^2, added 0.48 kg m^2, C = W BG = 4.48 N m/rad, linear
-0.05 and quadratic 1.29 damping: ros_ws/config/hindrax.yaml) integrated by this file's RK4 (fixed step),
-seen through a gyro with bias and noise.
+0.05 and quadratic 1.29 damping: ros_ws/config/hindrax.yaml) integrated by the fixed-step RK4 of
+hindrax_test_support.decay, seen through a gyro with bias and noise.
 """
 from __future__ import annotations
 
@@ -18,28 +18,7 @@ import yaml
 from hindrax_tools import cli
 from hindrax_onboard.estimation.free_decay import restoring_from_inclining
 from hindrax_onboard.estimation.least_squares import EstimationError
-
-
-
-def rk4_decay(k, M, b1, b2, x0, duration_s, fs_hz, substeps=20):
-    """Samples (t, x, v, a) of M x'' + b1 x' + b2 |x'| x' + k x = 0 from rest at x0, fixed-step RK4."""
-    def f(x, v):
-        return v, -(k * x + b1 * v + b2 * abs(v) * v) / M
-
-    n = int(round(duration_s * fs_hz))
-    h = 1.0 / fs_hz / substeps
-    x, v = x0, 0.0
-    xs, vs, acc = np.empty(n), np.empty(n), np.empty(n)
-    for i in range(n):
-        xs[i], vs[i], acc[i] = x, v, f(x, v)[1]
-        for _ in range(substeps):
-            k1 = f(x, v)
-            k2 = f(x + 0.5 * h * k1[0], v + 0.5 * h * k1[1])
-            k3 = f(x + 0.5 * h * k2[0], v + 0.5 * h * k2[1])
-            k4 = f(x + h * k3[0], v + h * k3[1])
-            x += h / 6.0 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-            v += h / 6.0 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-    return np.arange(n) / fs_hz, xs, vs, acc
+from hindrax_test_support.decay import rk4_decay
 
 C_TRUE, M0, G = 4.4792, 0.02, 9.81
 M_TEST, V_TEST = 0.5, 0.5 / 7850.0          # 0.5 kg of steel

@@ -29,6 +29,8 @@ Checks, all only while the ESC is armed (a vehicle on the bench or at the surfac
 * **cage**: the dead-reckoned horizontal position inside the pool box (``pool.length_m`` north x
   ``pool.width_m`` east, origin at the pool corner) shrunk by ``supervisor.cage_margin_m`` on every side;
 * **run time**: armed for at most ``supervisor.max_run_time_s``;
+* **ROS time standing still** for ``clock_stall_timeout_s`` of steady time (the node's measure,
+  :meth:`SupervisorCore.stall_check`): every check on ROS time would be blind;
 * **operator e-stop** and **abort requests** from other nodes (:meth:`SupervisorCore.trip`).
 
 Position (kept simple, and said so): DVL dead reckoning from ``pool.start_position_ned_m`` (where the operator
@@ -48,11 +50,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["SENSORS", "SupervisorLimits", "SupervisorCore", "tilt_from_specific_force"]
+__all__ = ["DISARM_RETRY_S", "SENSORS", "SupervisorLimits", "SupervisorCore", "tilt_from_specific_force"]
 
 #: Watched sensors, with the topic each one is measured on (the node's subscriptions).
 SENSORS: dict[str, str] = {"dvl": "dvl/data", "altimeter": "ping/altitude", "pressure": "pressure/depth",
                            "imu": "imu/data_raw"}
+#: A disarm request is repeated this often while the ESC still reports armed after a breach, s (steady clock).
+DISARM_RETRY_S = 0.2
 #: Longest gap between two DVL velocities that is integrated, s.
 MAX_DEAD_RECKONING_GAP_S = 1.0
 #: An accelerometer reading whose magnitude is outside this fraction of g is no tilt reference (the vehicle is
@@ -95,10 +99,12 @@ class SupervisorLimits:
     max_sample_age_s: float = math.inf
     max_identical_s: float = math.inf
     reaction_time_s: float = math.inf
+    clock_stall_timeout_s: float = math.inf
 
     @classmethod
-    def from_config(cls, cfg: Any) -> "SupervisorLimits":
-        """From a :class:`~hindrax_common.config.VehicleConfig` (``supervisor.*`` and ``pool.*`` keys)."""
+    def from_config(cls, cfg: Any, clock_stall_timeout_s: float | None = None) -> "SupervisorLimits":
+        """From a :class:`~hindrax_common.config.VehicleConfig` (``supervisor.*`` and ``pool.*`` keys) and the node
+        parameter ``clock_stall_timeout_s`` (s; None: its default ``supervisor.rate_window_s``)."""
         g = cfg.get
         margin = float(g("supervisor.cage_margin_m"))
         start = g("pool.start_position_ned_m")
@@ -114,7 +120,8 @@ class SupervisorLimits:
                    start_heading_rad=float(g("pool.start_heading_rad")),
                    max_sample_age_s=float(g("supervisor.max_sample_age_s")),
                    max_identical_s=float(g("supervisor.max_identical_s")),
-                   reaction_time_s=float(g("supervisor.reaction_time_s")))
+                   reaction_time_s=float(g("supervisor.reaction_time_s")),
+                   clock_stall_timeout_s=float(clock_stall_timeout_s or g("supervisor.rate_window_s")))
 
 
 @dataclass
@@ -143,6 +150,8 @@ class SupervisorCore:
     not_alive: dict = field(default_factory=dict)
     not_alive_reason: dict = field(default_factory=dict)
     _identical: dict = field(default_factory=dict)
+    #: steady time (s) of the last disarm request (:meth:`disarm_due`)
+    disarm_asked_s: float = -math.inf
 
     def __post_init__(self) -> None:
         self.position_ne = np.array(self.limits.start_position_ne, dtype=float)
@@ -171,6 +180,15 @@ class SupervisorCore:
     def reset(self) -> None:
         """Clear the latched breach (operator, after the cause is understood)."""
         self.tripped = ""
+
+    def disarm_due(self, steady_s: float, breach: bool = False) -> bool:
+        """Is a disarm request to the ESC due at steady time ``steady_s`` (s)? At a new breach (``breach``) at once,
+        armed or not; then while tripped and the ESC reports armed every :data:`DISARM_RETRY_S`, for a lost request
+        or a re-arm. Steady time: a ROS time that steps back or stands still must not hold the repeats off."""
+        if not breach and not (self.tripped and self.armed and steady_s - self.disarm_asked_s >= DISARM_RETRY_S):
+            return False
+        self.disarm_asked_s = steady_s
+        return True
 
     def _breach(self, reason: str) -> str:
         if not self.armed:
@@ -333,6 +351,15 @@ class SupervisorCore:
         return ""
 
     # ------------------------------------------------------------------ periodic
+    def stall_check(self, stalled_for_s: float) -> str:
+        """ROS time has stood still for ``stalled_for_s`` of steady time (s; the node's
+        :class:`~hindrax_common.node_support.liveness.ClockStepMonitor`): armed and beyond
+        ``limits.clock_stall_timeout_s`` is a breach, for every check on ROS time is blind. Returns a new breach."""
+        if stalled_for_s <= self.limits.clock_stall_timeout_s:
+            return ""
+        return self._breach(f"ROS time stalled for {stalled_for_s:.1f} s while armed: the supervisor's ROS-time "
+                            "checks are blind")
+
     def rate_hz(self, sensor: str, t_s: float) -> float:
         """Messages per second of ``sensor`` over the window ending at ``t_s``."""
         dq = self._stamps[sensor]

@@ -45,14 +45,13 @@ Time
     of ROS time is detected at the next check or sample, whichever reads the time first, reported (``/diagnostics``
     warning ``clock_step``) and the stored times are shifted by the step, so no check goes blind and a sample taken
     after the step is not shifted again; ROS time standing still for ``clock_stall_timeout_s`` (default
-    ``supervisor.rate_window_s``) of steady time while armed trips ("ROS time stalled": every ROS-time check would
-    be blind).
+    ``supervisor.rate_window_s``) of steady time while armed trips (:meth:`.core.SupervisorCore.stall_check`).
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``);
     the read-only node parameter ``clock_stall_timeout_s``."""
 from __future__ import annotations
 
-import math
+import time
 from typing import Any
 
 import numpy as np
@@ -82,8 +81,6 @@ from .disarm_cause import DisarmCauses
 
 __all__ = ["SupervisorNode", "main"]
 
-#: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
-DISARM_RETRY_S = 0.2
 #: QoS depth of ``imu/data_raw``: 0.5 s at 102 Hz, room for an executor held up on a loaded machine (a sample lost
 #: in the queue lowers the rate the ``supervisor.min_rate.imu_hz`` check sees)
 IMU_QUEUE_DEPTH = 50
@@ -99,22 +96,19 @@ class SupervisorNode(VehicleNode):
     def __init__(self, **kwargs: Any):
         super().__init__("supervisor", **kwargs)
         cfg = load_node_config(self, ("supervisor", "pool"))
-        self.core = SupervisorCore(SupervisorLimits.from_config(cfg))
+        # ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
+        self.core = SupervisorCore(SupervisorLimits.from_config(cfg, float(declare_node_parameter(
+            self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT, cfg.supervisor.rate_window_s))))
         #: why the thrust last stopped, for the operator (``disarm_cause`` of the status)
         self.causes = DisarmCauses()
         self._decode_imu = cdr_decoder(Imu)
         self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
         self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
-        self.esc_armed = False
         self.last_breach_time_s: float | None = None
-        self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
         self.heartbeat = HeartbeatPublisher(self, "supervisor")
         self.clock_monitor = ClockStepMonitor(self._now_s)
-        #: ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
-        self.clock_stall_timeout_s = float(declare_node_parameter(self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT,
-                                                                  cfg.supervisor.rate_window_s))
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
         # the sensors best effort (sensor_input_qos): a lost sample only lowers the rate the check counts
         self.create_subscription(Dvl, "dvl/data", self.on_dvl, sensor_input_qos(10))
@@ -181,14 +175,12 @@ class SupervisorNode(VehicleNode):
             self.diag.count("esc_state_malformed")
             state = (OUTPUT_UNKNOWN, False)
         armed = armed_after(self.core.armed, *state)
-        if armed != self.esc_armed:
+        if armed != self.core.armed:
             self._status_dirty = True
-        self.esc_armed = armed
         self._cause(lambda: self.causes.on_armed(armed, next((kv.value for kv in msg.values if kv.key == "reason"),
                                                               "")))
         self.core.set_armed(self._sample_time_s(), armed)
-        if armed and self.core.tripped:
-            self._disarm()
+        self._disarm()
 
     def on_guard(self, data: bytes) -> None:
         """A ``guard/heartbeat`` (its CDR bytes): its reason while it silences the outputs names a disarm
@@ -208,11 +200,11 @@ class SupervisorNode(VehicleNode):
 
     def on_abort(self, msg: String) -> None:
         self._cause(lambda: self.causes.on_starved(msg.data))  # the starvation behind an earlier stop, if it is one
-        self._handle(self.core.trip(f"abort requested: {msg.data}"), force=True)
+        self._handle(self.core.trip(f"abort requested: {msg.data}"))
 
     def on_estop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         new = self.core.trip("operator e-stop (supervisor/estop)")
-        self._handle(new, force=True)
+        self._handle(new)
         response.success = True
         was = "tripped" if new else "already tripped"
         response.message = f"{was}: {self.core.tripped}; disarm requested"
@@ -244,12 +236,9 @@ class SupervisorNode(VehicleNode):
     def on_check(self) -> None:
         self.tick_gaps.tick()
         self._sample_time_s()  # a backward step of ROS time: re-base first
-        if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
-            self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
-                                        "armed: the supervisor's ROS-time checks are blind"))
+        self._handle(self.core.stall_check(self.clock_monitor.stalled_for_s()))
         self._handle(self.core.check(self._now_s()))
-        if self.core.tripped and self.esc_armed:
-            self._disarm()
+        self._disarm()
         if self._status_dirty:
             self._publish_status()
         self._publish_heartbeat()
@@ -259,9 +248,8 @@ class SupervisorNode(VehicleNode):
         self.heartbeat.publish(not tripped, tripped or "within the envelope")
 
     # ------------------------------------------------------------------ breach
-    def _handle(self, reason: str, force: bool = False) -> None:
-        """A new breach (non-empty ``reason``): disarm, report. ``force``: disarm even if the ESC is not
-        known to be armed (e-stop, abort)."""
+    def _handle(self, reason: str) -> None:
+        """A new breach (non-empty ``reason``): disarm (even if the ESC is not known to be armed), report."""
         if not reason:
             return
         self.causes.on_trip(reason)
@@ -271,14 +259,13 @@ class SupervisorNode(VehicleNode):
         self.get_logger().error(f"supervisor breach: {reason}; disarming the ESC")
         self._status_dirty = True
         self._publish_heartbeat()  # the ESC and the guard act on it at once
-        self._disarm(force=True)
+        self._disarm(breach=True)
         self._publish_status()
 
-    def _disarm(self, force: bool = False) -> None:
-        now = self._now_s()
-        if not force and now - self._last_disarm_request_s < DISARM_RETRY_S:
+    def _disarm(self, breach: bool = False) -> None:
+        """``esc/set_armed(arm=False)`` when the core says it is due (:meth:`.core.SupervisorCore.disarm_due`)."""
+        if not self.core.disarm_due(time.monotonic(), breach):
             return
-        self._last_disarm_request_s = now
         if not self.esc_client.service_is_ready():
             self.get_logger().error("esc/set_armed not available: cannot disarm", throttle_duration_sec=1.0)
             return

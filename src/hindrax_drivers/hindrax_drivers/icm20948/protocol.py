@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterable, NamedTuple, Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from hindrax_common.transport.i2c import RegisterWrite
 
-__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample", "flatten_writes",
+__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
            "reset_wake_sequence", "configure_sequence", "slave_read_writes", "slave_write_writes",
            "mag_master_sequence", "mag_bypass_sequence", "ak09916_direct_init_writes", "parse_sensor_block",
            "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
@@ -302,32 +302,6 @@ class BankedWrite:
     value: int
     delay_after_s: float = 0.0
     note: str = ""
-
-
-def flatten_writes(writes: Iterable[BankedWrite], current_bank: int | None = None) -> list[RegisterWrite]:
-    """Turn banked writes into plain register writes, inserting REG_BANK_SEL writes.
-
-    A bank select is emitted whenever the bank differs from the last selected one; the bank is
-    treated as unknown at the start (``current_bank=None``) and after a DEVICE_RESET write (the
-    reset-to-bank-0 behaviour is only assumed in docs/devices.md §4.1), so it is always re-selected.
-
-    Raises ``Icm20948Error``: a value outside 0..255 or an AK09916 register (bank None)."""
-    out: list[RegisterWrite] = []
-    bank = current_bank
-    for w in writes:
-        if w.register.bank is None:
-            raise Icm20948Error(f"{w.register.name} is an AK09916 register, not an ICM-20948 one")
-        if not 0 <= int(w.value) <= 0xFF:
-            raise Icm20948Error(f"{w.register.name} value must be 0..255, got {w.value}")
-        if bank != w.register.bank:
-            out.append(RegisterWrite(REG_BANK_SEL_ADDRESS, bank_select_value(w.register.bank),
-                                     note=f"REG_BANK_SEL bank {w.register.bank}"))
-            bank = w.register.bank
-        out.append(RegisterWrite(w.register.address, int(w.value), float(w.delay_after_s),
-                                 note=w.note or w.register.name))
-        if w.register == PWR_MGMT_1 and w.value & PWR_MGMT_1_DEVICE_RESET:
-            bank = None
-    return out
 
 
 def reset_wake_sequence(reset_wait_s: float = 0.010, wake_wait_s: float = 0.020) -> list[BankedWrite]:

@@ -176,10 +176,10 @@ def _rig(ctx, sim_time: bool = False):
         emu.watch = False
         if esc.armed:  # the watchdog neutralises but stays armed
             call(r["arm"], SetArmed.Request(arm=False), spin)
-        settled = lambda: not esc.armed and not sup.esc_armed and (  # noqa: E731
+        settled = lambda: not esc.armed and not sup.core.armed and (  # noqa: E731
             sup.disarm_future is None or sup.disarm_future.done())
         wait_until(settled, 10, spin, "previous disarm settled")
-        t_quiet = time.monotonic() + 0.3  # > DISARM_RETRY_S: no supervisor retry still on its way
+        t_quiet = time.monotonic() + 0.3  # > DISARM_RETRY_S (supervisor.core): no retry on its way
         wait_until(lambda: time.monotonic() > t_quiet and settled(), 10, spin, "previous disarm settled")
         call(r["reset"], Trigger.Request(), spin)
         emu.watch, emu.neutral_at = False, None
