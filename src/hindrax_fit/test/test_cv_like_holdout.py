@@ -82,7 +82,7 @@ def fitted():
 
 def test_the_delay_is_found_within_one_grid_step(fitted):
     res, _ = fitted
-    # delay + lag: what the low frequencies see of both (0.29 s); 12 Levenberg-Marquardt steps per grid point left
+    # delay + lag: what the low frequencies see of both (0.29 s); 12 cold Levenberg-Marquardt steps per grid point left
     # the fits short of their optimum and gave 0.20 + 0.275 s
     assert abs(res.timing.delay_s + res.timing.lag_s - DELAY_S - LAG_S) <= fit_core.DELAY_STEP_S, res.timing
     assert abs(res.timing.delay_s - DELAY_S) <= fit_core.DELAY_STEP_S, res.timing

@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 from scipy import signal
+from scipy.integrate import solve_ivp
 
 from hindrax_fit.fit import fit_core
 
@@ -114,3 +115,31 @@ def test_a_richer_model_with_a_worse_cross_validation_gives_way_to_the_nested_on
     better = fit_core.Candidate(richer.terms, richer.layout, richer.fit, richer.train, richer.val,
                                 richer.fold_theta, 0.5 * nested.fold_sse, nested.fold_n, richer.cv, [])
     assert fit_core.not_below_nested(better, res.candidates) is better
+
+
+def test_where_the_truth_is_in_the_model_class_the_search_and_the_fit_find_it():
+    """Noise-free yaw runs of the 1-DOF model itself (solve_ivp, the lagged moment a state), delay and lag on the
+    coarse grid: the warm-started timing search lands on them and the output-error fit on the parameters."""
+    delay, lag, bias = 0.2, 0.05, 0.1
+    rng = np.random.default_rng(3)
+    chunks = []
+    for r in range(3):
+        n = int(60.0 / H)
+        tau = np.repeat(rng.uniform(-2.0, 2.0, n // 30 + 1), 30)[:n]  # levels held 1.5 s, at rest before
+        tau[:30] = 0.0
+        late = np.concatenate([np.zeros(int(round(delay / H))), tau])
+
+        def rhs(t, y):
+            c = late[min(int(t / H + 1e-9), n - 1)]
+            return [(c - y[0]) / lag, (y[0] - bias - KL * y[1] - KQ * abs(y[1]) * y[1]) / M]
+
+        t = np.arange(n) * H
+        sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-9, atol=1e-11, max_step=H / 4)
+        v = sol.y[1]
+        a = np.array([rhs(ti, yi)[1] for ti, yi in zip(t, sol.y.T)])
+        chunks.append(fit_core.Chunk(tau, v, np.zeros(n), a, np.arange(0.0, n, 2.0), v[::2], group=r, t0=70.0 * r,
+                                     force_start=0.0))
+    rec = fit_core.DofRecord("yaw", H, "velocity", chunks, "wrench", run_count=3)
+    res = fit_core.identify_dof(rec, fit_core.CoreOptions(select=False, max_delay_s=0.6))
+    assert (res.timing.delay_s, res.timing.lag_s) == (delay, lag), res.timing
+    assert res.theta == pytest.approx([M, KQ, KL, bias], rel=0.01)

@@ -703,11 +703,11 @@ def _blocks(group: np.ndarray, b: int) -> np.ndarray:
 
 
 def cluster_covariance(fit: FitOutcome, sd: SegmentData, min_clusters: int = MIN_CLUSTERS) -> Covariance:
-    """Cluster-robust covariance of the fit with blocks of segments as clusters
-    (docs/identification.md §7 step 5): blocks lengthened while their scores correlate above
-    :data:`CLUSTER_RHO_MAX`, at least ``min_clusters``; G / (G - 1), Student t with G - 1 degrees of
-    freedom ([Liang-Zeger1986]; [Bester-Conley-Hansen2011]; [Cameron-Miller2015] §VI); never below
-    the model-based covariance widened for the residuals' lag-1 autocorrelation."""
+    """Cluster-robust covariance of the output-error fit from its simulation-error Jacobian ([Ljung1999] §9.2-9.3),
+    blocks of segments as clusters (docs/identification.md §7 step 5): blocks lengthened while their scores correlate
+    above :data:`CLUSTER_RHO_MAX`, at least ``min_clusters``; G / (G - 1), Student t with G - 1 degrees of freedom
+    ([Liang-Zeger1986]; [Bester-Conley-Hansen2011]; [Cameron-Miller2015] §VI); never below the model-based covariance
+    widened for the residuals' lag-1 autocorrelation."""
     p = fit.theta.size
     J, r, w = fit.jac, fit.residuals, fit.weights
     Jw = J * w[:, None]
@@ -858,10 +858,13 @@ GRID_BATCH = 6
 
 
 def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentData, folds: "Folds",
-                   opts: CoreOptions) -> np.ndarray:
+                   opts: CoreOptions, starts: np.ndarray | None = None,
+                   iterations: int = timing_grid.ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
     """Cross-validated simulation-error mse of the 1-DOF model (:mod:`.timing_grid`) at each (delay, lag) of
     ``points``: per point the inputs rebuilt with that timing, per fold a fit on its training segments and the
-    prediction of its held-out ones (:func:`make_folds`; without folds, the training error on all segments)."""
+    prediction of its held-out ones (:func:`make_folds`; without folds, the training error on all segments), from
+    ``starts`` (K, p) (default: each point's equation-error start) in ``iterations`` steps. Returns (mse (n,), the
+    fold fits (n, K, p))."""
     terms = Terms("both")
     layout = parameter_layout(rec.dof, terms)
     if folds.held:
@@ -873,20 +876,22 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     else:
         train = held = np.ones((1, sd.m), dtype=bool)
         sv = sd
-    out = np.empty(len(points))
+    out, fits = np.empty(len(points)), []
     for a in range(0, len(points), GRID_BATCH):
         batch = points[a:a + GRID_BATCH]
         tms = [Timing(d, lag, "estimated") for d, lag in batch]
         sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts)) for tm in tms]
         svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s, excited_only=False) for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
-        start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
-        smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
-        th = timing_grid.fit_batch(U, sd.v0, smp, train, start, sd.h, sd.cols[..., :start.shape[1] - 4])
+        start = (np.stack([_equation_error_start(x, layout, x.a_s) for x in sds]) if starts is None
+                 else np.broadcast_to(starts, (len(batch),) + starts.shape))
+        smp, nc = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z), start.shape[-1] - 4
+        th = timing_grid.fit_batch(U, sd.v0, smp, train, start, sd.h, sd.cols[..., :nc], iterations)
         sse, n = timing_grid.held_out_sse(Uv, sv.v0, (sv.s_seg, sv.s_j, sv.s_a, sv.s_z), held, th, sv.h,
-                                          sv.cols[..., :start.shape[1] - 4])
+                                          sv.cols[..., :nc])
         out[a:a + len(batch)] = np.sum(sse, axis=1) / max(float(np.sum(n)), 1.0)
-    return out
+        fits += list(th)
+    return out, np.array(fits)
 
 
 def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
@@ -906,15 +911,21 @@ def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
     step = max(rec.h, DELAY_STEP_S)
     coarse = [(round(float(d), 6), lag) for lag in LAGS_S for d in np.arange(0.0, bound + 1e-9, step)
               if d + lag <= bound + 1e-9]
-    scores = dict(zip(coarse, _timing_scores(rec, coarse, sd, sv, fo, opts)))
+    # every point and fold starts from the fold's fit at no delay, the fine points from the best coarse point's: a
+    # warm start converges in fewer steps than the equation-error one (biased by the noise of the differentiated
+    # velocity), in timing_grid.WARM_ITERATIONS
+    s0, ref = _timing_scores(rec, [(0.0, 0.0)], sd, sv, fo, opts)
+    sc, th = _timing_scores(rec, coarse[1:], sd, sv, fo, opts, ref[0], timing_grid.WARM_ITERATIONS)
+    scores = dict(zip(coarse, np.concatenate([s0, sc])))
     d0, lag0 = min(scores, key=scores.get)
+    best = dict(zip(coarse, np.concatenate([ref, th])))[(d0, lag0)]
     i = LAGS_S.index(lag0)
     lags = {lag0, 0.5 * (lag0 + LAGS_S[i - 1]) if i > 0 else lag0,
             0.5 * (lag0 + LAGS_S[i + 1]) if i + 1 < len(LAGS_S) else lag0}
     fine = [(round(d0 + x, 6), lag) for lag in sorted(lags) for x in FINE_DELAYS_S
             if d0 + x >= 0.0 and d0 + x + lag <= bound + 1e-9 and (round(d0 + x, 6), lag) not in scores]
     if fine:
-        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, opts)))
+        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, opts, best, timing_grid.WARM_ITERATIONS)[0]))
     d, lag = min(scores, key=scores.get)
     curve = tuple((round(a, 4), round(b, 4), float(c)) for (a, b), c in sorted(scores.items()))
     return with_edge(Timing(d, lag, "estimated (output-error cross-validation)", curve, bound, why), rec.h)

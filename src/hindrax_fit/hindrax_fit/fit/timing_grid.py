@@ -19,11 +19,11 @@ import numpy as np
 
 __all__ = ["rk4_step", "simulate_batch", "fit_batch", "held_out_sse"]
 
-#: Levenberg-Marquardt iterations of one batch at most (each one simulation of every problem and its perturbations;
-#: most stop earlier). 12 left the fits of a noisy, idle-heavy record short of their optimum: the cross-validated
-#: curve jagged by more than its slope near the truth and the delay 0.15 s off (src/hindrax_fit/test/
-#: test_cv_like_holdout.py)
-ITERATIONS = 40
+#: Levenberg-Marquardt iterations of one batch at most (each one simulation of every problem and its perturbations).
+#: From the equation-error start 12 left the fits of a noisy, idle-heavy record short of their optimum: the
+#: cross-validated curve jagged by more than its slope near the truth and the delay 0.15 s off (src/hindrax_fit/test/
+#: test_cv_like_holdout.py); ``WARM_ITERATIONS`` from a converged fit at a neighbouring timing
+ITERATIONS, WARM_ITERATIONS = 40, 15
 
 
 def rk4_step(stage, u0, um, u1, v, h: float, k: tuple, w: np.ndarray) -> np.ndarray:
@@ -122,10 +122,10 @@ def _cost(tw, V, w):
 
 
 def fit_batch(U: np.ndarray, v0: np.ndarray, samples: tuple, masks: np.ndarray, theta0: np.ndarray, h: float,
-              cols: np.ndarray | None = None) -> np.ndarray:
+              cols: np.ndarray | None = None, iterations: int = ITERATIONS) -> np.ndarray:
     """Least-squares simulation-error fits (G, K, p) of every grid point's input U[:, g] on every fold's training
-    segments ``masks`` (K, m) from ``theta0`` (G, p), p = 4 + the columns of ``cols`` (bounded below by 0, as the
-    restoring stiffness) (module docstring)."""
+    segments ``masks`` (K, m) from ``theta0`` (G, p) or (G, K, p), p = 4 + the columns of ``cols`` (bounded below by
+    0, as the restoring stiffness), in at most ``iterations`` steps (module docstring)."""
     G, K = U.shape[1], masks.shape[0]
     m, L = U.shape[2], U.shape[3]
     p = theta0.shape[-1]
@@ -138,13 +138,14 @@ def fit_batch(U: np.ndarray, v0: np.ndarray, samples: tuple, masks: np.ndarray, 
         t[..., 0] = np.maximum(t[..., 0], 0.5 * h * (t[..., 2] + 2.0 * t[..., 1] * vmax))
         return t
 
-    th = resolvable(np.repeat(np.maximum(theta0, lower)[:, None, :], K, axis=1).copy())
+    th0 = np.maximum(theta0, lower)
+    th = resolvable((th0 if th0.ndim == 3 else np.repeat(th0[:, None, :], K, axis=1)).copy())
     V = simulate_batch(U, v0, th, h, cols)
     cost = _cost(tw, V, w)
     lam = np.full((G, K), 1e-3)
     eye = np.eye(p)
     wk = np.repeat(w, L, axis=1)[None, :, None, :]  # (1, K, 1, m L)
-    for _ in range(ITERATIONS):
+    for _ in range(iterations):
         d = 1e-6 * np.maximum(np.abs(th), 1e-3 * np.maximum(np.abs(th[..., :1]), 1e-6))
         P = th[:, :, None, :] + d[:, :, None, :] * eye  # (G, K, p, p) one parameter stepped per set
         VP = simulate_batch(U, v0, P.reshape(G, K * p, p), h, cols).reshape(G, K, p, m, L)

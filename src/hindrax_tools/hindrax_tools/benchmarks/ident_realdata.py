@@ -26,7 +26,8 @@ and whether the delay sat at its bound.
 
 Usage: ``python -m hindrax_tools.benchmarks.ident_realdata [--keep DIR] [--only NAME,...]
 [--results-doc docs/results.md]``: prints the table; with ``--results-doc`` writes section ``ident-realdata`` of that
-document and the figure ``figures/ident_realdata.png`` next to it. Tune on this, never on the tests."""
+document (``ident-realdata-openloop`` for ``--only realdata_openloop``: one section per choice) and its figure
+``figures/ident_realdata.png`` (``ident_realdata_openloop.png``) next to it. Tune on this, never on the tests."""
 from __future__ import annotations
 
 import argparse
@@ -172,18 +173,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep", default=None, help="directory for the bags (reused on the next run)")
     results_doc.add_argument(p)
     a = p.parse_args(argv)
-    res = run([n for n in a.only.split(",") if n] or None, a.keep)
+    only = [n for n in a.only.split(",") if n]
+    res = run(only or None, a.keep)
     print(results_doc.markdown_table(HEADER, table_rows(res)))
-    if a.results_doc:
+    if a.results_doc:  # a section of its own per --only choice: the other sets' tables stay
+        section = "-".join(["ident-realdata"] + [n.removeprefix("realdata_") for n in only])
         doc = Path(a.results_doc)
-        png = figure(res, doc.parent / "figures" / "ident_realdata.png")
+        png = figure(res, doc.parent / "figures" / f"{section.replace('-', '_')}.png")
         def made(r):
             return "bags reused from --keep" if r["bags_s"] < 5 else f"{r['bags_s']:.0f} s of bags"
 
         notes = "\n".join(f"- `{n}` ({made(r)}, {r['fit_s']:.0f} s to fit and evaluate): {r['note']}"
                           for n, r in res.items())
-        body = ("Three bags fitted, two predicted, no vehicle file; held-out nrmse = RMS(predicted - measured) / "
-                "std(measured) of 10 s open-loop predictions from the measured velocity "
+        body = ("The first bags of a set fitted, the others predicted, no vehicle file; held-out nrmse = "
+                "RMS(predicted - measured) / std(measured) of 10 s open-loop predictions from the measured velocity "
                 "(`python -m hindrax_tools.benchmarks.ident_realdata`). Gray-box 1-DOF: "
                 "M v' = u - k_l v - k_q |v| v - b with a delayed, lagged command, fitted by simulation error, delay "
                 "and lag chosen by leave-one-run-out cross-validation on the fitted bags "
@@ -191,7 +194,8 @@ def main(argv: list[str] | None = None) -> int:
                 + notes + "\n\n"
                 + results_doc.markdown_table(HEADER, table_rows(res))
                 + f"\n\n![held-out nrmse per data set and DOF]({png.relative_to(doc.parent).as_posix()})\n")
-        results_doc.write_if_asked(a, "ident-realdata", "Identification on real-like data", body)
+        results_doc.write_if_asked(a, section, "Identification on real-like data" + (f" ({', '.join(only)})"
+                                                                                     if only else ""), body)
     return 0
 
 
