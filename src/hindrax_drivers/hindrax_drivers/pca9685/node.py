@@ -26,9 +26,10 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output state;
   on every confirmed write or change of state, and repeated by the output tick when nothing went out for
   :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz armed and under the identification's 25 Hz commands; disarmed at neutral
-  every :data:`DISARMED_REPEAT_S`), ``esc/heartbeat`` (hindrax_msgs/Heartbeat every :data:`BEAT_EVERY_TICKS` steady ticks, at once
-  in one that many periods late or with a new state; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest guard beat
-  handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign of life and release condition),
+  every :data:`DISARMED_REPEAT_S`), ``esc/heartbeat`` (hindrax_msgs/Heartbeat every :data:`BEAT_EVERY_TICKS` steady
+  ticks, at once in one that many periods late or with a new state; ``output_state``, ``armed``, the reason as
+  ``message``, ``boot_id``/``seq``, the newest guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while
+  unknown; the output guard's sign of life and release condition),
   ``esc/output_state`` (the same state, latched: on a change of armed or output state and every 1 s,
   :mod:`hindrax_common.node_support.esc_state`; for nodes that need only "armed"), ``raw/pca9685`` (every I2C
   transaction), ``/diagnostics``. Neutral is written on disarm, on an exception in the output path and on shutdown
