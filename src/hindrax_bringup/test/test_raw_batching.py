@@ -83,18 +83,18 @@ def test_single_transaction_batch_stays_a_plain_message():
 
 
 def test_i2c_cycles_are_published_together_once_their_period_is_over():
-    # a 102 Hz poll: three cycles within the default 0.1 s stay pending, the cycle that ends past it publishes all
+    # three cycles within the default 0.5 s stay pending, the cycle that ends past it publishes all
     # four in wire order; force publishes what is pending at once; a tap outside a batch takes the pending along
     node = _Node()
     raw = RawDataPublisher(node, "icm20948")
-    assert raw.i2c_period_s == RAW_I2C_PERIOD_S == 0.1
+    assert raw.i2c_period_s == RAW_I2C_PERIOD_S == 0.5
     for k in range(4):
         raw.begin_batch()
         raw.i2c_tap("read", 0x69, 0x1A, bytes([k]))
         raw.i2c_tap("read", 0x69, 0x2D, bytes([k, k]))
         raw.flush()
         assert len(node.sent) == (0 if k < 3 else 1)
-        node.clock.t_ns += 34_000_000  # 34 ms later (0.102 s after the first cycle at k = 3)
+        node.clock.t_ns += 170_000_000  # 170 ms later (0.51 s after the first cycle at k = 3)
     assert raw_transactions(node.sent[0]) == [(READ, 0x69, r, bytes([k] * n)) for k in range(4)
                                               for r, n in ((0x1A, 1), (0x2D, 2))]
     assert raw.pending_bytes == 0

@@ -110,7 +110,8 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
     # timestamped bags (recording/bag_dir.py)
     assert {"model_file": "", "recording.output_root": "/tmp/b", "autostart": True, "all_topics": True,
             "exclude_regex": "^/(esc|guard|supervisor)/heartbeat|^/thrusters/command_pulse_width|"
-                             "^/dvl/(twist|altitude)|^/ping/confidence|^/(pressure|imu)/temperature"} in written
+                             "^/dvl/(twist|altitude)|^/ping/confidence|^/(pressure|imu)/temperature|"
+                             "^/imu/mag$"} in written
 
 
 def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):

@@ -195,8 +195,9 @@ class DiagnosticsPublisher:
 #: ``i2c_register`` of a RawDeviceData message that carries several I2C transactions (see RawDataPublisher)
 RAW_BATCH_REGISTER = -2
 _RAW_RECORD = struct.Struct("<BBhH")  # direction, 7-bit address, register (-1 none), data length
-#: I2C transactions of read cycles are published together at most this often (ROS time), s (RawDataPublisher)
-RAW_I2C_PERIOD_S = 0.1
+#: I2C transactions of read cycles are published together at most this often (ROS time), s (RawDataPublisher): raw/*
+#: is read by the recorder alone, so each message is a delivery for the bag only (docs/pi_budget.md)
+RAW_I2C_PERIOD_S = 0.5
 #: ... or as soon as this many bytes of records are pending
 RAW_I2C_MAX_BYTES = 16384
 
