@@ -1,5 +1,8 @@
 """Test-session set-up shared by every test directory.
 
+- One BLAS thread a process (``OPENBLAS_NUM_THREADS=1`` unless set; subprocesses inherit it): the suite runs three
+  xdist workers on two cores, and OpenBLAS's extra thread only spun beside them (a fit of test_ident_timing_cv.py:
+  23.7 CPU-s with two threads, 16.2 with one, no faster in wall time).
 - Discovery and data stay on loopback, over the vehicle's transport: UDPv4 bound to 127.0.0.1, no shared memory
   (:mod:`hindrax_common.process.dds_transport`; docs/architecture.md §11.4).
 - Each pytest-xdist worker (three, pytest.ini; and a plain run) reserves its own ROS domain ID through
@@ -23,8 +26,9 @@ import signal
 import sys
 from types import SimpleNamespace
 
-import numpy as np
-import pytest
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads OpenBLAS (module docstring)
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 from hindrax_common.process.dds_transport import loopback_transport  # noqa: E402 - after the range is set

@@ -177,9 +177,10 @@ class VirtualHardware:
             sim_node.add_clock_listener(link.tick)
             sim_node.add_step_gate(link.settled)
 
-    def serve_serial(self, lock: Any = None) -> None:
+    def serve_serial(self, lock: Any = None, poll_period_s: float | None = None) -> None:
         """Serve the serial devices' ptys from their own threads (built with ``serial_threads=False``), each
-        emulator call under ``lock`` when given (the lock that also guards the simulator's stepping).
+        emulator call under ``lock`` when given (the lock that also guards the simulator's stepping), waiting at most
+        ``poll_period_s`` when given (:class:`~hindrax_common.transport.pty_device.PtyDevice`).
 
         Raises:
             RuntimeError: the ptys are served already (threads or :meth:`lock_step_serial`), or there are none."""
@@ -188,6 +189,7 @@ class VirtualHardware:
         for pty in self._ptys.values():
             if lock is not None:
                 pty.lock = lock
+            pty.poll_period_s = poll_period_s or pty.poll_period_s
             pty.start()
 
     def serial_startup_done(self) -> bool:

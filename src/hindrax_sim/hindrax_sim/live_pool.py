@@ -82,7 +82,8 @@ class LivePoolServer:
         # the emulators' time is the wall clock since the start (as a driver's waits measure it), continuous
         self.hardware.use_clock(lambda: self._sim0 + (time.monotonic() - self._wall0))
         self.ports = dict(self.hardware.ports)
-        self.hardware.serve_serial(lock=self.lock)
+        # a wall clock: the serial threads wake for the host's bytes and the devices' outputs (PtyDevice), else 20 Hz
+        self.hardware.serve_serial(lock=self.lock, poll_period_s=0.05)
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         self.socket_path = str(directory / "i2c.sock")

@@ -94,7 +94,7 @@ class EmulatedDevices(DriverEndpoints):
     it too)."""
 
     def __init__(self, config: VehicleConfig, directory: str | os.PathLike | None = None,
-                 serve_i2c: bool = True, poll_period_s: float = 0.01) -> None:
+                 serve_i2c: bool = True, poll_period_s: float = 0.05) -> None:
         self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-devices-"))
         self.directory.mkdir(parents=True, exist_ok=True)
         self.socket_path = str(self.directory / "i2c.sock")

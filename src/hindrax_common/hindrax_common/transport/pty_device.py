@@ -39,7 +39,8 @@ class ByteStreamEmulator(Protocol):
     """Contract of an I/O-free serial device emulator (docs/architecture.md §2 layer 2).
 
     ``feed_host_bytes(data)`` receives bytes the host wrote; ``poll(t_s)`` returns the bytes the
-    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls)."""
+    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls). Optional:
+    ``next_output_s()``: when the next unprompted output is due (-inf: now; None: not before host bytes)."""
 
     def feed_host_bytes(self, data: bytes) -> None:  # pragma: no cover - protocol
         ...
@@ -193,6 +194,10 @@ class PeriodicSchedule:
             self._k = 0
         self._period_s = float(period_s)
 
+    def next_s(self) -> Optional[float]:
+        """The next tick instant (None before :meth:`restart`)."""
+        return None if self._anchor_s is None else self._anchor_s + self._k * self._period_s
+
     def due(self, t_s: float, max_backlog_s: float = float("inf")) -> list:
         """Pop every tick instant <= ``t_s`` (within 1 ns, so float rounding of ``k * period`` never
         moves a tick past a poll at the same nominal instant); ticks older than
@@ -214,7 +219,8 @@ class PeriodicSchedule:
 class PtyDevice:
     """Run a :class:`ByteStreamEmulator` behind a pseudo-terminal in a background thread.
 
-    The thread loops every ``poll_period_s`` (wall time): it reads whatever the host wrote to the
+    The thread loops every ``poll_period_s`` (wall time), or sooner when the host writes or the emulator's
+    ``next_output_s()`` (:class:`ByteStreamEmulator`) falls due: it reads whatever the host wrote to the
     slave side and passes it to ``emulator.feed_host_bytes``, then writes ``emulator.poll(clock())``
     to the master side.  Output that cannot be written (nobody reading, tty buffer full) is dropped
     and counted in :attr:`bytes_dropped`, as on a real UART.  Every emulator call happens with
@@ -226,7 +232,7 @@ class PtyDevice:
         emulator: the device emulator.
         clock: callable returning the emulator time in s (default ``time.monotonic``; a simulator
             passes its simulation clock).
-        poll_period_s: wall-clock period of the service loop.
+        poll_period_s: the longest wall-clock wait of the service loop (a fault set by test code goes out within it).
         link_name: file name of the stable symlink inside a private temporary directory.
         start: start the service thread immediately.
         realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
@@ -326,8 +332,20 @@ class PtyDevice:
     def _run(self) -> None:
         self.scheduling_refused = set_this_thread(self.realtime_priority)
         while not self._stop.is_set():
-            if not self._cycle(self.poll_period_s, None, True):
+            if not self._cycle(self._wait_s(), None, True):
                 self._stop.wait(self.poll_period_s)
+
+    def _wait_s(self) -> float:
+        """``poll_period_s``, or until the emulator's ``next_output_s()`` (a 10 Hz DVL: 10-30 loops a second, not 500),
+        but not after it raised (:attr:`last_error`). The clock is read only to wait: the first poll's is the boot."""
+        next_output = getattr(self.emulator, "next_output_s", None)
+        if next_output is None or self.last_error is not None:
+            return self.poll_period_s
+        with self.lock:
+            due = next_output()
+        if due is None:
+            return self.poll_period_s
+        return 0.0 if due == -math.inf else min(self.poll_period_s, max(0.0, due - self.clock()))
 
     def service(self, t_s: Optional[float] = None, deliver: bool = True) -> int:
         """One service cycle, synchronously and without waiting, for a caller that drives the device itself instead of

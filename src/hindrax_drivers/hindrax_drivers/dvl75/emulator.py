@@ -233,6 +233,14 @@ class Dvl75Emulator:
             messages, self._pending = self._pending, []
             return self.faults.transmit(messages, _corrupt_nmea_checksum)
 
+    def next_output_s(self) -> Optional[float]:
+        """When the next unprompted output is due (s): the next cycle; -inf before the boot or with replies queued; None
+        while paused (:class:`~hindrax_common.transport.pty_device.ByteStreamEmulator`)."""
+        with self._lock:
+            if self._boot_t is None or self._pending:
+                return -math.inf
+            return None if self._paused else self._schedule.next_s()
+
     def reboot(self, t_s: float) -> None:
         """Restart as at power-up at time ``t_s``: boot time (``tu`` = 0), non-sticky state
         (pause, position, GPS fix) reset, flash kept, boot banner queued (if free-form is on)."""

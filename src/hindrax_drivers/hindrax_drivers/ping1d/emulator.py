@@ -173,6 +173,14 @@ class Ping1dEmulator:
             messages, self._pending = self._pending, []
             return self.faults.transmit(messages, _corrupt_checksum)
 
+    def next_output_s(self) -> Optional[float]:
+        """When the next unprompted output is due (s): the next ping; -inf with frames or replies waiting or pinging
+        just switched; None while off (:class:`~hindrax_common.transport.pty_device.ByteStreamEmulator`)."""
+        with self._lock:
+            if self._inbox or self._pending or self.settings.ping_enabled != self._was_enabled:
+                return -math.inf
+            return self._schedule.next_s() if self._was_enabled else None
+
     # --- measurement model --------------------------------------------------------------------------
     def _interval_s(self) -> float:
         return max(self.settings.ping_interval_s, _MIN_PING_INTERVAL_S)
