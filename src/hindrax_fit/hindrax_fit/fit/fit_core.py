@@ -870,9 +870,12 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     if folds.held:
         train = np.zeros((len(folds.train), sd.m), dtype=bool)
         held = np.zeros((len(folds.held), sv.m), dtype=bool)
+        # scored where the force moves: a held-out run the DOF only drifts in (a bias) has no timing to tell and its
+        # error, which the fitted damping and bias alone set, swamped the curve of the runs that have (delay 0)
+        driven = np.std(sv.force, axis=1) >= EXCITATION_MIN[excited_kind(rec.dof)][0]
         for k, (t, hh) in enumerate(zip(folds.train, folds.held)):
             train[k, t] = True
-            held[k, hh] = True
+            held[k, hh[driven[hh]] if driven[hh].any() else hh] = True
     else:
         train = held = np.ones((1, sd.m), dtype=bool)
         sv = sd
@@ -1024,13 +1027,17 @@ def make_folds(sd_train: SegmentData, sd_val: SegmentData, k: int) -> Folds:
 
     Validation segments of two runs or more (``group``): whole runs held out, every segment of them moving or not
     (the held-out runs of ``hindrax ident fit --holdout`` and ``ident predict`` are new runs, scored on all their
-    segments), the runs in ``k`` contiguous groups (one run per fold when there are at most ``k``); each fold trains
-    on the other runs. One run: contiguous blocks of the excited validation segments (time order), a training
-    segment overlapping a held-out validation segment's time span left out of that fold's training; fewer excited
-    validation segments than ``k``: that many folds (at least 2)."""
+    segments), the runs dealt to ``k`` groups in turn, the most force variance first (one run per fold when there
+    are at most ``k``); each fold trains on the other runs. One run: contiguous blocks of the excited validation
+    segments (time order), a training segment overlapping a held-out validation segment's time span left out of that
+    fold's training; fewer excited validation segments than ``k``: that many folds (at least 2)."""
     runs = np.unique(sd_val.group)
     if runs.size >= 2:
-        held_runs = [a for a in np.array_split(runs, min(k, runs.size)) if a.size]
+        # dealt in turn, the runs that drive the DOF most first: runs driving it in a row (a campaign) held out in one
+        # fold left it to train on none of them (its CV at holding's level, the delay curve noise: delay 0)
+        drive = [-float(np.sum(np.var(sd_val.force[sd_val.group == g], axis=1))) for g in runs]
+        order, k = runs[np.argsort(drive, kind="stable")], min(k, runs.size)
+        held_runs = sorted((np.sort(order[i::k]) for i in range(k)), key=lambda a: int(a[0]))
         held = [np.flatnonzero(np.isin(sd_val.group, a)) for a in held_runs]
         return Folds(held, [np.flatnonzero(~np.isin(sd_train.group, a)) for a in held_runs], [])
     exc = np.flatnonzero(sd_val.excited)
