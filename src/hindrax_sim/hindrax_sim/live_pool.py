@@ -95,7 +95,7 @@ class LivePoolServer:
         self._thread.start()
 
     def _run(self) -> None:
-        step_s = self.sim.step_s
+        step_s, applied = self.sim.step_s, False
         while not self._stop.is_set():
             due = self._sim0 + (time.monotonic() - self._wall0)
             if due - self.sim.t_s > MAX_LAG_S:
@@ -105,9 +105,12 @@ class LivePoolServer:
                 due = self.sim.t_s
             while self.sim.t_s + 0.5 * step_s <= due:
                 with self.lock:
-                    self.sim.set_external_wrench(self.operator.external_wrench_frd(self.sim.rotation))
+                    if applied or self.operator.active:  # at rest the held external wrench stays zero
+                        self.sim.set_external_wrench(self.operator.external_wrench_frd(self.sim.rotation))
+                        applied = self.operator.active
                     self.sim.step(self.hardware.pulse_widths_us())
-            self._stop.wait(step_s)
+            # one sleep to the next step's deadline (an Event's wait costs a third more per wake)
+            time.sleep(max(0.0, self._wall0 + self.sim.t_s + 0.5 * step_s - self._sim0 - time.monotonic()))
 
     def act(self, code: str) -> bool:
         """Do what an operator prompt's ``code`` asks (:meth:`PoolOperator.act`); False for an unknown code."""
