@@ -76,6 +76,7 @@ class LivePoolServer:
         # where the Ping1D is mounted on the simulated vehicle (the truth's, not the vehicle file's), FRD, m
         self._ping_position_frd_m = np.asarray(self.sim.config.sensors.ping1d.position_frd_m, dtype=float)
         self.hardware = VirtualHardware(self.sim, self.sim.config, seed=self.sim.seed, serial_threads=False)
+        self.sim.sensors.stop_grid()  # its emulators measure when the devices would: the grid's work is unread
         ballast_n, line_n = calibration_forces(cfg)
         self.operator = PoolOperator(ballast_n, line_n, inclining_load(cfg), float_buoyancy(cfg))
         self._wall0, self._sim0 = time.monotonic(), self.sim.t_s
