@@ -15,7 +15,8 @@ The devices are reached as :class:`~hindrax_bringup.layout.emulated_devices.Emul
 Why a process of its own: the I2C emulators answer inside the drivers' bus calls, from a Python thread; in a busy
 process (a test's probe nodes, a campaign client) those answers wait for the interpreter lock for tens of
 milliseconds, the ESC's heartbeat follows them, and the output guard stops the thrusters. Alone, this process
-spends about 2 % of a core stepping the simulator (0.08 ms per 5 ms step on the development machine).
+spends under 1 % of a core stepping the simulator (0.04 ms per 5 ms step on the development machine); waking
+200 times a second costs it more than the steps.
 
 The operator's hands (the calibration steps' ballast, float, line pulls and inclining mass:
 :class:`~hindrax_sim.campaign.PoolOperator`, the same as the in-process campaign's) are commands
