@@ -209,7 +209,11 @@ class VirtualHardware:
         # interval of the trapezoidal deltas) is then exact; a dropout is a ping without bottom lock
         v = self.sim.measure("dvl75", dropout=True)
         latest = self.sim.sensors.latest
-        a = self.sim.measure("dvl75_attitude", dropout=True) or latest.get("dvl75_attitude")
+        a = self.sim.measure("dvl75_attitude", dropout=True)
+        if a is None:  # a dropout repeats the newest report (the live pool's grid is stopped: SensorSuite.stop_grid)
+            a = latest.get("dvl75_attitude")
+        else:
+            latest["dvl75_attitude"] = a
         locked = bool(v is not None and v.locked and all(math.isfinite(x) for x in v.velocity_frd_m_s))
         altitude = v.altitude_m if v is not None and math.isfinite(v.altitude_m) else None
         roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a is not None else (0.0, 0.0, 0.0)

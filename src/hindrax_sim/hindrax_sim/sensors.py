@@ -538,6 +538,11 @@ class SensorSuite:
             return None
         return model.measure(truth)
 
+    def stop_grid(self) -> None:
+        """Sample on the rate grid no more (``latest`` keeps its samples, :meth:`reset` restarts the grid), for a
+        simulator whose devices all sample on demand (:meth:`measure`): the live pool's emulators."""
+        self.next_due_s = math.inf
+
     def update(self, t_s: float, truth: Callable[[], VehicleTruth]) -> list[tuple[str, Any]]:
         """Sample every device due at ``t_s``; ``truth`` is called (at most once) only if one is due.
 

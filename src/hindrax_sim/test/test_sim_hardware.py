@@ -167,3 +167,15 @@ def test_a_serial_gate_holds_time_in_a_process_the_machine_did_not_schedule(monk
     link.pty.service()
     st.connections += 1  # reopened: those bytes went with the old connection
     assert link.settled()
+
+
+def test_a_dvl_attitude_dropout_repeats_the_newest_report_with_the_grid_stopped(hw, monkeypatch):
+    sim, vh, _ = hw
+    sim.reset(position_ned_m=[5.0, 3.0, 0.9], rpy_rad=[0.0, 0.0, 1.0])
+    sim.sensors.stop_grid()  # as the live pool: every device samples on demand only
+    sim.advance(0.05, None)
+    heard = vh._dvl75_truth(0.0)
+    assert heard.yaw_rad == pytest.approx(1.0, abs=0.1)
+    measure = sim.measure
+    monkeypatch.setattr(sim, "measure", lambda d, dropout=False: None if d == "dvl75_attitude" else measure(d, dropout))
+    assert vh._dvl75_truth(0.0).yaw_rad == heard.yaw_rad  # the newest report, not the startup grid's or 0

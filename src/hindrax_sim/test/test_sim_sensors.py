@@ -188,3 +188,17 @@ def test_device_streams_do_not_depend_on_other_devices(cfg):
     assert gyro_values(["icm20948_gyro"]) == gyro_values(None)
     with pytest.raises(ValueError):
         Simulator(cfg, sensors=["sonar9000"])
+
+
+def test_stop_grid_leaves_only_on_demand_samples(cfg):
+    """The live pool stops the rate grid: steps sample nothing, ``latest`` holds, :meth:`measure` still answers."""
+    sim = Simulator(cfg)
+    sim.advance(0.2)
+    before = dict(sim.sensors.latest)
+    assert set(before) == set(sim.sensors.models)
+    sim.sensors.stop_grid()
+    assert all(sim.step() == [] for _ in range(100))  # 0.5 s: every device (>= 10 Hz) would have sampled
+    assert sim.sensors.latest == before
+    assert sim.measure("ms5837") is not None
+    sim.sensors.reset(sim.t_s)
+    assert any(sim.step() for _ in range(100))
