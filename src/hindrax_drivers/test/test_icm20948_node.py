@@ -167,12 +167,16 @@ def test_missing_magnetometer_is_a_warning_and_the_imu_keeps_publishing(rig):
     status = r.node.diag.status()
     assert status.level == DiagnosticStatus.WARN and "magnetometer unavailable" in status.message
     # three SLV4 identity attempts with I2C_MST_RST in between (docs/devices.md §4.3 step 7)
-    resets = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_HOST_TO_DEVICE
-              and x.i2c_register == p.USER_CTRL.address and x.data[0] & p.USER_CTRL_I2C_MST_RST]
-    assert len(resets) == 2
-    # no EXT_SLV_SENS_DATA read without a magnetometer: INT_STATUS_1 (0x1A) to the end of the 14-byte block
-    polls = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x1A]
-    assert polls and all(len(x.data) == 19 + 14 for x in polls[-5:])
+    def resets():
+        return [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_HOST_TO_DEVICE
+                and x.i2c_register == p.USER_CTRL.address and x.data[0] & p.USER_CTRL_I2C_MST_RST]
+
+    def polls():  # no EXT_SLV_SENS_DATA read without a magnetometer: INT_STATUS_1 (0x1A) to the 14-byte block end
+        return [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x1A]
+
+    r.wait(lambda: len(polls()) >= 5, 5, "raw poll records (published every RAW_I2C_PERIOD_S)")
+    assert len(resets()) == 2
+    assert all(len(x.data) == 19 + 14 for x in polls()[-5:])
 
 
 def test_wrong_identity_is_reported_and_retried(rig):
@@ -320,7 +324,7 @@ def test_sample_without_data_ready_is_not_published(rig):
     r.wait_imu(10)
     is_poll = lambda x: (x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST  # noqa: E731
                          and x.i2c_register == p.I2C_MST_STATUS.address and len(x.data) == 45)
-    r.wait(lambda: any(is_poll(x) for x in r.raw), 5, "raw poll bursts (published every 0.1 s)")
+    r.wait(lambda: any(is_poll(x) for x in r.raw), 5, "raw poll bursts (published every RAW_I2C_PERIOD_S)")
     assert not [x for x in r.raw if x.i2c_register == p.INT_STATUS_1.address]  # no read of its own
     assert any(x.data[p.INT_STATUS_1.address - p.I2C_MST_STATUS.address] & p.INT_STATUS_1_RAW_DATA_0_RDY
                for x in r.raw if is_poll(x))

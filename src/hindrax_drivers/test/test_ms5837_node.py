@@ -102,8 +102,13 @@ def test_published_values_equal_truth_within_quantisation(rig, emu_variant, conf
     # The wire: D1 (0x48, OSR 4096), ADC read, D2 (0x58), ADC read, in that order (docs/devices.md §3.1).
     from hindrax_common.node_support.node_common import raw_transactions  # a cycle's transactions come in one message
 
-    seq = [(d, reg) for m in r.raw for d, _address, reg, _data in raw_transactions(m)]
     write, read = RawDeviceData.DIRECTION_HOST_TO_DEVICE, RawDeviceData.DIRECTION_DEVICE_TO_HOST
+
+    def wire():
+        return [(d, reg) for m in r.raw for d, _address, reg, _data in raw_transactions(m)]
+
+    r.wait(lambda: wire().count((write, 0x58)) >= 2, 5, "two cycles' raw records (published every RAW_I2C_PERIOD_S)")
+    seq = wire()
     j = seq.index((read, 0xA0))
     assert [(read, 0xA0 + 2 * k) for k in range(8)] == seq[j:j + 8]  # the 8 PROM words (after the reset)
     i = seq.index((write, 0x48))
