@@ -548,12 +548,20 @@ class _Layout:
         p.wait(10)
 
     def close(self) -> None:
+        """Stop every process (SIGINT, SIGKILL after 5 s): one left alive keeps its node on the domain and the next
+        graph on it refuses to start beside "another vehicle"."""
         self.commanding = False
-        for name in list(self.procs):
-            p = self.procs.pop(name)
+        stopping = [self.procs.pop(name) for name in list(self.procs)]
+        for p in stopping:
             if p.poll() is None:
                 p.send_signal(_signal.SIGCONT)
                 p.send_signal(_signal.SIGINT)
+        for p in stopping:
+            try:
+                p.wait(5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(5)
         self._spin = False
         self.thread.join(5)
         self.ex.shutdown()
