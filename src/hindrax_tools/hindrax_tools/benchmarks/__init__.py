@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -69,6 +70,21 @@ def start_logged(log: Path, argv: Sequence[str], mode: str = "w", **popen_kwargs
     written to the file ``log`` (opened with ``mode``: ``"a"`` keeps an earlier run's lines)."""
     with open(log, mode) as out:
         return subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, **popen_kwargs)
+
+
+def stop_processes(procs: Sequence[subprocess.Popen], wait_s: float = 15.0) -> None:
+    """SIGCONT and SIGINT to every process still running, in order, then wait for each: ``wait_s``, then SIGKILL.
+    One left alive keeps its nodes on the domain, and the next graph there refuses to start beside "another vehicle"."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGCONT)  # a frozen process handles SIGINT only once it runs again
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(wait_s)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(5)
 
 
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:

@@ -105,7 +105,7 @@ from hindrax_common.config import default_config_path, load_config
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from . import call, spin_for, start_logged
+from . import call, spin_for, start_logged, stop_processes
 from .launch_layout import launch_processes, package_share
 from .machine import proc_cpu_s
 
@@ -548,20 +548,9 @@ class _Layout:
         p.wait(10)
 
     def close(self) -> None:
-        """Stop every process (SIGINT, SIGKILL after 5 s): one left alive keeps its node on the domain and the next
-        graph on it refuses to start beside "another vehicle"."""
+        """Stop every process (:func:`~hindrax_tools.benchmarks.stop_processes`, SIGKILL after 5 s)."""
         self.commanding = False
-        stopping = [self.procs.pop(name) for name in list(self.procs)]
-        for p in stopping:
-            if p.poll() is None:
-                p.send_signal(_signal.SIGCONT)
-                p.send_signal(_signal.SIGINT)
-        for p in stopping:
-            try:
-                p.wait(5)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(5)
+        stop_processes([self.procs.pop(name) for name in list(self.procs)], wait_s=5.0)
         self._spin = False
         self.thread.join(5)
         self.ex.shutdown()

@@ -70,7 +70,7 @@ from hindrax_msgs.srv import SetArmed
 from .launch_layout import launch_processes, package_share, read_ports_file
 from .actuation import wrench_to_registers
 from .launch_node import TOPOLOGY_ENV
-from . import call, probe_spinning, spin_for, start_logged
+from . import call, probe_spinning, spin_for, start_logged, stop_processes
 from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s, thread_cpu_s
 from .recorder import subscribe_recorder_counts
 
@@ -421,7 +421,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, rig: Rig | None = No
                 declared = {n: p for n, p in procs.items() if n != "pool"}
                 out["topology"] = read_topologies(declared, tmp)
         finally:
-            _stop([*reversed(procs.values()), *extra.values()])
+            stop_processes([*reversed(procs.values()), *extra.values()])
     bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
     if len(bags) != 1:  # one recorder start (nothing respawns here)
         raise RuntimeError(f"expected one bag under {bag_root}, found {[b.name for b in bags]}")
@@ -492,19 +492,6 @@ def rig_rows(cores: float, busy_loops: int = 0, duration_s: float = 10.0, window
          "note": error or "the surge goal ran through the running window; cancelled, then the idle window"},
     ]
     return rows
-
-
-def _stop(procs: list[subprocess.Popen]) -> None:
-    """SIGINT to every process still running, in order, then wait for each: 15 s, then SIGKILL."""
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-    for p in procs:
-        try:
-            p.wait(15)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait(5)
 
 
 def _bag_rates(out: dict) -> None:
@@ -670,7 +657,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                     _check_alive(procs, tmp)
                     out["phases"][phase] = {"windows": wins}
         finally:
-            _stop(list(procs.values()))
+            stop_processes(list(procs.values()))
     return out
 
 
