@@ -3,7 +3,7 @@
 The guard is the second stop path of docs/architecture.md §8. It asserts (silences the outputs: /OE high, or the
 chip's all-off and sleep registers where /OE is not wired) when any of these holds:
 
-* the ESC's output state (``esc/heartbeat``, 16.7 Hz from its steady-clock tick) has not been heard for
+* the ESC's output state (``esc/heartbeat``, 25 Hz from its steady-clock tick) has not been heard for
   ``timeout_s``: the ESC process died or hangs, and the chip keeps its last widths on the wire;
 * the ESC reports ``OUTPUT_UNKNOWN``: the chip cannot be written or read back (I2C fault);
 * the supervisor's heartbeat (``supervisor/heartbeat``) has not been heard for ``timeout_s``, or says ERROR (a

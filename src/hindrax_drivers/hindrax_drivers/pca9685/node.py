@@ -26,10 +26,9 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output state;
   on every confirmed write or change of state, and repeated by the output tick when nothing went out for
   :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz armed and under the identification's 25 Hz commands; disarmed at neutral
-  every :data:`DISARMED_REPEAT_S`), ``esc/heartbeat`` (hindrax_msgs/Heartbeat every :data:`BEAT_EVERY_TICKS` steady
-  ticks, at once in one that many periods late or with a new state; ``output_state``, ``armed``, the reason as
-  ``message``, ``boot_id``/``seq``, the newest guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while
-  unknown; the output guard's sign of life and release condition),
+  every :data:`DISARMED_REPEAT_S`), ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick, at once in one
+  two periods late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest guard beat
+  handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign of life and release condition),
   ``esc/output_state`` (the same state, latched: on a change of armed or output state and every 1 s,
   :mod:`hindrax_common.node_support.esc_state`; for nodes that need only "armed"), ``raw/pca9685`` (every I2C
   transaction), ``/diagnostics``. Neutral is written on disarm, on an exception in the output path and on shutdown
@@ -81,11 +80,8 @@ _UNKNOWN, _NEUTRAL, _COMMANDING = ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT
 #: once, so no width is lost: the readers hold the last one (identification, bag fit, simulator). With the
 #: identification's commands at 25 Hz, one repeat between two writes at 50 Hz had carried nothing new.
 REPEAT_AFTER_PERIODS = 1.5
-#: ``esc/heartbeat`` goes out every this many safety ticks (50 Hz: 16.7 Hz, 3.3 beats per the guard's 0.2 s timeout;
-#: 25 Hz before, docs/pi_budget.md), at once when its output state or armed flag changed
-BEAT_EVERY_TICKS = 3
 #: disarmed at neutral the repeat is a keep-alive every this many s (ROS time): the state is on ``esc/heartbeat`` at
-#: 16.7 Hz for the guard and on ``esc/output_state`` for the rest; no reader needs the widths faster at rest
+#: 25 Hz for the guard and on ``esc/output_state`` for the rest; no reader needs the widths faster at rest
 DISARMED_REPEAT_S = 0.5
 
 
@@ -157,7 +153,7 @@ class EscNode(VehicleNode):
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.heartbeat = HeartbeatPublisher(self, "esc")
-        self._heartbeat_tick, self._beat_s, self._beat_state = 0, -math.inf, None  # ticks; last beat: s, state
+        self._heartbeat_tick, self._beat_s = 0, -math.inf  # ticks; last beat, monotonic s
         self.tick_gaps = TickGaps()  # how late the safety tick (and its heartbeat) ran, on /diagnostics
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.lights_us = self.lights_off_us
@@ -371,14 +367,12 @@ class EscNode(VehicleNode):
         if self.link.maintain(t):  # results, a stuck bus call (UNKNOWN: the beat below says ERROR), retries
             self._publish_written(self.get_clock().now())
         self.peers.tick()
-        if self._heartbeat_tick % BEAT_EVERY_TICKS == 1:  # in a tick without a beat (the graph asked only when due)
+        if self._heartbeat_tick % 2 == 0:  # 25 Hz, in the ticks without a beat (the graph asked only when due)
             self._check_graph()
         self._feed_peers()
         self._heartbeat_tick += 1
-        state = (self.output_state, self.armed)
-        if self._heartbeat_tick % BEAT_EVERY_TICKS == 0 or t - self._beat_s >= BEAT_EVERY_TICKS * self.period_s \
-                or state != self._beat_state:  # 16.7 Hz, late, or a new state: the guard hears it at once
-            self._beat_s, self._beat_state = t, state
+        if self._heartbeat_tick % 2 == 0 or t - self._beat_s >= 2 * self.period_s:  # 25 Hz, or late
+            self._beat_s = t
             self._publish_heartbeat()
         self.core.set_peers(*self._peer_verdicts())  # the arming time starts in the tick that confirmed neutral
         self._publish_state()  # once a second without a change, on the steady clock (ROS time may stand still)
