@@ -200,8 +200,11 @@ def test_f2_a_starved_guard_takes_the_waiting_beats_before_it_judges_a_dead_esc_
         r.wait(lambda: time.monotonic() - start > seconds, f"{seconds} s passed", poll=r.commanding)
 
     def starve_guard(esc_dies=False):
-        r.guard.tick()  # its last tick before the stall (a beat heard since: its age is above 0)
         r.ex.remove_node(r.guard)
+        # callbacks of the guard the executor had already found ready still run after remove_node (rclpy takes them
+        # one per spin_once): let them run out before the stall, or the guard hears a beat inside it (under load)
+        spin_for(0.05)
+        r.guard.tick()  # its last tick before the stall (a beat heard since: its age is above 0)
         spin_for(0.3)  # the ESC's beats wait on the guard's subscription
         if esc_dies:
             r.ex.remove_node(r.esc)
