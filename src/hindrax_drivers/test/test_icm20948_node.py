@@ -418,7 +418,7 @@ def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):
     does): no device reset and no full start-up during three retries, and accel/gyro samples published between
     each retry and the next."""
     r = rig(truth=live_truth, overrides={"sensors.icm20948.mag_retry_interval_s": 0.3})
-    r.wait(lambda: len(r.mag) >= 5 and len(r.imu) >= 50, 10, "IMU and magnetometer data")
+    r.wait(lambda: len(r.mag) >= 5 and len(r.imu) >= 50, 30, "IMU and magnetometer data")
     resets: list[int] = []
     device_reset = r.emu._device_reset
 
