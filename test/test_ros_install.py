@@ -1,7 +1,8 @@
 """`make ros-install` as a new user on the vehicle would use it: colcon builds a copy of the workspace, and the
 installed executables run from the install space with the installed vehicle file.
 
-Built once per session in a copy of the repository's ros_ws + src (test/conftest.py; about 50 s on 2 idle cores).
+Built once per session in a copy of the repository's ros_ws + src (test/conftest.py; about 60 s on the shared 2 cores,
+hindrax_msgs' compiles taken from make setup's ccache).
 Checks: the vehicle's build installs hindrax_msgs, hindrax_common, hindrax_drivers, hindrax_bringup and hindrax_onboard
 only (no fit, simulator or tools: those are the topside's, here the venv's editable installs), every node's console
 script is installed in lib/<package>, the install's `hindrax` (hindrax_onboard's) is on PATH after sourcing it, finds
@@ -46,7 +47,7 @@ def graph():
 
 REPO = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
-# the colcon build (about 50 s on 2 idle cores, 100-200 s measured with the machine shared) runs once per session
+# the colcon build (about 60 s with the machine shared, setup's ccache warm; 120 s or more cold) runs once per session
 pytestmark = pytest.mark.timeout(1200)
 
 DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "static_tf_node"]
