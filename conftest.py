@@ -51,9 +51,8 @@ _domain_ctx = None
 
 #: The longest tests, longest first: seconds of each in a full run with three workers on 2 cores (``-n 3
 #: --durations=60``, quiet machine, 536 s in all), setup included (the colcon build, test/conftest.py, falls to the
-#: first pool-day test), and the test's ``file::function``; tests of 6 s and more. Tests not listed follow, every
-#: test directory at the same pace (:func:`_package_pace`); refresh the list from ``--durations``. An xdist group (a
-#: module with a module-scoped fixture, or
+#: first pool-day test), and the test's ``file::function``; tests of 6 s and more. Tests not listed follow in
+#: collection order; refresh the list from ``--durations``. An xdist group (a module with a module-scoped fixture, or
 #: the readers of a shared run) runs as one unit where its listed test stands (its tests run there, in file order),
 #: with the seconds of the whole group (its parts of 5 s and more). The colcon build goes to the second line's worker
 #: (test_ros_install.py's module: its first test builds it), beside the vehicle_launch group's tests that need no
@@ -206,31 +205,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         for m in it.iter_markers("xdist_group"):
             name = str(m.args[0] if m.args else m.kwargs.get("name", "default"))
             group[name] = min(group.get(name, len(rank)), own[it])
-    pace = _package_pace(items)
     items.sort(key=lambda it: (min([own[it], *(group[str(m.args[0] if m.args else m.kwargs.get("name", "default"))]
-                                               for m in it.iter_markers("xdist_group"))]), _group_order(it),
-                               pace[it]))
+                                               for m in it.iter_markers("xdist_group"))]), _group_order(it)))
     return result
-
-
-def _package_pace(items: list[pytest.Item]) -> dict[pytest.Item, float]:
-    """Where each test stands in its own test directory (0 first, 1 last), the sort's last key: the tests not in
-    :data:`LONGEST_FIRST` then go out in every directory at the same pace instead of one directory after another.
-    The drivers' node tests mostly wait on the wall clock (test_icm20948_node.py: 24 s of wall time for 2.7 CPU-s)
-    and the fit's and simulator's mostly compute; dealt in collection order both free workers took driver tests
-    together beside the README walk, and a full run used 1.1-1.5 of the two cores for 140 s of its 560. The tests of
-    one xdist group take their first test's place, so a group stays in a row (in collection order: the sort is
-    stable)."""
-    where: dict[str, list[pytest.Item]] = {}
-    for it in items:
-        where.setdefault(str(it.path.parent), []).append(it)
-    pace = {it: i / len(its) for its in where.values() for i, it in enumerate(its)}
-    first: dict[str, float] = {}
-    for it in items:
-        for m in it.iter_markers("xdist_group"):
-            name = str(m.args[0] if m.args else m.kwargs.get("name", "default"))
-            pace[it] = first.setdefault(name, pace[it])
-    return pace
 
 
 def _group_order(item: pytest.Item) -> int:
