@@ -84,18 +84,20 @@ def sourced_env(prefix: Path) -> dict:
 
 
 def make_ros_install(root: Path, colcon_args: str = "") -> subprocess.CompletedProcess:
-    """``make ros-install`` in ``root`` (``-o setup``: the venv is set up already), optionally with COLCON_ARGS.
+    """``make ros-install`` in ``root`` (``-o setup``: the venv is set up already), optionally
+    with COLCON_ARGS.
 
-    hindrax_msgs' C and C++ compiles go through the venv's ccache with ``make setup``'s cache and settings
-    (scripts/setup_venv.sh): a compile of the same source, headers and flags takes the object setup's compile made,
-    any other compiles (measured: 173 of 175 taken, the colcon build's CPU 79 -> 40 s). rosidl's generators, CMake,
-    colcon and the install run as on the vehicle, with the Makefile's command a user runs."""
+    hindrax_msgs' C and C++ compiles go through the venv's ccache with ``make setup``'s cache
+    and settings (scripts/setup_venv.sh): a compile of the same source, headers and flags takes
+    the object setup's compile made, any other compiles (measured: 173 of 175 taken, the colcon
+    build's CPU 79 -> 40 s). rosidl's generators, CMake, colcon and the install run as on the
+    vehicle, with the Makefile's command a user runs."""
     env = build_env()
     ccache = VENV / "bin" / "ccache"
     if ccache.exists():
         env.update(CMAKE_C_COMPILER_LAUNCHER=str(ccache), CMAKE_CXX_COMPILER_LAUNCHER=str(ccache),
-                   CCACHE_DIR=str(REPO / "build" / "ccache"), CCACHE_BASEDIR=str(REPO / "build"), CCACHE_DEPEND="1",
-                   PYTHONHASHSEED="0")
+                   CCACHE_DIR=str(REPO / "build" / "ccache"), CCACHE_BASEDIR=str(REPO / "build"),
+                   CCACHE_DEPEND="1", PYTHONHASHSEED="0")
     cmd = ["make", "-o", "setup", "ros-install", f"VENV={VENV}"] + ([f"COLCON_ARGS={colcon_args}"] if colcon_args
                                                                       else [])
     return subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True, timeout=1200)

@@ -25,10 +25,11 @@ from typing import Sequence
 # Every process the project starts keeps DDS discovery on loopback unless told otherwise (SUBNET on the topside),
 # over the vehicle's loopback UDP transport (docs/architecture.md §11.4).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-# One OpenBLAS thread unless told otherwise, set before any command imports numpy. With OpenBLAS's default (a thread
-# per core) `hindrax run`'s identification.yaml followed the core count: two threads against one changed the last
-# bits of six entries (README: one seed, one table on any machine). The fit's matrices are small: its term selection
-# took 7-9 CPU-s with two threads, 2.6 with one, no faster in wall time.
+# One OpenBLAS thread unless told otherwise, set before any command imports numpy. With
+# OpenBLAS's default (a thread per core) `hindrax run`'s identification.yaml followed the core
+# count: two threads against one changed the last bits of six entries (README: one seed, one
+# table on any machine). The fit's matrices are small: its term selection took 7-9 CPU-s with
+# two threads, 2.6 with one, no faster in wall time.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 #: the entry-point group through which other packages add (words, module, help) rows (hindrax_tools/setup.py)

@@ -29,10 +29,13 @@ def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         env = child_env(ROS_DOMAIN_ID=str(fresh))
-        # the missing topic's timeout is short: the test waits it out in full (30 s of the suite's tail before)
-        runs = [subprocess.Popen([hindrax, "topic", "echo", topic, "--count", "1", "--timeout", timeout_s], env=env,
+        # the missing topic's timeout is short: the test waits it out in full
+        # (30 s of the suite's tail before)
+        topics = (("/rov/supervisor/status", "30"), ("/rov/no_such_topic", "3"))
+        runs = [subprocess.Popen([hindrax, "topic", "echo", topic, "--count", "1",
+                                  "--timeout", timeout_s], env=env,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                for topic, timeout_s in (("/rov/supervisor/status", "30"), ("/rov/no_such_topic", "3"))]
+                for topic, timeout_s in topics]
         try:
             wait_until(lambda: all(p.poll() is not None for p in runs), 120, lambda: ex.spin_once(timeout_sec=0.05),
                        "hindrax topic echo")
@@ -48,5 +51,5 @@ def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
     assert end.strip() == ""
     assert yaml.safe_load(text) == {"level": 2, "name": "supervisor", "message": "", "hardware_id": "",
                                     "values": [{"key": "disarm_cause", "value": "no valid DVL velocity"}]}
-    assert missing[0] == 1 and missing[2] == ("no topic /rov/no_such_topic within 3 s (is it spelled as the graph "
-                                              "has it?)\n"), missing
+    assert missing[0] == 1 and missing[2] == ("no topic /rov/no_such_topic within 3 s (is it "
+                                              "spelled as the graph has it?)\n"), missing

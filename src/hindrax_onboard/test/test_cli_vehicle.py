@@ -25,10 +25,10 @@ def test_without_the_topside_a_topside_command_answers_one_line(monkeypatch, cap
 
 @pytest.mark.parametrize("given, expected", [(None, "1"), ("3", "3")])
 def test_hindrax_pins_openblas_to_one_thread_unless_told(given, expected):
-    """One OpenBLAS thread before any command imports numpy (the command module's comment): with two threads
-    `hindrax run`'s identification.yaml differed from one thread's in the last bits of six entries (the equation-error
-    comparison's standard deviations), so the table would follow the machine's core count. A user's own setting
-    stands."""
+    """One OpenBLAS thread before any command imports numpy (the command module's comment): with
+    two threads `hindrax run`'s identification.yaml differed from one thread's in the last bits of
+    six entries (the equation-error comparison's standard deviations), so the table would follow
+    the machine's core count. A user's own setting stands."""
     import os
     import subprocess
     import sys
@@ -37,5 +37,6 @@ def test_hindrax_pins_openblas_to_one_thread_unless_told(given, expected):
     if given is not None:
         env["OPENBLAS_NUM_THREADS"] = given
     code = "import os, hindrax_onboard.cli; print(os.environ['OPENBLAS_NUM_THREADS'])"
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=60)
     assert out.returncode == 0 and out.stdout.strip() == expected, out.stdout + out.stderr
