@@ -83,12 +83,21 @@ def sourced_env(prefix: Path) -> dict:
     return env
 
 
+def ccache_settings() -> dict[str, str]:
+    """What scripts/ccache_env.sh exports (the settings scripts/setup_venv.sh compiled with), run by bash in the
+    repository as setup sources it."""
+    r = subprocess.run(["bash", "-c", ". scripts/ccache_env.sh && env -0"], cwd=REPO, env={"PATH": os.defpath},
+                       capture_output=True, text=True, check=True, timeout=30)
+    exported = dict(v.split("=", 1) for v in r.stdout.split("\0") if "=" in v)
+    return {k: v for k, v in exported.items() if k.startswith("CCACHE_") or k == "PYTHONHASHSEED"}
+
+
 def make_ros_install(root: Path, colcon_args: str = "") -> subprocess.CompletedProcess:
     """``make ros-install`` in ``root`` (``-o setup``: the venv is set up already), optionally
     with COLCON_ARGS.
 
     hindrax_msgs' C and C++ compiles go through the venv's ccache with ``make setup``'s cache
-    and settings (scripts/setup_venv.sh): a compile of the same source, headers and flags takes
+    and settings (scripts/ccache_env.sh, :func:`ccache_settings`): a compile of the same source, headers and flags takes
     the object setup's compile made, any other compiles (measured: 173 of 175 taken, the colcon
     build's CPU 79 -> 40 s). rosidl's generators, CMake, colcon and the install run as on the
     vehicle, with the Makefile's command a user runs."""
@@ -96,8 +105,7 @@ def make_ros_install(root: Path, colcon_args: str = "") -> subprocess.CompletedP
     ccache = VENV / "bin" / "ccache"
     if ccache.exists():
         env.update(CMAKE_C_COMPILER_LAUNCHER=str(ccache), CMAKE_CXX_COMPILER_LAUNCHER=str(ccache),
-                   CCACHE_DIR=str(REPO / "build" / "ccache"), CCACHE_BASEDIR=str(REPO / "build"),
-                   CCACHE_DEPEND="1", PYTHONHASHSEED="0")
+                   **ccache_settings())
     cmd = ["make", "-o", "setup", "ros-install", f"VENV={VENV}"] + ([f"COLCON_ARGS={colcon_args}"] if colcon_args
                                                                       else [])
     return subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True, timeout=1200)
