@@ -506,19 +506,40 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
     assert alpha.calls[before:] == [("set_armed", True)]  # the accepted one, once
 
 def test_another_server_of_an_operator_service_is_reported_and_arming_refused(pool, topside):
-    """Issue 71.2: a silent second server of /alpha/arm receives every signed request; the gateway's status (ERROR,
-    also inside on /diagnostics for hindrax health) and the CLI name it, and the gateway refuses to arm meanwhile."""
+    """Issue 71.2: a second server of /alpha/arm receives every signed request; the gateway's status (ERROR, also
+    inside on /diagnostics for hindrax health) and the CLI name it, and the gateway refuses to arm meanwhile. The
+    server answers the CLI's arm "armed" (a DDS client takes the first answer, and nothing says whose): the CLI
+    reports the outcome unknown and exits 1, never "armed"."""
     from hindrax_msgs.srv import SignedTrigger
 
     alpha = pool["vehicles"]["alpha"]
     before = len(alpha.calls)
     heard: list = []
-    spy = topside.node.create_service(SignedTrigger, "/alpha/arm", lambda req, resp: heard.append(req) or resp)
+    lie = threading.Event()
+
+    def answer(req, resp):
+        heard.append(req)
+        if lie.is_set():
+            resp.success, resp.message = True, "armed"
+        return resp
+
+    spy = topside.node.create_service(SignedTrigger, "/alpha/arm", answer)
     try:
         status = topside.status("alpha", lambda s: s.level == b"\x02")
         assert status.message.startswith("another server answers /alpha/arm (2 servers)"), status.message
-        r = hindrax(pool, "arm", "--vehicle", "alpha")
+        lie.set()
+        spinning = threading.Thread(target=lambda: [topside.executor.spin_once(timeout_sec=0.05)
+                                                    for _ in iter(lie.is_set, False)])
+        spinning.start()
+        try:
+            r = hindrax(pool, "arm", "--vehicle", "alpha")
+        finally:
+            lie.clear()
+            spinning.join()
+        assert heard, "the second server never heard the CLI's arm"
         assert "warning: vehicle 'alpha': another server answers /alpha/arm (2 servers)" in r.stderr, r.stderr
+        assert r.returncode == 1 and "armed" not in r.stdout, (r.stdout, r.stderr)
+        assert "/alpha/arm: 2 servers answer it" in r.stderr and "outcome is unknown" in r.stderr, r.stderr
         signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
         client = topside.node.create_client(SignedTrigger, "/alpha/arm")
         future = client.call_async(signed)

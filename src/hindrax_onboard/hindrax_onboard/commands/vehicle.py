@@ -159,10 +159,18 @@ def call_service(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s
     """The answer of one call ``spec`` = (service type, name, request) (:meth:`Target.service`) from
     ``node``, spun by ``executor``. Raises :class:`CommandError` naming the service when it is not
     there (``hint``) or does not answer (``answer_hint``, default ``hint``) within ``timeout_s``
-    each (wall)."""
+    each (wall), and when more than one server answers ``name`` before or after the call: a DDS
+    request reaches every server of its name and the client takes the first answer, which may be
+    another server's, not the vehicle's (docs/threat_model.md §3); the request went out, but the
+    answer is not reported as the vehicle's."""
     srv_type, name, request = spec
     client = node.create_client(srv_type, name)
     wait_for(executor, client.service_is_ready, timeout_s, f"no {name} service", hint)
+    servers = node.count_services(name)
     future = client.call_async(request)
     wait_for(executor, future.done, timeout_s, f"{name} did not answer", answer_hint or hint)
+    servers = max(servers, node.count_services(name))
+    if servers > 1:
+        raise CommandError(f"{name}: {servers} servers answer it, so this answer may not be the vehicle's: the "
+                           f"request was sent, its outcome is unknown ({hint})")
     return future.result()
