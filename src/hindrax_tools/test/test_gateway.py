@@ -226,6 +226,19 @@ def hindrax(pool, *args: str) -> subprocess.CompletedProcess:
                           timeout=120)
 
 
+def hindrax_spinning(pool, topside, *args: str) -> subprocess.CompletedProcess:
+    """:func:`hindrax` while the topside probe's executor spins in a thread (its servers answer the command)."""
+    done = threading.Event()
+    spinning = threading.Thread(target=lambda: [topside.executor.spin_once(timeout_sec=0.05)
+                                                for _ in iter(done.is_set, True)])
+    spinning.start()
+    try:
+        return hindrax(pool, *args)
+    finally:
+        done.set()
+        spinning.join()
+
+
 def test_a_process_on_the_topside_reaches_only_the_interface(pool):
     alpha = pool["vehicles"]["alpha"]
     r = subprocess.run([sys.executable, "-c", INTRUDER, str(WAIT_S)], capture_output=True, text=True,
@@ -510,6 +523,9 @@ def test_another_server_of_an_operator_service_is_reported_and_arming_refused(po
     inside on /diagnostics for hindrax health) and the CLI name it, and the gateway refuses to arm meanwhile. The
     server answers the CLI's arm "armed" (a DDS client takes the first answer, and nothing says whose): the CLI
     reports the outcome unknown and exits 1, never "armed"."""
+    from rclpy.action import ActionServer
+
+    from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.srv import SignedTrigger
 
     alpha = pool["vehicles"]["alpha"]
@@ -523,23 +539,27 @@ def test_another_server_of_an_operator_service_is_reported_and_arming_refused(po
             resp.success, resp.message = True, "armed"
         return resp
 
+    def accept(goal_handle):
+        goal_handle.succeed()
+        return RunIdentification.Result(success=True, message="campaign complete")
+
     spy = topside.node.create_service(SignedTrigger, "/alpha/arm", answer)
+    spy_action = ActionServer(topside.node, RunIdentification, "/alpha/run_identification", accept)
     try:
         status = topside.status("alpha", lambda s: s.level == b"\x02")
         assert status.message.startswith("another server answers /alpha/arm (2 servers)"), status.message
         lie.set()
-        spinning = threading.Thread(target=lambda: [topside.executor.spin_once(timeout_sec=0.05)
-                                                    for _ in iter(lie.is_set, False)])
-        spinning.start()
         try:
-            r = hindrax(pool, "arm", "--vehicle", "alpha")
+            r = hindrax_spinning(pool, topside, "arm", "--vehicle", "alpha")
         finally:
             lie.clear()
-            spinning.join()
         assert heard, "the second server never heard the CLI's arm"
         assert "warning: vehicle 'alpha': another server answers /alpha/arm (2 servers)" in r.stderr, r.stderr
         assert r.returncode == 1 and "armed" not in r.stdout, (r.stdout, r.stderr)
         assert "/alpha/arm: 2 servers answer it" in r.stderr and "outcome is unknown" in r.stderr, r.stderr
+        r = hindrax_spinning(pool, topside, "ident", "start", "--vehicle", "alpha", "--dofs", "surge")
+        assert r.returncode == 1 and "campaign started" not in r.stdout, (r.stdout, r.stderr)
+        assert "/alpha/run_identification: 2 servers answer its goals" in r.stderr, r.stderr
         signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
         client = topside.node.create_client(SignedTrigger, "/alpha/arm")
         future = client.call_async(signed)
@@ -551,6 +571,7 @@ def test_another_server_of_an_operator_service_is_reported_and_arming_refused(po
         assert not (future.done() and future.result().success)
     finally:
         topside.node.destroy_service(spy)
+        spy_action.destroy()
     status = topside.status("alpha", lambda s: s.level == b"\x00")
     assert status.message == "ok", status.message
 
