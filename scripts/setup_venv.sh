@@ -65,8 +65,9 @@ step "interfaces hindrax_msgs and tf2_msgs (cmake, about 30 s)"
 ticking
 venv_abs=$(cd "$VENV" && pwd)
 mkdir -p build
-# hindrax_msgs compiles through ccache with the settings of scripts/ccache_env.sh: the suite's `make ros-install`
-# (test/conftest.py) compiles the same generated sources and takes its objects from there (173 of 175 compiles).
+# hindrax_msgs compiles through ccache with the settings of scripts/ccache_env.sh: the suite's
+# `make ros-install` (test/conftest.py) compiles the same generated sources and takes its objects
+# from there (173 of 175 compiles).
 . scripts/ccache_env.sh
 for pkg_dir in src/hindrax_msgs third_party/tf2_msgs; do
   build=build/$(basename "$pkg_dir")

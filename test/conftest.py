@@ -84,10 +84,11 @@ def sourced_env(prefix: Path) -> dict:
 
 
 def ccache_settings() -> dict[str, str]:
-    """What scripts/ccache_env.sh exports (the settings scripts/setup_venv.sh compiled with), run by bash in the
-    repository as setup sources it."""
-    r = subprocess.run(["bash", "-c", ". scripts/ccache_env.sh && env -0"], cwd=REPO, env={"PATH": os.defpath},
-                       capture_output=True, text=True, check=True, timeout=30)
+    """What scripts/ccache_env.sh exports (the settings scripts/setup_venv.sh compiled with), run
+    by bash in the repository as setup sources it."""
+    r = subprocess.run(["bash", "-c", ". scripts/ccache_env.sh && env -0"], cwd=REPO,
+                       env={"PATH": os.defpath}, capture_output=True, text=True, check=True,
+                       timeout=30)
     exported = dict(v.split("=", 1) for v in r.stdout.split("\0") if "=" in v)
     return {k: v for k, v in exported.items() if k.startswith("CCACHE_") or k == "PYTHONHASHSEED"}
 
@@ -97,10 +98,10 @@ def make_ros_install(root: Path, colcon_args: str = "") -> subprocess.CompletedP
     with COLCON_ARGS.
 
     hindrax_msgs' C and C++ compiles go through the venv's ccache with ``make setup``'s cache
-    and settings (scripts/ccache_env.sh, :func:`ccache_settings`): a compile of the same source, headers and flags takes
-    the object setup's compile made, any other compiles (measured: 173 of 175 taken, the colcon
-    build's CPU 79 -> 40 s). rosidl's generators, CMake, colcon and the install run as on the
-    vehicle, with the Makefile's command a user runs."""
+    and settings (scripts/ccache_env.sh, :func:`ccache_settings`): a compile of the same
+    source, headers and flags takes the object setup's compile made, any other compiles
+    (measured: 173 of 175 taken, the colcon build's CPU 79 -> 40 s). rosidl's generators, CMake,
+    colcon and the install run as on the vehicle, with the Makefile's command a user runs."""
     env = build_env()
     ccache = VENV / "bin" / "ccache"
     if ccache.exists():

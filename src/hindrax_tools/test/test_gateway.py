@@ -227,7 +227,8 @@ def hindrax(pool, *args: str) -> subprocess.CompletedProcess:
 
 
 def hindrax_spinning(pool, topside, *args: str) -> subprocess.CompletedProcess:
-    """:func:`hindrax` while the topside probe's executor spins in a thread (its servers answer the command)."""
+    """:func:`hindrax` while the topside probe's executor spins in a thread (its servers answer
+    the command)."""
     done = threading.Event()
     spinning = threading.Thread(target=lambda: [topside.executor.spin_once(timeout_sec=0.05)
                                                 for _ in iter(done.is_set, True)])
@@ -519,10 +520,11 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
     assert alpha.calls[before:] == [("set_armed", True)]  # the accepted one, once
 
 def test_another_server_of_an_operator_service_is_reported_and_arming_refused(pool, topside):
-    """Issue 71.2: a second server of /alpha/arm receives every signed request; the gateway's status (ERROR, also
-    inside on /diagnostics for hindrax health) and the CLI name it, and the gateway refuses to arm meanwhile. The
-    server answers the CLI's arm "armed" (a DDS client takes the first answer, and nothing says whose): the CLI
-    reports the outcome unknown and exits 1, never "armed"."""
+    """Issue 71.2: a second server of /alpha/arm receives every signed request; the gateway's
+    status (ERROR, also inside on /diagnostics for hindrax health) and the CLI name it, and the
+    gateway refuses to arm meanwhile. The server answers the CLI's arm "armed", and a second
+    action server accepts its campaign (a DDS client takes the first answer, and nothing says
+    whose): the CLI reports the outcome unknown and exits 1, never "armed" or "started"."""
     from rclpy.action import ActionServer
 
     from hindrax_msgs.action import RunIdentification
@@ -556,8 +558,10 @@ def test_another_server_of_an_operator_service_is_reported_and_arming_refused(po
         assert heard, "the second server never heard the CLI's arm"
         assert "warning: vehicle 'alpha': another server answers /alpha/arm (2 servers)" in r.stderr, r.stderr
         assert r.returncode == 1 and "armed" not in r.stdout, (r.stdout, r.stderr)
-        assert "/alpha/arm: 2 servers answer it" in r.stderr and "outcome is unknown" in r.stderr, r.stderr
-        r = hindrax_spinning(pool, topside, "ident", "start", "--vehicle", "alpha", "--dofs", "surge")
+        assert "/alpha/arm: 2 servers answer it" in r.stderr, r.stderr
+        assert "outcome is unknown" in r.stderr, r.stderr
+        r = hindrax_spinning(pool, topside, "ident", "start", "--vehicle", "alpha", "--dofs",
+                             "surge")
         assert r.returncode == 1 and "campaign started" not in r.stdout, (r.stdout, r.stderr)
         assert "/alpha/run_identification: 2 servers answer its goals" in r.stderr, r.stderr
         signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())

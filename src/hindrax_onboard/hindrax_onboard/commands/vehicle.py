@@ -171,6 +171,6 @@ def call_service(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s
     wait_for(executor, future.done, timeout_s, f"{name} did not answer", answer_hint or hint)
     servers = max(servers, node.count_services(name))
     if servers > 1:
-        raise CommandError(f"{name}: {servers} servers answer it, so this answer may not be the vehicle's: the "
-                           f"request was sent, its outcome is unknown ({hint})")
+        raise CommandError(f"{name}: {servers} servers answer it, so this answer may not be the "
+                           f"vehicle's: the request was sent, its outcome is unknown ({hint})")
     return future.result()

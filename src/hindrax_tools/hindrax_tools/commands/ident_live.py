@@ -124,9 +124,10 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside); ``sign``:
     signs the goal for the gateway (:meth:`~hindrax_onboard.commands.vehicle.Target.sign`); ``status_topic``:
     the node's ManeuverStatus (``/<vehicle>/identification/status`` on the topside). Returns (success, message).
-    Raises :class:`CommandError` when no server answers, the goal is rejected, a campaign is already running
-    (read on ``status_topic`` before the goal is sent: the goal is then not sent), or more than one server answers
-    the action's goals (the acceptance may be another server's, docs/threat_model.md §3)."""
+    Raises :class:`CommandError` when no server answers, the goal is rejected, a campaign is
+    already running (read on ``status_topic`` before the goal is sent: the goal is then not sent),
+    or more than one server answers the action's goals (the acceptance may be another server's,
+    docs/threat_model.md §3)."""
     from rclpy.action import ActionClient
 
     from hindrax_common.node_support.action_goal import GoalNotAnswered, GoalSender
@@ -167,10 +168,10 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
         raise CommandError("goal rejected: a campaign is already running or still ending, or the goal is invalid "
                            "(hindrax ident status; the identification node's log)")
     servers = node.count_services(f"{action_name}/_action/send_goal")
-    if servers > 1:  # a goal reaches every server of the action; the first answer may not be the vehicle's
-        raise CommandError(f"{action_name}: {servers} servers answer its goals, so this acceptance may not be the "
-                           "vehicle's: the goal was sent, its outcome is unknown (hindrax ident status; hindrax "
-                           "health on the vehicle)")
+    if servers > 1:  # a goal reaches every server; the first answer may not be the vehicle's
+        raise CommandError(f"{action_name}: {servers} servers answer its goals, so this acceptance "
+                           "may not be the vehicle's: the goal was sent, its outcome is unknown "
+                           "(hindrax ident status; hindrax health on the vehicle)")
     what = "calibration only" if calibration_only else (', '.join(dofs) or 'all DOFs')
     cal = f" after calibration {', '.join(calibrate)}" if (calibrate and not calibration_only) else ""
     print_line(f"campaign started: {what}{cal}; Ctrl-C cancels")
