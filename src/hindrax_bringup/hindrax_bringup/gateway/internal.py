@@ -12,7 +12,12 @@ channel ends (the topside process is gone), and the topside process ends when it
 Parameters (read here, for both processes): the vehicle file (``vehicle.name``: the namespace; the sections the
 bounds need), ``topside_domain_id`` (int, 0-101), ``topside_discovery_range`` (``LOCALHOST``, ``SUBNET``,
 ``SYSTEM_DEFAULT``, ``OFF``), ``call_timeout_s`` (0.1-30 s, default 4). A bad value ends the start with one line
-naming key, value and allowed range (exit status 1)."""
+naming key, value and allowed range (exit status 1).
+
+A campaign goal whose send-goal response is lost (Fast DDS drops a response to a client its server has not matched
+yet: :mod:`hindrax_common.node_support.action_goal`) is known accepted by its first feedback, which the server sends
+only for a goal it executes: the goal's handle is made then and its result fetched as for an answered goal. A cancel
+that comes before the acceptance is kept and sent once the goal is known accepted."""
 from __future__ import annotations
 
 import argparse
@@ -21,17 +26,21 @@ import os
 import signal
 import socket
 import threading
+import uuid
 from dataclasses import asdict, dataclass
 from typing import Any, Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from unique_identifier_msgs.msg import UUID
 
 from hindrax_common.config import ConfigError, ConfigIssue
+from hindrax_common.node_support.action_goal import send_goal_response_type
 from hindrax_common.node_support.node_common import load_node_config
 from hindrax_common.process.ros_process import RosProcess
 from .bounds import RequestBounds
@@ -108,6 +117,7 @@ class InternalSide:
         self.action_type = interface_type(action.inner_type)
         self.action = ActionClient(node, self.action_type, action.internal)
         self.goals: dict[int, Any] = {}
+        self.cancelled: set[int] = set()  # goals the topside cancelled before they were known accepted
         self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
 
     def _forward(self, topside: str) -> Any:
@@ -153,27 +163,45 @@ class InternalSide:
             self.channel.send({"k": "accepted", "id": goal_id, "ok": False,
                                "why": "the identification node is not running on the vehicle"})
             return
-        sent = self.action.send_goal_async(
-            deserialize_message(payload, self.action_type.Goal),
-            feedback_callback=lambda fb: self.channel.send({"k": "feedback", "id": goal_id},
-                                                           serialize_message(fb.feedback)))
+        goal = deserialize_message(payload, self.action_type.Goal)
+        goal_uuid = UUID(uuid=list(uuid.uuid4().bytes))
+        known = []  # the goal's handle once it is known accepted (its response, or its first feedback)
+
+        def running(handle: Any) -> None:  # the first sign of acceptance only: the response or a feedback
+            known.append(handle)
+            self.goals[goal_id] = handle
+            self.channel.send({"k": "accepted", "id": goal_id, "ok": True, "why": ""})
+            handle.get_result_async().add_done_callback(lambda f: (self.goals.pop(goal_id, None), self.channel.send(
+                {"k": "result", "id": goal_id, "status": int(f.result().status)},
+                serialize_message(f.result().result))))
+            if goal_id in self.cancelled:
+                handle.cancel_goal_async()
+
+        def on_feedback(fb: Any) -> None:
+            if not known:  # executing, its response lost: accepted, as the lost response said
+                stamp = self.node.get_clock().now().to_msg()
+                running(ClientGoalHandle(self.action, goal_uuid,
+                                         send_goal_response_type(goal)(accepted=True, stamp=stamp)))
+            self.channel.send({"k": "feedback", "id": goal_id}, serialize_message(fb.feedback))
 
         def on_sent(future: Any) -> None:
             handle = future.result()
-            self.channel.send({"k": "accepted", "id": goal_id, "ok": bool(handle.accepted),
-                               "why": "" if handle.accepted else "refused by the identification node "
-                                                                 "(see identification/status)"})
+            if known:
+                return
             if handle.accepted:
-                self.goals[goal_id] = handle
-                handle.get_result_async().add_done_callback(lambda f: (self.goals.pop(goal_id, None), self.channel.send(
-                    {"k": "result", "id": goal_id, "status": int(f.result().status)},
-                    serialize_message(f.result().result))))
-        sent.add_done_callback(on_sent)
+                running(handle)
+            else:
+                self.channel.send({"k": "accepted", "id": goal_id, "ok": False,
+                                   "why": "refused by the identification node (see identification/status)"})
+        self.action.send_goal_async(goal, feedback_callback=on_feedback, goal_uuid=goal_uuid).add_done_callback(
+            on_sent)
 
     def _on_cancel(self, head: dict, _payload: bytes) -> None:
         handle = self.goals.get(head["id"])
         if handle is not None:
             handle.cancel_goal_async()
+        else:
+            self.cancelled.add(head["id"])  # sent once the goal is known accepted (module docstring)
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -302,6 +302,8 @@ class Gateway:
                     head, payload = replies.get(timeout=CANCEL_POLL_S)
                 except queue.Empty:
                     if not accepted and time.monotonic() > answer_by:
+                        # fail closed: a goal accepted after this is cancelled, not left running unseen
+                        self.channel.send({"k": "cancel", "id": goal_id})
                         return failed("no answer from the identification node within "
                                       f"{self.settings.call_timeout_s:g} s")
                     if accepted and goal_handle.is_cancel_requested and not cancelling:
@@ -311,7 +313,8 @@ class Gateway:
                         return failed("the gateway is shutting down")
                     continue
                 kind = head.get("k")
-                if kind == "feedback":
+                if kind == "feedback":  # sent only for an executing goal: accepted
+                    accepted = True
                     goal_handle.publish_feedback(deserialize_message(payload, self._action_type.Feedback))
                 elif kind == "accepted":
                     if not head.get("ok"):
