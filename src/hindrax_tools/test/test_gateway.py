@@ -550,16 +550,19 @@ def test_another_server_of_an_operator_service_is_reported_and_arming_refused(po
     try:
         status = topside.status("alpha", lambda s: s.level == b"\x02")
         assert status.message.startswith("another server answers /alpha/arm (2 servers)"), status.message
+        # a new client may send before it has matched the second server: again until that one hears it
+        runs: list = []
         lie.set()
         try:
-            r = hindrax_spinning(pool, topside, "arm", "--vehicle", "alpha")
+            wait_until(lambda: runs.append(hindrax_spinning(pool, topside, "arm", "--vehicle", "alpha")) or heard,
+                       WAIT_S, None, "the second server heard a CLI arm")
         finally:
             lie.clear()
-        assert heard, "the second server never heard the CLI's arm"
-        assert "warning: vehicle 'alpha': another server answers /alpha/arm (2 servers)" in r.stderr, r.stderr
-        assert r.returncode == 1 and "armed" not in r.stdout, (r.stdout, r.stderr)
-        assert "/alpha/arm: 2 servers answer it" in r.stderr, r.stderr
-        assert "outcome is unknown" in r.stderr, r.stderr
+        for r in runs:
+            assert "warning: vehicle 'alpha': another server answers /alpha/arm (2 servers)" in r.stderr, r.stderr
+            assert r.returncode == 1 and "armed" not in r.stdout, (r.stdout, r.stderr)
+            assert "/alpha/arm: 2 servers answer it" in r.stderr, r.stderr
+            assert "outcome is unknown" in r.stderr, r.stderr
         r = hindrax_spinning(pool, topside, "ident", "start", "--vehicle", "alpha", "--dofs",
                              "surge")
         assert r.returncode == 1 and "campaign started" not in r.stdout, (r.stdout, r.stderr)
