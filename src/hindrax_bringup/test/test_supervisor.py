@@ -231,13 +231,14 @@ def test_dvl_without_dvext_uses_the_imu_tilt_or_trips():
 
 # ------------------------------------------------------------------ graph: every breach -> neutral on the chip
 @pytest.fixture
-def graph():
+def graph(request):
     """The ESC and the supervisor (:class:`~hindrax_test_support.safety_graph.SafetyGraph`) with the e-stop client,
-    ``supervisor/abort`` and :attr:`step` publishing the sensors from :attr:`state`."""
+    ``supervisor/abort`` and :attr:`step` publishing the sensors from :attr:`state`. Parametrized indirectly, the
+    parameter is the supervisor's ``clock_stall_timeout_s`` (s; default the graph's 30 s)."""
     over = {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True, "esc.watchdog_timeout_s": 5.0,
             "supervisor.rate_window_s": 1.0, "supervisor.max_run_time_s": 30.0}
     with ros_context() as ctx:
-        g = SafetyGraph(ctx, over)
+        g = SafetyGraph(ctx, over, getattr(request, "param", 30.0))
         g.pubs["abort"] = g.probe.create_publisher(String, "supervisor/abort", 10)
         g.estop = g.probe.create_client(Trigger, "supervisor/estop")
         g.state = dict(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set())
@@ -366,6 +367,24 @@ def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, brea
     # latched: re-arming is undone by the supervisor until it is reset
     g.esc.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
     wait_until(lambda: not g.esc.armed, 5, g.step, "disarmed again while tripped")
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("graph", [0.5], indirect=True)
+def test_ros_time_standing_still_while_armed_trips_the_node_and_neutral_reaches_the_chip(graph):
+    """The node's wiring of the stall check: armed with thrust, /clock stops; the supervisor's steady-clock check
+    trips on "ROS time stalled" (clock_stall_timeout_s 0.5 s, never before 0.5 s of steady time) and the chip goes
+    to neutral once time moves again."""
+    import time
+
+    g = graph
+    arm_and_thrust(g)
+    held_at = time.monotonic()
+    wait_until(lambda: g.sup.core.tripped, 10, g.spin_once, "a stall trip")
+    assert time.monotonic() - held_at >= 0.5
+    assert g.sup.core.tripped.startswith("ROS time stalled for ") and "while armed" in g.sup.core.tripped
+    until_neutral(g)
+    assert not g.esc.armed
 
 
 # ------------------------------------------------------------------ system clock: the same callbacks as with sim time

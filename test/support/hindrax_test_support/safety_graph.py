@@ -29,13 +29,18 @@ class SafetyGraph:
     supervisor is real), publishers of /clock and the sensors (:attr:`pubs`: ``clock``, ``dvl``, ``alt``, ``depth``,
     ``imu``, and ``cmd`` of the allocation stand-in, the one commander the ESC accepts), the ``esc/set_armed`` and
     ``supervisor/reset`` clients and the ``supervisor/status`` messages (:attr:`statuses`); one executor. Simulated
-    time :attr:`ns` (ns) starts at 1 s and moves only by :meth:`advance`."""
+    time :attr:`ns` (ns) starts at 1 s and moves only by :meth:`advance`.
 
-    def __init__(self, ctx: Any, overrides: dict[str, Any]) -> None:
+    The supervisor's ``clock_stall_timeout_s`` (steady s) is ``clock_stall_timeout_s``: by default 30 s, as the
+    simulated launch holds it (``hindrax_sim.graph.bringup.SIMULATED_TIME_HOLD_S``), for the test steps simulated
+    time itself and on a loaded machine a step can come more than a rate window late (a fresh clone's suite: 1.1 s)."""
+
+    def __init__(self, ctx: Any, overrides: dict[str, Any], clock_stall_timeout_s: float = 30.0) -> None:
         self.emu = Pca9685Emulator()
         params = config_parameters(overrides) + [Parameter("use_sim_time", value=True)]
         self.esc = EscNode(bus=EmulatedI2CBus({0x40: self.emu}), context=ctx, parameter_overrides=params)
-        self.sup = SupervisorNode(context=ctx, parameter_overrides=params)
+        self.sup = SupervisorNode(context=ctx, parameter_overrides=params + [
+            Parameter("clock_stall_timeout_s", value=float(clock_stall_timeout_s))])
         self.probe = rclpy.create_node("probe", context=ctx)
         SafetyHeartbeats(self.probe, supervisor=None)
         self.ex = SingleThreadedExecutor(context=ctx)
