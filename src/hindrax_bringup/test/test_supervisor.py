@@ -497,8 +497,9 @@ def test_a_backward_clock_step_between_a_sample_and_the_check_gives_no_dvl_trip(
         quiet = ("altimeter", "pressure", "imu")
         over = {**{f"supervisor.min_rate.{s}_hz": 0.0 for s in quiet},
                 **{f"supervisor.rate_check_disabled.{s}": "clock-step test: DVL only" for s in quiet}}
+        # the test sets ROS time by hand: a starved step must not read as a stalled clock (tested by itself above)
         sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(over)
-                             + [Parameter("use_sim_time", value=True)])
+                             + [Parameter("use_sim_time", value=True), Parameter("clock_stall_timeout_s", value=30.0)])
         clock = sup.get_clock()
         try:
             def at(t_s: float) -> None:
