@@ -33,14 +33,13 @@ from typing import Any, Sequence
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.action import ActionClient
-from rclpy.action.client import ClientGoalHandle
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from unique_identifier_msgs.msg import UUID
 
 from hindrax_common.config import ConfigError, ConfigIssue
-from hindrax_common.node_support.action_goal import send_goal_response_type
+from hindrax_common.node_support.action_goal import accepted_goal_handle
 from hindrax_common.node_support.node_common import load_node_config
 from hindrax_common.process.ros_process import RosProcess
 from .bounds import RequestBounds
@@ -179,9 +178,7 @@ class InternalSide:
 
         def on_feedback(fb: Any) -> None:
             if not known:  # executing, its response lost: accepted, as the lost response said
-                stamp = self.node.get_clock().now().to_msg()
-                running(ClientGoalHandle(self.action, goal_uuid,
-                                         send_goal_response_type(goal)(accepted=True, stamp=stamp)))
+                running(accepted_goal_handle(self.action, goal_uuid, goal, self.node.get_clock().now().to_msg()))
             self.channel.send({"k": "feedback", "id": goal_id}, serialize_message(fb.feedback))
 
         def on_sent(future: Any) -> None:

@@ -36,7 +36,7 @@ from rclpy.action.client import ClientGoalHandle
 from rclpy.qos import qos_profile_action_status_default
 from unique_identifier_msgs.msg import UUID
 
-__all__ = ["GoalNotAnswered", "GoalSender", "send_goal_response_type"]
+__all__ = ["GoalNotAnswered", "GoalSender", "accepted_goal_handle", "send_goal_response_type"]
 
 #: Goal states after which the server publishes no more (action_msgs/GoalStatus, ROS 2 design "Actions").
 _ENDED = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED})
@@ -57,6 +57,14 @@ def send_goal_response_type(goal: Any) -> type:
     if action_name == goal_type.__name__ or impl is None or getattr(action, "Goal", None) is not goal_type:
         raise TypeError(f"{goal_type.__qualname__} is not the Goal message of a generated ROS 2 action")
     return impl.SendGoalService.Response
+
+
+def accepted_goal_handle(client: Any, goal_id: Any, goal: Any, stamp: Any) -> ClientGoalHandle:
+    """The :class:`~rclpy.action.client.ClientGoalHandle` that ``client`` (an ActionClient) would have made from a
+    lost ``SendGoal`` response accepting ``goal`` (its ``Goal`` message) under ``goal_id`` (a
+    ``unique_identifier_msgs/UUID``) at ``stamp`` (``builtin_interfaces/Time``): accepted, so its result and cancel
+    calls work as usual. Raises ``TypeError`` as :func:`send_goal_response_type`."""
+    return ClientGoalHandle(client, goal_id, send_goal_response_type(goal)(accepted=True, stamp=stamp))
 
 
 class GoalNotAnswered(RuntimeError):
@@ -104,7 +112,7 @@ class GoalSender:
         Returns a handle whose ``accepted`` is False when the server rejected the goal. Raises
         :class:`GoalNotAnswered` when neither came within ``timeout_s`` seconds (the request is sent
         ``1 + timeout_s / resend_every_s`` times at most)."""
-        response_type = send_goal_response_type(goal)
+        send_goal_response_type(goal)  # a TypeError before anything is sent
         goal_id = UUID(uuid=list(uuidlib.uuid4().bytes))
         key = bytes(goal_id.uuid)
         futures = [self._client.send_goal_async(goal, feedback_callback=feedback_callback, goal_uuid=goal_id)]
@@ -115,8 +123,7 @@ class GoalSender:
                 return accepted[0]
             if key in self._status:  # running (or already ended) on the server: our goal, response lost
                 # the SendGoal response the server sent and we lost: accepted, at the stamp it published
-                response = response_type(accepted=True, stamp=self._accepted_stamp[key])
-                return ClientGoalHandle(self._client, goal_id, response)
+                return accepted_goal_handle(self._client, goal_id, goal, self._accepted_stamp[key])
             now = time.monotonic()
             rejected = [f.result() for f in futures if f.done()]
             if rejected and (len(futures) == 1 or now - last > self.resend_every_s):
