@@ -498,10 +498,12 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
     before = len(alpha.calls)
     signer, answers = Signer(topside.key, "alpha"), []
 
-    def armed() -> bool:  # an e-stop of the test before may still count as overtaking it: sign again, send again
+    def armed() -> bool:  # an e-stop of the test before may still count as overtaking it, and run alone the gateway
+        # may not yet see the vehicle's ESC service ("not available on the vehicle"): sign again, send again
         answers.append((signer.sign_message("arm", SignedTrigger.Request()), None))
         answers[-1] = (answers[-1][0], topside.call(SignedTrigger, "/alpha/arm", answers[-1][0]))
-        return answers[-1][1].success or "e-stop arrived" not in answers[-1][1].message
+        why = answers[-1][1].message
+        return answers[-1][1].success or "e-stop arrived" not in why and "not available on the vehicle" not in why
     wait_until(armed, WAIT_S, None, "an arm accepted")
     signed, answer = answers[-1]
     assert answer.success, answer.message
