@@ -178,7 +178,8 @@ class InternalSide:
 
         def on_feedback(fb: Any) -> None:
             if not known:  # executing, its response lost: accepted, as the lost response said
-                running(accepted_goal_handle(self.action, goal_uuid, goal, self.node.get_clock().now().to_msg()))
+                now = self.node.get_clock().now().to_msg()
+                running(accepted_goal_handle(self.action, goal_uuid, goal, now))
             self.channel.send({"k": "feedback", "id": goal_id}, serialize_message(fb.feedback))
 
         def on_sent(future: Any) -> None:

@@ -60,11 +60,13 @@ def send_goal_response_type(goal: Any) -> type:
 
 
 def accepted_goal_handle(client: Any, goal_id: Any, goal: Any, stamp: Any) -> ClientGoalHandle:
-    """The :class:`~rclpy.action.client.ClientGoalHandle` that ``client`` (an ActionClient) would have made from a
-    lost ``SendGoal`` response accepting ``goal`` (its ``Goal`` message) under ``goal_id`` (a
-    ``unique_identifier_msgs/UUID``) at ``stamp`` (``builtin_interfaces/Time``): accepted, so its result and cancel
-    calls work as usual. Raises ``TypeError`` as :func:`send_goal_response_type`."""
-    return ClientGoalHandle(client, goal_id, send_goal_response_type(goal)(accepted=True, stamp=stamp))
+    """The :class:`~rclpy.action.client.ClientGoalHandle` that ``client`` (an ActionClient)
+    would have made from a lost ``SendGoal`` response accepting ``goal`` (its ``Goal`` message)
+    under ``goal_id`` (a ``unique_identifier_msgs/UUID``) at ``stamp``
+    (``builtin_interfaces/Time``): accepted, so its result and cancel calls work as usual.
+    Raises ``TypeError`` as :func:`send_goal_response_type`."""
+    response = send_goal_response_type(goal)(accepted=True, stamp=stamp)
+    return ClientGoalHandle(client, goal_id, response)
 
 
 class GoalNotAnswered(RuntimeError):

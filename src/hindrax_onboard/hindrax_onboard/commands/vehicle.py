@@ -169,15 +169,19 @@ def call_service(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s
     servers = node.count_services(name)
     future = client.call_async(request)
     wait_for(executor, future.done, timeout_s, f"{name} did not answer", answer_hint or hint)
-    refuse_shared_answer(name, max(servers, node.count_services(name)), "it", "answer", "request", hint)
+    servers = max(servers, node.count_services(name))
+    refuse_shared_answer(name, servers, "it", "answer", "request", hint)
     return future.result()
 
 
-def refuse_shared_answer(name: str, servers: int, answered: str, answer: str, request: str, hint: str) -> None:
-    """Raises :class:`CommandError` when ``servers`` (more than one) answer ``name``: a DDS request or goal reaches
-    every server of its name and the client takes the first answer, which may be another server's, not the vehicle's
-    (docs/threat_model.md §3); the ``request`` went out, so its outcome is unknown. ``answered`` names what they answer
-    ("it", "its goals"), ``answer`` what was taken ("answer", "acceptance"); ``hint``: where to look next."""
+def refuse_shared_answer(name: str, servers: int, answered: str, answer: str, request: str,
+                         hint: str) -> None:
+    """Raises :class:`CommandError` when ``servers`` (more than one) answer ``name``: a DDS
+    request or goal reaches every server of its name and the client takes the first answer,
+    which may be another server's, not the vehicle's (docs/threat_model.md §3); the ``request``
+    went out, so its outcome is unknown. ``answered`` names what they answer ("it", "its
+    goals"), ``answer`` what was taken ("answer", "acceptance"); ``hint``: where to look next."""
     if servers > 1:
-        raise CommandError(f"{name}: {servers} servers answer {answered}, so this {answer} may not be the "
-                           f"vehicle's: the {request} was sent, its outcome is unknown ({hint})")
+        raise CommandError(f"{name}: {servers} servers answer {answered}, so this {answer} may not "
+                           f"be the vehicle's: the {request} was sent, its outcome is unknown "
+                           f"({hint})")

@@ -26,8 +26,9 @@ import time
 from typing import Any, Callable
 
 from hindrax_onboard.commands.common import CommandError, choices
-from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service, find_vehicle,
-                                              refuse_shared_answer, wait_for, with_ros)
+from hindrax_onboard.commands.vehicle import (Target, add_vehicle_arguments, call_service,
+                                              find_vehicle, refuse_shared_answer, wait_for,
+                                              with_ros)
 
 __all__ = ["add_arguments", "run", "format_estimate", "format_feedback", "format_status", "start_campaign",
            "call_continue"]
@@ -167,8 +168,9 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
         running()
         raise CommandError("goal rejected: a campaign is already running or still ending, or the goal is invalid "
                            "(hindrax ident status; the identification node's log)")
-    refuse_shared_answer(action_name, node.count_services(f"{action_name}/_action/send_goal"), "its goals",
-                         "acceptance", "goal", "hindrax ident status; hindrax health on the vehicle")
+    goal_servers = node.count_services(f"{action_name}/_action/send_goal")
+    refuse_shared_answer(action_name, goal_servers, "its goals", "acceptance", "goal",
+                         "hindrax ident status; hindrax health on the vehicle")
     what = "calibration only" if calibration_only else (', '.join(dofs) or 'all DOFs')
     cal = f" after calibration {', '.join(calibrate)}" if (calibrate and not calibration_only) else ""
     print_line(f"campaign started: {what}{cal}; Ctrl-C cancels")
