@@ -31,6 +31,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_common.config import default_config_path
 from hindrax_bringup.gateway.interface import relays
+from hindrax_bringup.gateway.node import QUEUE_GAP_S
 from hindrax_bringup.gateway.operator_signing import Signer, create_key, load_key
 from hindrax_bringup.layout.launch_xml import read_launch
 from hindrax_bringup.layout.process_runner import ProcessRunner
@@ -504,7 +505,13 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
         answers[-1] = (answers[-1][0], topside.call(SignedTrigger, "/alpha/arm", answers[-1][0]))
         why = answers[-1][1].message
         return answers[-1][1].success or "e-stop arrived" not in why and "not available on the vehicle" not in why
-    wait_until(armed, WAIT_S, None, "an arm accepted")
+    # Each attempt after a gap longer than QUEUE_GAP_S: a request sooner after the last one counts as queued behind
+    # it, so an e-stop before that busy spell began overtakes every back-to-back retry (60 s of them failed a run).
+    gap = threading.Event()
+    try:
+        wait_until(armed, WAIT_S, lambda: gap.wait(2 * QUEUE_GAP_S), "an arm accepted")
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: {len(answers)} attempts, the last answered {answers[-1][1].message!r}") from exc
     signed, answer = answers[-1]
     assert answer.success, answer.message
     lifted = SignedTrigger.Request()
