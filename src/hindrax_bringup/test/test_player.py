@@ -137,15 +137,16 @@ def same_cdr(received: bytes, recorded: bytes) -> bool:
 def subscribe_raw(node, topics, reliability=ReliabilityPolicy.RELIABLE):
     """Raw subscriptions to ``topics``: ``{topic: [(cdr bytes, publisher's send time in s)]}``.
 
-    The send time is the DDS source timestamp (the publisher's system clock), not the time this process took the
-    message: a starved test process takes a burst late, which says nothing about when the player published it.
+    The send time is the DDS source timestamp (the publisher's system clock), not the time this process
+    took the message: a starved test process takes a burst late, which says nothing about when the
+    player published it.
     """
     reader = BagReader(SENSORS)
     got: dict[str, list] = {t: [] for t in topics}
     for t in topics:
         cls = message_class(reader.channels[t].type)
-        node.create_subscription(cls, t, lambda data, info, t=t: got[t].append((data, info["source_timestamp"] / 1e9)),
-                                 QoSProfile(depth=1000, reliability=reliability), raw=True)
+        sent = lambda data, info, t=t: got[t].append((data, info["source_timestamp"] / 1e9))  # noqa: E731
+        node.create_subscription(cls, t, sent, QoSProfile(depth=1000, reliability=reliability), raw=True)
     return got
 
 

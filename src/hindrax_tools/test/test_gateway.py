@@ -505,13 +505,15 @@ def test_a_captured_arm_is_refused_with_2_48_added_and_after_a_gateway_restart(p
         answers[-1] = (answers[-1][0], topside.call(SignedTrigger, "/alpha/arm", answers[-1][0]))
         why = answers[-1][1].message
         return answers[-1][1].success or "e-stop arrived" not in why and "not available on the vehicle" not in why
-    # Each attempt after a gap longer than QUEUE_GAP_S: a request sooner after the last one counts as queued behind
-    # it, so an e-stop before that busy spell began overtakes every back-to-back retry (60 s of them failed a run).
+    # Each attempt after a gap longer than QUEUE_GAP_S: a request sooner after the last one counts as
+    # queued behind it, so an e-stop before that busy spell began overtakes every back-to-back retry
+    # (60 s of them failed a run).
     gap = threading.Event()
     try:
         wait_until(armed, WAIT_S, lambda: gap.wait(2 * QUEUE_GAP_S), "an arm accepted")
     except AssertionError as exc:
-        raise AssertionError(f"{exc}: {len(answers)} attempts, the last answered {answers[-1][1].message!r}") from exc
+        last = answers[-1][1].message
+        raise AssertionError(f"{exc}: {len(answers)} attempts, the last answered {last!r}") from exc
     signed, answer = answers[-1]
     assert answer.success, answer.message
     lifted = SignedTrigger.Request()
