@@ -143,44 +143,6 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         _domain_ctx = None
 
 
-#: The nice of a worker while it runs a test outside the :data:`VEHICLE_LAUNCH_GROUP`, and of what it starts then. That
-#: group runs on one worker on the wall clock and is the run's critical path (pytest.ini); beside it, the other workers'
-#: tests took the CPU its launches start and fit with (fresh clones at -n 4: the rehearsal 89-98 s, 70 s alone;
-#: ``test_pool_day`` 24-30 s, 15 s alone). At nice 5 their processes weigh a third of a nice-0 one while both wait to
-#: run, and take all that the group leaves idle. Going back to nice 0 for a group test needs CAP_SYS_NICE (root, as
-#: CI here); without it every test keeps the nice it was started with (:func:`_vehicle_launch_group_first`).
-OTHER_TESTS_NICE = 5
-_renice: bool | None = None
-_base_nice = 0
-
-
-def _set_nice(value: int) -> None:
-    """The calling thread's nice (Linux: per thread; the processes and threads it starts inherit it)."""
-    os.setpriority(os.PRIO_PROCESS, 0, value)
-
-
-@pytest.fixture(autouse=True)
-def _vehicle_launch_group_first(request):
-    """Run a test of the :data:`VEHICLE_LAUNCH_GROUP` at the worker's starting nice, any other at
-    :data:`OTHER_TESTS_NICE` above it, where the worker may lower its nice again (tried once per worker)."""
-    global _renice, _base_nice
-    if os.environ.get("PYTEST_XDIST_WORKER") is None:
-        yield  # a plain run: nothing beside it
-        return
-    if _renice is None:
-        _base_nice = base = os.getpriority(os.PRIO_PROCESS, 0)
-        try:
-            _set_nice(base + OTHER_TESTS_NICE)
-            _set_nice(base)
-            _renice = True
-        except PermissionError:
-            _renice = False
-    base = _base_nice
-    if _renice:
-        _set_nice(base if request.node.get_closest_marker("vehicle_launch") is not None else base + OTHER_TESTS_NICE)
-    yield
-
-
 @pytest.fixture(autouse=True)
 def _stop_signals_not_left_ignored():
     """Fail a test that leaves SIGINT or SIGTERM ignored (``SIG_IGN``, which ``exec`` passes on to children) where it
