@@ -185,8 +185,9 @@ def test_player_publishes_the_recorded_bytes_with_timing_and_clock(ros):
     # Each message is preceded by a /clock of its own log time. The 50 Hz wall-clock tick rate is checked with a
     # stepped clock in test_clock_carries_bag_time_monotonically_and_precedes_each_message: a count of ticks
     # received here depends on how the two processes are scheduled, which a loaded 2-core CI can miss.
-    # Best effort: a starved test process loses some (3 s asleep while the player ran: 197 of 240 kept; a fresh clone
-    # on four workers: 199). Clocks only on the 50 Hz ticks (4x: every 80 ms of bag time) would hit almost none.
+    # Best effort: a starved test process loses some (3 s asleep while the player ran: 197 of 240
+    # kept; a fresh clone on four workers: 199). Clocks only on the 50 Hz ticks (4x: every 80 ms of
+    # bag time) would hit almost none (31 of 240).
     log_times = {m.log_time_ns for m in all_msgs}
     assert len(set(clocks) & log_times) >= 0.5 * len(log_times)
 

@@ -379,8 +379,9 @@ def test_ros_time_standing_still_while_armed_trips_the_node_and_neutral_reaches_
 
     g = graph
     arm_and_thrust(g)
-    # taken before ROS time last moves: the node sees that move after it, never before (a fresh clone's suite failed
-    # the bound by 0.2 ms when this was taken after arm_and_thrust's last step, which the node had seen already)
+    # taken before ROS time last moves: the node sees that move after it, never before (a fresh
+    # clone's suite failed the bound by 0.2 ms when this was taken after arm_and_thrust's last step,
+    # which the node had seen already)
     held_at = time.monotonic()
     g.step(0.001)
     wait_until(lambda: g.sup.core.tripped, 10, g.spin_once, "a stall trip")
