@@ -334,8 +334,11 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
     # the ballast step's holds shorter than the defaults (15 s settle, 30 s averaged: 105 of the campaign's 190 s of
     # pool time) with the vehicle file's own keys: the same steps, prompts and fit in a campaign of about 124 s. The
     # same campaign in `hindrax run` (virtual pool, seed of the vehicle file): thrust scale 1.0062 +- 0.0065 and heave
-    # added mass +1.2 %, against 0.9973 +- 0.0047 and -0.3 % at the defaults (2026-11-29).
-    doc["/**"]["ros__parameters"]["calibration"].update(hold_settle_s=6.0, hold_window_s=12.0)
+    # added mass +1.2 %, against 0.9973 +- 0.0047 and -0.3 % at the defaults (2026-11-29). In the Pi rig (below) the
+    # defaults: there the whole campaign's length on a Pi's budget is what is measured.
+    rig_cores = float(os.environ.get("HINDRAX_RIG_CORES") or 0)
+    if not rig_cores:
+        doc["/**"]["ros__parameters"]["calibration"].update(hold_settle_s=6.0, hold_window_s=12.0)
     vehicle_file = tmp_path / "hindrax.yaml"
     vehicle_file.write_text(yaml.safe_dump(doc))
     cfg = load_config(vehicle_file)
@@ -360,7 +363,6 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
         return subprocess.run(words, env=env, capture_output=True, text=True, timeout=timeout)
 
     rigged = contextlib.ExitStack()
-    rig_cores = float(os.environ.get("HINDRAX_RIG_CORES") or 0)
     rig = rigged.enter_context(Rig(rig_cores, int(os.environ.get("HINDRAX_RIG_BUSY_LOOPS") or 0))) \
         if rig_cores else None
     with rigged, domain_id() as topside_domain, LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
