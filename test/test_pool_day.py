@@ -285,7 +285,8 @@ def test_the_readme_pool_day_names_the_machine_and_the_domain_of_each_line():
     assert len(on_vehicle) >= 3 and all(any(c[:len(w)] == list(w) for w, _m, _h in COMMANDS) for c in on_vehicle)
 
 
-CAMPAIGN_S = 900.0  # wall-time deadline of the campaign (about 124 s of pool time, on a loaded two-core machine)
+#: wall-time deadline of the campaign (about 124 s of pool time, on a loaded two-core machine)
+CAMPAIGN_S = 900.0
 
 
 def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_model):
@@ -331,10 +332,11 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
     # the vehicle file of this vehicle: the installed one, its oscillator measured (`hindrax esc calibrate --write`)
     doc = yaml.safe_load((install.share("hindrax_common") / "config" / "hindrax.yaml").read_text())
     doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True
-    # the ballast step's holds shorter than the defaults (15 s settle, 30 s averaged: 105 of the campaign's 190 s of
-    # pool time) with the vehicle file's own keys: the same steps, prompts and fit in a campaign of about 124 s. The
-    # same campaign in `hindrax run` (virtual pool, seed of the vehicle file): thrust scale 1.0062 +- 0.0065 and heave
-    # added mass +1.2 %, against 0.9973 +- 0.0047 and -0.3 % at the defaults (2026-11-29). In the Pi rig (below) the
+    # the ballast step's holds shorter than the defaults (15 s settle, 30 s averaged: 105 of the
+    # campaign's 190 s of pool time) with the vehicle file's own keys: the same steps, prompts and
+    # fit in a campaign of about 124 s. The same campaign in `hindrax run` (virtual pool, seed of
+    # the vehicle file): thrust scale 1.0062 +- 0.0065 and heave added mass +1.2 %, against
+    # 0.9973 +- 0.0047 and -0.3 % at the defaults (2026-11-29). In the Pi rig (below) the
     # defaults: there the whole campaign's length on a Pi's budget is what is measured.
     rig_cores = float(os.environ.get("HINDRAX_RIG_CORES") or 0)
     if not rig_cores:

@@ -5,12 +5,13 @@ installed pool_test launch on this worker's domain (the internal one) with the g
 and prints the two shells' environments. Then, as the README's pool day does: ``hindrax health`` in the vehicle's
 shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, a heave campaign starts and
 a second ``ident start`` is refused while it runs, ``hindrax disarm`` ends it and ``hindrax reset`` + ``hindrax arm``
-bring the vehicle back from the topside, the pool's operator attaches and removes the ballast through the command's
-input, and ``quit`` stops everything cleanly. Before, a newcomer had to piece this together from the live pool
-module, a hand-edited vehicle file and a test. The block's second launch (``model_file:=``) takes the model of the
-session's README walk (test_pool_day.py, ``pool_day_model``: the same launch's campaign, bag and fit, its heave
-checked against the pool's truth; run alone, a heave campaign and its ``ident bag`` here make one), and there
-``control hold`` prints the altitude held.
+bring the vehicle back from the topside, the pool's operator attaches and removes the ballast
+through the command's input, and ``quit`` stops everything cleanly. Before, a newcomer had to
+piece this together from the live pool module, a hand-edited vehicle file and a test. The block's
+second launch (``model_file:=``) takes the model of the session's README walk (test_pool_day.py,
+``pool_day_model``: the same launch's campaign, bag and fit, its heave checked against the pool's
+truth; run alone, a heave campaign and its ``ident bag`` here make one), and there ``control
+hold`` prints the altitude held.
 """
 from __future__ import annotations
 
@@ -132,7 +133,7 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             reset = hindrax("reset")
             assert reset.returncode == 0 and reset.stdout.startswith(f"{name}: "), reset
             wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm after the reset")
-            # the README's hold and its printed result: on the second day's launch below, with the model
+            # the README's hold and its printed result: on the second day's launch, with the model
             assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
             # a whole heave campaign for the README's offline steps below, unless the session's README walk has
             # identified one already (test/conftest.py pool_day_model: the same launch, campaign, bag and fit)
