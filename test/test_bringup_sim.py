@@ -105,14 +105,14 @@ def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
     import sys
     from pathlib import Path
 
-    from domain_coordinator import domain_id
+    from hindrax_test_support.helpers import fresh_domain
 
     from hindrax_common.testing import child_env, child_process, interrupt
 
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     # a domain of its own: the ESCs of this worker's earlier tests may still be in its domain's discovery caches,
     # and bringup refuses a domain with another ESC
-    with domain_id() as fresh, child_process([hindrax, "bringup", "--sim", "--rtf", "1"],
+    with fresh_domain() as fresh, child_process([hindrax, "bringup", "--sim", "--rtf", "1"],
                                              env=child_env(ROS_DOMAIN_ID=str(fresh)), stdout=subprocess.PIPE,
                                              stderr=subprocess.STDOUT, text=True) as proc:
         lines = []

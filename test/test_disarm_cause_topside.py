@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
-from domain_coordinator import domain_id
+from hindrax_test_support.helpers import fresh_domain
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 
@@ -39,7 +39,7 @@ WAIT_S = 30.0  # generous: a loaded two-core machine
 @pytest.fixture(scope="module")
 def topside():
     """(layout, probe on the topside domain, the statuses it read, its executor)."""
-    with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, domain_id() as top, \
+    with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, fresh_domain() as top, \
             ros_context(domain_id=top) as ctx, contextlib.ExitStack() as stack:
         name = load_config(lay.config).get("vehicle.name")
         create_key(lay.tmp / "keys" / f"{name}.key")  # the operator's key, on "both sides" (one folder here)

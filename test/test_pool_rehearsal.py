@@ -25,7 +25,7 @@ import time
 
 import pytest
 import yaml
-from domain_coordinator import domain_id
+from hindrax_test_support.helpers import fresh_domain
 
 from hindrax_common.testing import wait_until
 
@@ -72,7 +72,7 @@ class _Lines:
 
 def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_path, pool_day_model):
     install = colcon_install
-    with domain_id() as topside:
+    with fresh_domain() as topside:
         proc = subprocess.Popen(["hindrax", "pool", "rehearse", "--topside-domain", str(topside), "--dir",
                                  str(tmp_path)], env=install.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True, bufsize=1)

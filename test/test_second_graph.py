@@ -25,9 +25,9 @@ def _refusal(args: list[str], role_node: str, tmp_path: Path) -> tuple[int, list
     """Run ``hindrax ARGS`` while a node named ``role_node`` publishes its heartbeat on this test's domain; returns
     (exit status, stderr lines, domain). The domain is a fresh one: a node named esc or supervisor that an earlier
     test of this worker left would still be in the worker's domain's discovery caches and be named too."""
-    from domain_coordinator import domain_id
+    from hindrax_test_support.helpers import fresh_domain
 
-    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
+    with fresh_domain() as fresh, ros_context(domain_id=fresh) as ctx:
         other = rclpy.create_node(role_node, context=ctx)
         beat = other.create_publisher(Heartbeat, f"{role_node}/heartbeat", 10)
         other.create_timer(0.05, lambda: beat.publish(Heartbeat(level=Heartbeat.OK, boot_id=1, seq=1)))
@@ -81,12 +81,12 @@ def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
 def test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start(tmp_path, args, started, role, role_name):
     """Discovery on a loaded machine can outlast the start-up window, and a second graph may start later: an ESC or
     supervisor seen after the start (``bringup`` running, ``run`` armed) ends it the same way (one line, exit 1)."""
-    from domain_coordinator import domain_id
+    from hindrax_test_support.helpers import fresh_domain
 
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     # a domain of its own: the other tests here leave a node named esc or supervisor in this worker's domain's
     # discovery caches for a while, which would refuse the start itself
-    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx, open(tmp_path / "stdout", "w") as out, \
+    with fresh_domain() as fresh, ros_context(domain_id=fresh) as ctx, open(tmp_path / "stdout", "w") as out, \
             open(tmp_path / "stderr", "w") as errf:
         proc = subprocess.Popen([hindrax, *args], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path,
                                 stdout=out, stderr=errf)
@@ -128,9 +128,9 @@ def test_pool_rehearse_refuses_a_domain_with_another_esc_before_starting_anythin
 
 def test_health_names_a_second_vehicle_on_its_domain(tmp_path):
     """Issue 74.2: the first vehicle's health said READY beside a second one; two ESCs on the domain are named."""
-    from domain_coordinator import domain_id
+    from hindrax_test_support.helpers import fresh_domain
 
-    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
+    with fresh_domain() as fresh, ros_context(domain_id=fresh) as ctx:
         escs = [rclpy.create_node("esc", context=ctx) for _ in range(2)]
         ex = SingleThreadedExecutor(context=ctx)
         for esc in escs:

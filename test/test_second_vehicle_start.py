@@ -14,7 +14,7 @@ import subprocess
 import sys
 
 import pytest
-from domain_coordinator import domain_id
+from hindrax_test_support.helpers import fresh_domain
 
 from hindrax_common.testing import child_env, ros_context, wait_until
 from hindrax_common.transport.shared_emulation import SOCKET_ENV
@@ -33,7 +33,7 @@ def test_a_second_vehicles_esc_and_supervisor_refuse_to_start(tmp_path):
 
     procs: list[subprocess.Popen] = []
     hardware: dict[str, _Hardware] = {}
-    with domain_id() as did, ros_context(did) as ctx:
+    with fresh_domain() as did, ros_context(did) as ctx:
         def start(vehicle: str, name: str) -> subprocess.Popen:
             folder = tmp_path / vehicle
             folder.mkdir(exist_ok=True)

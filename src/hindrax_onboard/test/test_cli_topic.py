@@ -18,10 +18,10 @@ pytestmark = pytest.mark.ros
 
 def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
     import yaml
-    from domain_coordinator import domain_id
+    from hindrax_test_support.helpers import fresh_domain
 
     hindrax = str(Path(sys.executable).with_name("hindrax"))
-    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
+    with fresh_domain() as fresh, ros_context(domain_id=fresh) as ctx:
         node = rclpy.create_node("supervisor_stand_in", context=ctx)
         pub = node.create_publisher(DiagnosticStatus, "/rov/supervisor/status", 10)
         node.create_timer(0.1, lambda: pub.publish(DiagnosticStatus(level=b"\x02", name="supervisor", values=[

@@ -6,7 +6,7 @@ from __future__ import annotations
 import subprocess
 
 import pytest
-from domain_coordinator import domain_id
+from hindrax_test_support.helpers import fresh_domain
 
 from hindrax_common.testing import child_env, python_executable
 
@@ -23,7 +23,7 @@ def test_health_without_a_vehicle_says_so_in_one_line_naming_the_domain():
     """Issue 45.4: nothing running -> one short line naming the domain (was 17 FAIL lines and a summary)."""
     # A ROS domain of its own, reserved like the workers' (conftest.py): nothing else this worker ran (an
     # in-process node of another test, a process a failed test left behind) can be mistaken for the vehicle.
-    with domain_id() as domain:
+    with fresh_domain() as domain:
         r = hindrax("health", "--launch", "hindrax_onboard/pool_test.launch.xml", "output_dir:=/tmp/x", "--timeout",
                     "1.5", ROS_DOMAIN_ID=str(domain))
         quiet = hindrax("health", "--quiet", "--timeout", "0.5", ROS_DOMAIN_ID=str(domain))

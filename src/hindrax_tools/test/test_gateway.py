@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from domain_coordinator import domain_id
+from hindrax_test_support.helpers import fresh_domain
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_common.config import default_config_path
@@ -200,7 +200,7 @@ def pool(tmp_path_factory):
     keys = tmp / "keys"
     for name in VEHICLES:
         create_key(keys / f"{name}.key")
-    with domain_id() as topside, domain_id() as internal_a, domain_id() as internal_b:
+    with fresh_domain() as topside, fresh_domain() as internal_a, fresh_domain() as internal_b:
         vehicles = {}
         runners = []
         try:
@@ -599,7 +599,7 @@ def test_a_second_gateway_with_the_same_name_is_reported_and_arming_refused(pool
     from hindrax_msgs.srv import SignedTrigger
 
     alpha = pool["vehicles"]["alpha"]
-    with domain_id() as impostor_domain:
+    with fresh_domain() as impostor_domain:
         runner = ProcessRunner([gateway_process(vehicle_file(pool["tmp"], "alpha"), pool["topside"])],
                                env=child_env(ROS_DOMAIN_ID=str(impostor_domain), HINDRAX_KEYS_DIR=str(pool["keys"])),
                                log_dir=pool["tmp"] / "impostor")
