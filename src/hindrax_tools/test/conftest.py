@@ -14,6 +14,8 @@ SHARED_RUNS = ("ballast_goal_on_the_graph",)
 #: each stage of the shortened ballast goal (first prompt: +34 s of simulated time; the whole goal about a minute)
 #: must come within this much SIMULATED time: the bound is the design's, the same on any machine
 STAGE_SIM_S = 120.0
+#: the ballast step's holds of the shared run, the vehicle file's keys (defaults 15 s and 30 s), s
+SHORT_HOLDS = {"calibration.hold_settle_s": 3.0, "calibration.hold_window_s": 9.0}
 #: wall-clock guard of each stage, only against a hang: the in-process graph runs the simulator as fast as the
 #: machine allows (real_time_factor 0), so a loaded machine takes longer for the same simulated time
 STAGE_WALL_S = 500.0
@@ -32,10 +34,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 @pytest.fixture(scope="session")
 def ballast_goal_on_the_graph(tmp_path_factory) -> SimpleNamespace:
     """One calibration-only ballast goal on the in-process graph (virtual pool, seed 4, recorder on, the step
-    shortened to 3 s of settling and 9 s of averaging), the operator played step by step as at the pool; what the
-    operator's calls answered and what a probe saw, for the tests that only read the run (``test_calibration_graph``:
-    prompts, continue and refusals; ``test_calibration_topic``: the step's result on ``identification/calibration``
-    and in the bag). Each stage must come within :data:`STAGE_SIM_S` of simulated time, else the fixture fails.
+    shortened to 3 s of settling and 9 s of averaging: :data:`SHORT_HOLDS`), the operator played step by step as at
+    the pool; what the operator's calls answered and what a probe saw, for the tests that only read the run
+    (``test_calibration_graph``: prompts, continue and refusals; ``test_calibration_topic``: the step's result on
+    ``identification/calibration`` and in the bag). Each stage must come within :data:`STAGE_SIM_S` of simulated
+    time, else the fixture fails.
 
     Fields: ``continue_before_goal``, ``continue_attach``, ``continue_again``, ``continue_remove``,
     ``continue_after`` ((success, message) of ``identification/continue``); ``bad_goals_accepted`` (the unknown step
@@ -62,12 +65,11 @@ def ballast_goal_on_the_graph(tmp_path_factory) -> SimpleNamespace:
 
     run = SimpleNamespace(bag=tmp_path_factory.mktemp("ballast_goal") / "bag")
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    with pytest.MonkeyPatch.context() as mp, ros_context() as ctx:
-        mp.setattr(executive, "CALIBRATION_SETTLE_S", 3.0)
-        mp.setattr(executive, "CALIBRATION_WINDOW_S", 9.0)
+    with ros_context() as ctx:
         graph = build_graph(default_config_path(), sim=True, context=ctx, seed=4, record=True,
                             record_dir=str(run.bag),
-                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0,
+                                       **SHORT_HOLDS})
         probe = rclpy.create_node("operator", context=ctx)
         graph.executor.add_node(probe)
         sim = graph.nodes["simulator"].simulator

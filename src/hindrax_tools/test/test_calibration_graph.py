@@ -3,8 +3,9 @@ operator prompt in the action feedback and in ``identification/status``, the ``i
 (std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_sim.graph.graph_campaign.
 VirtualOperator`) and the ``calibration.*`` keys of the vehicle file.
 
-The graph tests shorten the ballast step's settling and averaging times (executive module constants, read at run
-time) so that a calibration-only goal takes about a minute of simulated time.
+The graph tests shorten the ballast step's settling and averaging times with the vehicle file's keys
+(``calibration.hold_settle_s``, ``hold_window_s``) so that a calibration-only goal takes about a minute of simulated
+time.
 """
 from __future__ import annotations
 
@@ -139,15 +140,14 @@ def test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refu
 
 
 @pytest.mark.ros
-def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(monkeypatch, tmp_path, capsys):
+def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(tmp_path, capsys):
     """`hindrax run --calibrate ballast` through the whole graph (recorder, bag): the virtual operator answers both
     prompts from the feedback (known weight in the simulator, identification/continue); the measured scale reaches
     identification.yaml. Without the weight applied the step would abort (holding force did not rise)."""
-    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 3.0)
-    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 9.0)
+    vehicle = _write(tmp_path, lambda prm: prm["calibration"].update(hold_settle_s=3.0, hold_window_s=9.0))
     out = tmp_path / "run"
-    rc = cli.main(["run", "--calibrate", "ballast", "--dofs", "heave", "--levels", "1", "--seed", "2",
-                   "--out", str(out)])
+    rc = cli.main(["run", "--config", str(vehicle), "--calibrate", "ballast", "--dofs", "heave", "--levels", "1",
+                   "--seed", "2", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0, text[-3000:]
     assert "virtual operator: attach_ballast done" in text and "virtual operator: remove_ballast done" in text
@@ -163,7 +163,7 @@ def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(monk
     assert doc["dofs"]["heave"]["inertia"]["value"] > 0
 
 
-def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypatch):
+def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch():
     """In-process (the campaign hangs the test mass on the simulator): 0.5 kg of steel 0.15 m to starboard, then
     forward, with that DOF free and the rest held. Truth: z_g W - z_b B of the vehicle file (= the default truth,
     4.503 N m/rad). Measured with the default 15 s / 30 s holds: seed 2 roll 4.489 +- 0.132, pitch 4.606 +- 0.129;
@@ -173,9 +173,8 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
     from hindrax_sim.campaign import Campaign
     from hindrax_onboard.identification.online.executive import inclining_load
 
-    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 10.0)
-    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 21.0)
-    cfg = load_config(default_config_path())
+    cfg = load_config(default_config_path()).with_overrides({"calibration.hold_settle_s": 10.0,
+                                                             "calibration.hold_window_s": 21.0})
     f = cfg.flat
     w_b = float(f["vehicle.displaced_volume_m3"]) * float(f["environment.water_density_kg_m3"]) * 9.81
     c_true = float(f["vehicle.centre_of_gravity_frd_m"][2]) * cfg.weight_n \

@@ -134,19 +134,20 @@ def test_calibrate_refuses_unknown_steps(capsys):
         assert "unknown step" in capsys.readouterr().err
 
 
-def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys, monkeypatch):
+def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys):
     """Issue 26, the vertical part of --calibrate thrust, one seed: forward thrust x0.95, reverse x0.85 (the
-    "thrust_asymmetric" truth), the sinker and the float (holds shortened to 8 s + 18 s), three heave levels: heave
-    inertia and quadratic damping of both directions within 5 % with 95 % intervals covering the truth, each vertical
-    direction's scale within 3 std. (`--calibrate ballast,line_pull` on this pool: heave damping -22 % down, +26 %
-    up, all suspect.) The horizontal pulls: test_line_pull_measures_... below and test_campaign_steps.py; the whole
-    `--calibrate thrust` over five seeds: the scenario suite (docs/identification.md §6.2)."""
-    from hindrax_onboard.identification.online import executive
-
-    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 8.0)
-    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 18.0)
+    "thrust_asymmetric" truth), the sinker and the float (the vehicle file's holds shortened to 8 s + 18 s), three
+    heave levels: heave inertia and quadratic damping of both directions within 5 % with 95 % intervals covering the
+    truth, each vertical direction's scale within 3 std. (`--calibrate ballast,line_pull` on this pool: heave
+    damping -22 % down, +26 % up, all suspect.) The horizontal pulls: test_line_pull_measures_... below and
+    test_campaign_steps.py; the whole `--calibrate thrust` over five seeds: the scenario suite
+    (docs/identification.md §6.2)."""
+    doc = yaml.safe_load(default_config_path().read_text())
+    doc["/**"]["ros__parameters"]["calibration"].update(hold_settle_s=8.0, hold_window_s=18.0)
+    vehicle = tmp_path / "hindrax.yaml"
+    vehicle.write_text(yaml.safe_dump(doc))
     out = tmp_path / "run"
-    rc = cli.main(["ident", "campaign", "--dofs", "heave", "--levels", "3", "--seed", "1",
+    rc = cli.main(["ident", "campaign", "--config", str(vehicle), "--dofs", "heave", "--levels", "3", "--seed", "1",
                    "--truth", str(ASYMMETRIC), "--calibrate", "ballast,float", "--out", str(out)])
     assert rc == 0, capsys.readouterr().err
     doc = yaml.safe_load((out / "identification.yaml").read_text())
