@@ -4,7 +4,8 @@ The pip wheels of the venv carry rclpy but not ``ros2 topic``; the README's pool
 (``/<name>/supervisor/status``: ``disarm_cause``) with this. The topic's type is the one the graph shows (waited for up
 to ``--timeout`` s); each message prints as YAML (field order of the message definition), ``---`` after each, as
 ``ros2 topic echo`` does. Subscribed best effort, volatile: it hears reliable and best-effort publishers alike.
-Exit 0 after ``--count`` messages (0: until Ctrl-C), 1 when the topic or a message does not come within the timeout."""
+Exit 0 after ``--count`` messages (0: until Ctrl-C), 1 when the topic or a message does not come within the timeout
+(the line then says whether the topic has a publisher at all, and which)."""
 from __future__ import annotations
 
 import argparse
@@ -14,7 +15,7 @@ from typing import Any
 from .common import CommandError
 from .vehicle import wait_for, with_ros
 
-__all__ = ["add_arguments", "run", "plain"]
+__all__ = ["add_arguments", "run", "plain", "silence"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,6 +40,16 @@ def plain(value: Any) -> Any:
     return value
 
 
+def silence(topic: str, timeout_s: float, publishers: list) -> str:
+    """The one line for a topic that sent nothing within ``timeout_s``: whether the graph shows any publisher of it
+    (``publishers``: rclpy's ``TopicEndpointInfo`` list), and which nodes they are."""
+    if not publishers:
+        return f"no message on {topic} within {timeout_s:g} s: it has no publisher (only readers on the graph)"
+    names = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in publishers})
+    return (f"no message on {topic} within {timeout_s:g} s from its {len(publishers)} publisher(s) "
+            f"({', '.join(names)}): is the node sending (a status goes out on a change or at its period)?")
+
+
 def run(args: argparse.Namespace) -> int:
     """Echo the topic (module docstring). Raises :class:`CommandError` for a topic absent or silent."""
     import yaml
@@ -59,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
         got: list = []
         node.create_subscription(cls, args.topic, got.append,
                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
-        wait_for(executor, lambda: got, args.timeout, f"no message on {args.topic}", "is its publisher running?")
+        try:
+            wait_for(executor, lambda: got, args.timeout, f"no message on {args.topic}", "is its publisher running?")
+        except CommandError:
+            raise CommandError(silence(args.topic, args.timeout, node.get_publishers_info_by_topic(args.topic))) \
+                from None
         shown = 0
         while not args.count or shown < args.count:
             while got and (not args.count or shown < args.count):
