@@ -43,11 +43,12 @@ pipq() {
 step "ROS 2 Jazzy wheels and Python packages (pip, about 2 minutes on a fresh venv)"
 ticking
 pipq install -q --upgrade pip
-# colcon too (requirements-colcon.txt): `make ros-install` builds ros_ws with it, and the test suite runs that
-# build, which must not install packages into the venv while other tests run. --no-compile: pip would byte-compile
-# every module of every wheel (the ROS wheels' generated interfaces of packages nothing here imports among them);
-# the import check below compiles the libraries the tests import. A fresh venv's `make setup`, alternated with the
-# pip byte-compile (2026-11-29, 2 cores, two rounds of two pairs): wall 0.95x and 0.89x, CPU 0.90x (149 against 165
+# colcon too (requirements-colcon.txt): `make ros-install` builds ros_ws with it, and the test suite
+# runs that build, which must not install packages into the venv while other tests run.
+# --no-compile: pip would byte-compile every module of every wheel (the ROS wheels' generated
+# interfaces of packages nothing here imports among them); the import check below compiles the
+# libraries the tests import. A fresh venv's `make setup`, alternated with the pip byte-compile
+# (2026-11-29, 2 cores, two rounds of two pairs): wall 0.95x and 0.89x, CPU 0.90x (149 against 165
 # CPU-s); pip's own step 27 -> 14 CPU-s.
 pipq install -q --no-compile -r requirements.txt -r requirements-colcon.txt -c constraints.txt
 if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q -c constraints.txt 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
@@ -95,9 +96,9 @@ pipq install -q --no-deps --no-build-isolation -e src/hindrax_common -e src/hind
   -e src/hindrax_onboard -e src/hindrax_fit -e src/hindrax_sim -e src/hindrax_tools >"build/editable-install.log" \
   || { cat build/editable-install.log >&2; exit 1; }
 
-# Smoke check: the interfaces and rclpy import in the venv. It also byte-compiles the libraries every test worker
-# imports (the pip step above compiles nothing), once here rather than by three workers at once; the rest (plots,
-# the nodes' own modules) compiles at its first import.
+# Smoke check: the interfaces and rclpy import in the venv. It also byte-compiles the libraries
+# every test worker imports (the pip step above compiles nothing), once here rather than by three
+# workers at once; the rest (plots, the nodes' own modules) compiles at its first import.
 step "import check"
 PYTHONDONTWRITEBYTECODE= "$PY" -c 'import rclpy, tf2_msgs.msg, \
   hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_common, hindrax_drivers, \

@@ -39,8 +39,9 @@ WAIT_S = 30.0  # generous: a loaded two-core machine
 @pytest.fixture(scope="module")
 def topside():
     """(layout, probe on the topside domain, the statuses it read, its executor)."""
-    with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, fresh_domain() as top, \
-            ros_context(domain_id=top) as ctx, contextlib.ExitStack() as stack:
+    with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, \
+            fresh_domain() as top, ros_context(domain_id=top) as ctx, \
+            contextlib.ExitStack() as stack:
         name = load_config(lay.config).get("vehicle.name")
         create_key(lay.tmp / "keys" / f"{name}.key")  # the operator's key, on "both sides" (one folder here)
         lay.env = dict(lay.env, HINDRAX_KEYS_DIR=str(lay.tmp / "keys"))

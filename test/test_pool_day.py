@@ -367,7 +367,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
     rigged = contextlib.ExitStack()
     rig = rigged.enter_context(Rig(rig_cores, int(os.environ.get("HINDRAX_RIG_BUSY_LOOPS") or 0))) \
         if rig_cores else None
-    with rigged, fresh_domain() as topside_domain, LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
+    with rigged, fresh_domain() as topside_domain, \
+            LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
             ros_context(domain_id=topside_domain) as top_ctx:
         fill["<topside_domain>"] = str(topside_domain)
         topside_env = {**install.env, "ROS_DOMAIN_ID": str(topside_domain),

@@ -86,8 +86,8 @@ def test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start(tmp_p
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     # a domain of its own: the other tests here leave a node named esc or supervisor in this worker's domain's
     # discovery caches for a while, which would refuse the start itself
-    with fresh_domain() as fresh, ros_context(domain_id=fresh) as ctx, open(tmp_path / "stdout", "w") as out, \
-            open(tmp_path / "stderr", "w") as errf:
+    with fresh_domain() as fresh, ros_context(domain_id=fresh) as ctx, \
+            open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as errf:
         proc = subprocess.Popen([hindrax, *args], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path,
                                 stdout=out, stderr=errf)
         ex = SingleThreadedExecutor(context=ctx)

@@ -27,14 +27,15 @@ def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
         node.create_timer(0.1, lambda: pub.publish(DiagnosticStatus(level=b"\x02", name="supervisor", values=[
             KeyValue(key="disarm_cause", value="no valid DVL velocity")])))
         node.create_publisher(DiagnosticStatus, "/rov/silent", 10)  # on the graph, never sends
-        node.create_subscription(DiagnosticStatus, "/rov/only_read", lambda _m: None, 10)  # no publisher
+        # read, never published
+        node.create_subscription(DiagnosticStatus, "/rov/only_read", lambda _m: None, 10)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         env = child_env(ROS_DOMAIN_ID=str(fresh))
         # the missing and silent topics' timeouts are short: the test waits them out in full
         # (30 s of the suite's tail before)
-        topics = (("/rov/supervisor/status", "30"), ("/rov/no_such_topic", "3"), ("/rov/silent", "3"),
-                  ("/rov/only_read", "3"))
+        topics = (("/rov/supervisor/status", "30"), ("/rov/no_such_topic", "3"),
+                  ("/rov/silent", "3"), ("/rov/only_read", "3"))
         runs = [subprocess.Popen([hindrax, "topic", "echo", topic, "--count", "1",
                                   "--timeout", timeout_s], env=env,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -48,7 +49,8 @@ def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
                     p.kill()
             ex.shutdown()
             node.destroy_node()
-    (ok, missing, silent, only_read) = [(p.returncode, p.stdout.read(), p.stderr.read()) for p in runs]
+    ok, missing, silent, only_read = [(p.returncode, p.stdout.read(), p.stderr.read())
+                                      for p in runs]
     assert ok[0] == 0, ok
     text, end = ok[1].rsplit("---", 1)
     assert end.strip() == ""
@@ -57,8 +59,10 @@ def test_echo_prints_one_status_as_yaml_and_a_missing_topic_in_one_line():
     assert missing[0] == 1 and missing[2] == ("no topic /rov/no_such_topic within 3 s (is it "
                                               "spelled as the graph has it?)\n"), missing
     # found on the graph, then nothing: the line says whether anything publishes it, and which node
-    assert silent[0] == 1 and silent[2] == ("no message on /rov/silent within 3 s from its 1 publisher(s) "
-                                            "(/supervisor_stand_in): is the node sending (a status goes out on a "
-                                            "change or at its period)?\n"), silent
-    assert only_read[0] == 1 and only_read[2] == ("no message on /rov/only_read within 3 s: it has no publisher "
-                                                  "(only readers on the graph)\n"), only_read
+    assert silent[0] == 1, silent
+    assert silent[2] == ("no message on /rov/silent within 3 s from its 1 publisher(s) "
+                         "(/supervisor_stand_in): is the node sending (a status goes out on a "
+                         "change or at its period)?\n"), silent
+    assert only_read[0] == 1, only_read
+    assert only_read[2] == ("no message on /rov/only_read within 3 s: it has no publisher "
+                            "(only readers on the graph)\n"), only_read

@@ -33,12 +33,12 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 @pytest.fixture(scope="session")
 def ballast_goal_on_the_graph(tmp_path_factory) -> SimpleNamespace:
-    """One calibration-only ballast goal on the in-process graph (virtual pool, seed 4, recorder on, the step
-    shortened to 3 s of settling and 9 s of averaging: :data:`SHORT_HOLDS`), the operator played step by step as at
-    the pool; what the operator's calls answered and what a probe saw, for the tests that only read the run
-    (``test_calibration_graph``: prompts, continue and refusals; ``test_calibration_topic``: the step's result on
-    ``identification/calibration`` and in the bag). Each stage must come within :data:`STAGE_SIM_S` of simulated
-    time, else the fixture fails.
+    """One calibration-only ballast goal on the in-process graph (virtual pool, seed 4, recorder on,
+    the step shortened to 3 s of settling and 9 s of averaging: :data:`SHORT_HOLDS`), the operator
+    played step by step as at the pool; what the operator's calls answered and what a probe saw, for
+    the tests that only read the run (``test_calibration_graph``: prompts, continue and refusals;
+    ``test_calibration_topic``: the step's result on ``identification/calibration`` and in the bag).
+    Each stage must come within :data:`STAGE_SIM_S` of simulated time, else the fixture fails.
 
     Fields: ``continue_before_goal``, ``continue_attach``, ``continue_again``, ``continue_remove``,
     ``continue_after`` ((success, message) of ``identification/continue``); ``bad_goals_accepted`` (the unknown step

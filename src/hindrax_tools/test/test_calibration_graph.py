@@ -4,8 +4,8 @@ operator prompt in the action feedback and in ``identification/status``, the ``i
 VirtualOperator`) and the ``calibration.*`` keys of the vehicle file.
 
 The graph tests shorten the ballast step's settling and averaging times with the vehicle file's keys
-(``calibration.hold_settle_s``, ``hold_window_s``) so that a calibration-only goal takes about a minute of simulated
-time.
+(``calibration.hold_settle_s``, ``hold_window_s``) so that a calibration-only goal takes about a
+minute of simulated time.
 """
 from __future__ import annotations
 
@@ -144,10 +144,11 @@ def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(tmp_
     """`hindrax run --calibrate ballast` through the whole graph (recorder, bag): the virtual operator answers both
     prompts from the feedback (known weight in the simulator, identification/continue); the measured scale reaches
     identification.yaml. Without the weight applied the step would abort (holding force did not rise)."""
-    vehicle = _write(tmp_path, lambda prm: prm["calibration"].update(hold_settle_s=3.0, hold_window_s=9.0))
+    holds = {"hold_settle_s": 3.0, "hold_window_s": 9.0}
+    vehicle = _write(tmp_path, lambda prm: prm["calibration"].update(holds))
     out = tmp_path / "run"
-    rc = cli.main(["run", "--config", str(vehicle), "--calibrate", "ballast", "--dofs", "heave", "--levels", "1",
-                   "--seed", "2", "--out", str(out)])
+    rc = cli.main(["run", "--config", str(vehicle), "--calibrate", "ballast", "--dofs", "heave",
+                   "--levels", "1", "--seed", "2", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0, text[-3000:]
     assert "virtual operator: attach_ballast done" in text and "virtual operator: remove_ballast done" in text

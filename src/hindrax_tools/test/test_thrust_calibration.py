@@ -135,11 +135,12 @@ def test_calibrate_refuses_unknown_steps(capsys):
 
 
 def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys):
-    """Issue 26, the vertical part of --calibrate thrust, one seed: forward thrust x0.95, reverse x0.85 (the
-    "thrust_asymmetric" truth), the sinker and the float (the vehicle file's holds shortened to 8 s + 18 s), three
-    heave levels: heave inertia and quadratic damping of both directions within 5 % with 95 % intervals covering the
-    truth, each vertical direction's scale within 3 std. (`--calibrate ballast,line_pull` on this pool: heave
-    damping -22 % down, +26 % up, all suspect.) The horizontal pulls: test_line_pull_measures_... below and
+    """Issue 26, the vertical part of --calibrate thrust, one seed: forward thrust x0.95, reverse
+    x0.85 (the "thrust_asymmetric" truth), the sinker and the float (the vehicle file's holds
+    shortened to 8 s + 18 s), three heave levels: heave inertia and quadratic damping of both
+    directions within 5 % with 95 % intervals covering the truth, each vertical direction's scale
+    within 3 std. (`--calibrate ballast,line_pull` on this pool: heave damping -22 % down, +26 % up,
+    all suspect.) The horizontal pulls: test_line_pull_measures_... below and
     test_campaign_steps.py; the whole `--calibrate thrust` over five seeds: the scenario suite
     (docs/identification.md §6.2)."""
     doc = yaml.safe_load(default_config_path().read_text())
@@ -147,8 +148,9 @@ def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys
     vehicle = tmp_path / "hindrax.yaml"
     vehicle.write_text(yaml.safe_dump(doc))
     out = tmp_path / "run"
-    rc = cli.main(["ident", "campaign", "--config", str(vehicle), "--dofs", "heave", "--levels", "3", "--seed", "1",
-                   "--truth", str(ASYMMETRIC), "--calibrate", "ballast,float", "--out", str(out)])
+    rc = cli.main(["ident", "campaign", "--config", str(vehicle), "--dofs", "heave",
+                   "--levels", "3", "--seed", "1", "--truth", str(ASYMMETRIC),
+                   "--calibrate", "ballast,float", "--out", str(out)])
     assert rc == 0, capsys.readouterr().err
     doc = yaml.safe_load((out / "identification.yaml").read_text())
     assert set(doc["calibration"]["steps"]) == {"vertical", "vertical_negative"}

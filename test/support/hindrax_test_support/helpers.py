@@ -1,8 +1,9 @@
-"""Small helpers of a few tests: real-time priority, a counted burst's QoS, single raw transactions, fresh ROS
-domains."""
+"""Small helpers of a few tests: real-time priority, a counted burst's QoS, single raw
+transactions, fresh ROS domains."""
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import resource
 from typing import Any, Iterator
@@ -42,27 +43,21 @@ def unbatch_raw(msg: Any) -> list:
                           i2c_address=a, i2c_register=r, data=data) for d, a, r, data in raw_transactions(msg)]
 
 
-#: the ROS domain IDs :func:`fresh_domain` hands out: above the xdist workers' own (conftest.py: 2-28) and the
-#: lowest free ones that ``hindrax run`` reserves for itself (``run_domain``), within ROS 2's 0-101 on Linux
+#: the ROS domain IDs :func:`fresh_domain` hands out: above the xdist workers' own (conftest.py:
+#: 2-28) and the lowest free ones ``hindrax run`` reserves (``run_domain``), within ROS 2's 0-101
 FRESH_DOMAINS = range(40, 102)
-_fresh_last: list[int] = []
+#: where this process's next :func:`fresh_domain` starts looking (first: from the process ID)
+_next_domain = itertools.count(os.getpid())
 
 
 @contextlib.contextmanager
 def fresh_domain() -> Iterator[int]:
-    """A ROS domain ID for one test (a topside, a second vehicle), held for the block by ``domain_coordinator``'s
-    port lock as the workers' domains are, so no concurrent process gets it. Each call of a process goes on from
-    the ID its last call had (the first from the process ID), so a test never gets the domain an earlier test of
-    its worker just left, as ``domain_coordinator``'s lowest-free choice gives: a suite run on 2 cores had
-    ``hindrax bringup --sim`` refused on a fresh domain for an ``ESC /esc`` beside the test's own supervisor
+    """A ROS domain ID for one test (a topside, a second vehicle), held for the block by
+    ``domain_coordinator``'s port lock as the workers' domains are, so no concurrent process gets
+    it. The IDs tried go round :data:`FRESH_DOMAINS` from where this process's last call stopped,
+    so a test never gets the domain an earlier test of its worker just left, as
+    ``domain_coordinator``'s lowest-free choice gives: a suite run on 2 cores had ``hindrax bringup
+    --sim`` refused on a fresh domain for an ``ESC /esc`` beside the test's own supervisor
     (2026-11-29). Raises RuntimeError when every ID of :data:`FRESH_DOMAINS` is taken."""
-    n = len(FRESH_DOMAINS)
-    state = _fresh_last or [os.getpid() % n]
-
-    def select() -> int:
-        state[0] = (state[0] + 1) % n
-        return FRESH_DOMAINS[state[0]]
-
-    with domain_id(select) as did:
-        _fresh_last[:] = state
+    with domain_id(lambda: FRESH_DOMAINS[next(_next_domain) % len(FRESH_DOMAINS)]) as did:
         yield did

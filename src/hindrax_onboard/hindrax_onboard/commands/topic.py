@@ -4,8 +4,8 @@ The pip wheels of the venv carry rclpy but not ``ros2 topic``; the README's pool
 (``/<name>/supervisor/status``: ``disarm_cause``) with this. The topic's type is the one the graph shows (waited for up
 to ``--timeout`` s); each message prints as YAML (field order of the message definition), ``---`` after each, as
 ``ros2 topic echo`` does. Subscribed best effort, volatile: it hears reliable and best-effort publishers alike.
-Exit 0 after ``--count`` messages (0: until Ctrl-C), 1 when the topic or a message does not come within the timeout
-(the line then says whether the topic has a publisher at all, and which)."""
+Exit 0 after ``--count`` messages (0: until Ctrl-C), 1 when the topic or a message does not come
+within the timeout (the line then says whether the topic has a publisher at all, and which)."""
 from __future__ import annotations
 
 import argparse
@@ -41,13 +41,14 @@ def plain(value: Any) -> Any:
 
 
 def silence(topic: str, timeout_s: float, publishers: list) -> str:
-    """The one line for a topic that sent nothing within ``timeout_s``: whether the graph shows any publisher of it
-    (``publishers``: rclpy's ``TopicEndpointInfo`` list), and which nodes they are."""
+    """The one line for a topic that sent nothing within ``timeout_s``: whether the graph shows
+    any publisher of it (``publishers``: rclpy's ``TopicEndpointInfo`` list), and which nodes."""
+    silent = f"no message on {topic} within {timeout_s:g} s"
     if not publishers:
-        return f"no message on {topic} within {timeout_s:g} s: it has no publisher (only readers on the graph)"
+        return f"{silent}: it has no publisher (only readers on the graph)"
     names = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in publishers})
-    return (f"no message on {topic} within {timeout_s:g} s from its {len(publishers)} publisher(s) "
-            f"({', '.join(names)}): is the node sending (a status goes out on a change or at its period)?")
+    return (f"{silent} from its {len(publishers)} publisher(s) ({', '.join(names)}): is the node "
+            f"sending (a status goes out on a change or at its period)?")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,10 +72,10 @@ def run(args: argparse.Namespace) -> int:
         node.create_subscription(cls, args.topic, got.append,
                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         try:
-            wait_for(executor, lambda: got, args.timeout, f"no message on {args.topic}", "is its publisher running?")
-        except CommandError:
-            raise CommandError(silence(args.topic, args.timeout, node.get_publishers_info_by_topic(args.topic))) \
-                from None
+            wait_for(executor, lambda: got, args.timeout, f"no message on {args.topic}", "")
+        except CommandError:  # the line says what the graph shows of its publishers instead
+            publishers = node.get_publishers_info_by_topic(args.topic)
+            raise CommandError(silence(args.topic, args.timeout, publishers)) from None
         shown = 0
         while not args.count or shown < args.count:
             while got and (not args.count or shown < args.count):
