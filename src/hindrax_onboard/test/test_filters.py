@@ -174,3 +174,28 @@ def test_linear_kalman_steps_as_filterpy_does():
         np.testing.assert_allclose(own.x, ref.x, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(own.P, ref.P, rtol=1e-12, atol=1e-12)
     assert own.P[2, 2] < p0[2, 2]  # the filter did fuse: the acceleration is known better than at the start
+
+
+@pytest.mark.parametrize("rows", [[0], [2], [0, 2], [1, 2]])
+def test_linear_kalman_update_of_one_or_two_rows_is_the_textbook_one(rows):
+    """One or two measurement rows (the closed-form inverse of estimation/kalman.py) give the gain of
+    K = P H^T (H P H^T + R)^-1 with ``numpy.linalg.inv`` ([Bar-Shalom2001] §5.2), and a singular innovation
+    covariance raises ``LinAlgError`` as ``numpy.linalg.inv`` does."""
+    from hindrax_onboard.estimation.kalman import LinearKalman
+
+    rng = np.random.default_rng(len(rows) * 10 + rows[0])
+    a = rng.normal(size=(3, 3))
+    p, x = a @ a.T + np.eye(3), rng.normal(size=(3, 1))
+    H = np.eye(3)[rows]
+    R = np.diag(rng.uniform(1e-3, 1.0, len(rows)))
+    z = rng.normal(size=(len(rows), 1))
+    gain = p @ H.T @ np.linalg.inv(H @ p @ H.T + R)
+    own = LinearKalman(3)
+    own.x, own.P = x.copy(), p.copy()
+    own.update(z, H=H, R=R)
+    np.testing.assert_allclose(own.x, x + gain @ (z - H @ x), rtol=1e-12, atol=1e-12)
+    i_kh = np.eye(3) - gain @ H
+    np.testing.assert_allclose(own.P, i_kh @ p @ i_kh.T + gain @ R @ gain.T, rtol=1e-12, atol=1e-12)
+    own.P = np.zeros((3, 3))
+    with pytest.raises(np.linalg.LinAlgError):
+        own.update(z, H=H, R=np.zeros_like(R))
