@@ -30,6 +30,7 @@ import pytest
 import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
+from hindrax_test_support.vehicle_files import vehicle_file
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, Imu, Range
@@ -330,8 +331,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
     machines = [m for m, _ in lines]
     assert machines[0] == "vehicle" and "topside" in machines and (("vehicle", STOP_LAUNCH) in lines), lines
     # the vehicle file of this vehicle: the installed one, its oscillator measured (`hindrax esc calibrate --write`)
-    doc = yaml.safe_load((install.share("hindrax_common") / "config" / "hindrax.yaml").read_text())
-    doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True
+    edits = {"esc.oscillator_calibrated": True}
     # the ballast step's holds shorter than the defaults (15 s settle, 30 s averaged: 105 of the
     # campaign's 190 s of pool time) with the vehicle file's own keys: the same steps, prompts and
     # fit in a campaign of about 124 s. The same campaign in `hindrax run` (virtual pool, seed of
@@ -340,15 +340,15 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
     # defaults: there the whole campaign's length on a Pi's budget is what is measured.
     rig_cores = float(os.environ.get("HINDRAX_RIG_CORES") or 0)
     if not rig_cores:
-        doc["/**"]["ros__parameters"]["calibration"].update(hold_settle_s=6.0, hold_window_s=12.0)
-    vehicle_file = tmp_path / "hindrax.yaml"
-    vehicle_file.write_text(yaml.safe_dump(doc))
-    cfg = load_config(vehicle_file)
+        edits.update({"calibration.hold_settle_s": 6.0, "calibration.hold_window_s": 12.0})
+    vehicle = vehicle_file(tmp_path / "hindrax.yaml", edits,
+                           install.share("hindrax_common") / "config" / "hindrax.yaml")
+    cfg = load_config(vehicle)
     name = cfg.vehicle.name
     runs = tmp_path / "runs"
     # the operator key: `hindrax keys` writes it on the vehicle; the topside's copy is the same file on this machine
     keys = {"HINDRAX_KEYS_DIR": str(tmp_path / "keys")}
-    vehicle_env = {**install.env, "HINDRAX_CONFIG": str(vehicle_file), **keys}
+    vehicle_env = {**install.env, "HINDRAX_CONFIG": str(vehicle), **keys}
     # the topside PC's folder of copied bags; `rsync -a pi@<vehicle>:SRC DST/` is a local copy on this one machine
     topside_runs = tmp_path / "topside_runs"
     fill: dict[str, str] = {"/var/lib/hindrax/runs": str(runs), "~/runs": str(topside_runs), "pi@<vehicle>:": "",
@@ -368,7 +368,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
     rig = rigged.enter_context(Rig(rig_cores, int(os.environ.get("HINDRAX_RIG_BUSY_LOOPS") or 0))) \
         if rig_cores else None
     with rigged, fresh_domain() as topside_domain, \
-            LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
+            LivePool(vehicle, tmp_path / "pool", env=child_env()) as pool, \
             ros_context(domain_id=topside_domain) as top_ctx:
         fill["<topside_domain>"] = str(topside_domain)
         topside_env = {**install.env, "ROS_DOMAIN_ID": str(topside_domain),
@@ -388,7 +388,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
             words = line.split()
             assert words[:4] == ["ros2", "launch", "hindrax_onboard", "pool_test.launch.xml"], line
             args = dict(w.split(":=", 1) for w in words[4:])
-            d = Day(install, pool, "hindrax_onboard/pool_test.launch.xml", {"config": str(vehicle_file), **args},
+            d = Day(install, pool, "hindrax_onboard/pool_test.launch.xml", {"config": str(vehicle), **args},
                     env={**install.env, **keys}, prefix=tuple(rig.prefix) if rig else ())
             d.__enter__()
             d.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
@@ -578,15 +578,14 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     from hindrax_msgs.srv import SetArmed
 
     install = colcon_install
-    doc = yaml.safe_load((install.share("hindrax_common") / "config" / "hindrax.yaml").read_text())
-    doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True  # `hindrax esc calibrate --write` done
-    vehicle_file = tmp_path / "hindrax.yaml"
-    vehicle_file.write_text(yaml.safe_dump(doc))
-    cfg = load_config(vehicle_file)
+    # `hindrax esc calibrate --write` done
+    vehicle = vehicle_file(tmp_path / "hindrax.yaml", {"esc.oscillator_calibrated": True},
+                           install.share("hindrax_common") / "config" / "hindrax.yaml")
+    cfg = load_config(vehicle)
     neutral = cfg.thrusters.pulse_width_neutral_us
     timeout_s = cfg.esc.guard_heartbeat_timeout_s
     with EmulatedDevices(cfg, tmp_path / "devices") as dev, \
-            Day(install, dev, "hindrax_bringup/vehicle.launch.xml", {"config": str(vehicle_file)}) as day:
+            Day(install, dev, "hindrax_bringup/vehicle.launch.xml", {"config": str(vehicle)}) as day:
         pwm: list[tuple[float, bool, float]] = []
         beats: list[float] = []
         guard: list[tuple[float, int, str]] = []

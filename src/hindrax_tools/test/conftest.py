@@ -7,6 +7,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import pytest
+from hindrax_test_support.vehicle_files import SHORT_HOLDS
 
 
 #: session fixtures that run something long (a graph, a campaign) for several tests that only read the outcome
@@ -14,8 +15,6 @@ SHARED_RUNS = ("ballast_goal_on_the_graph",)
 #: each stage of the shortened ballast goal (first prompt: +34 s of simulated time; the whole goal about a minute)
 #: must come within this much SIMULATED time: the bound is the design's, the same on any machine
 STAGE_SIM_S = 120.0
-#: the ballast step's holds of the shared run, the vehicle file's keys (defaults 15 s and 30 s), s
-SHORT_HOLDS = {"calibration.hold_settle_s": 3.0, "calibration.hold_window_s": 9.0}
 #: wall-clock guard of each stage, only against a hang: the in-process graph runs the simulator as fast as the
 #: machine allows (real_time_factor 0), so a loaded machine takes longer for the same simulated time
 STAGE_WALL_S = 500.0

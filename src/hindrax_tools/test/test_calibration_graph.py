@@ -14,23 +14,15 @@ import math
 import numpy as np
 import pytest
 import yaml
+from hindrax_test_support.vehicle_files import SHORT_HOLDS, vehicle_file
 
-from hindrax_common.config import ConfigError, default_config_path, load_config, ros_parameters_from_yaml
+from hindrax_common.config import ConfigError, default_config_path, load_config
 from hindrax_tools import cli
 from hindrax_onboard.identification.online import executive
 from hindrax_sim.graph.graph_campaign import VirtualOperator, parse_prompt
 
 # the shipped keys: 1 kg of steel (7850 kg/m^3), in water of 1000 kg/m^3 with g = 9.81 m/s^2
 W_BALLAST = (1.0 - 1000.0 / 7850.0) * 9.81
-
-
-def _write(tmp_path, mutate):
-    doc = yaml.safe_load(default_config_path().read_text())
-    params = ros_parameters_from_yaml(doc)
-    mutate(params)
-    p = tmp_path / "v.yaml"
-    p.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    return p
 
 
 @pytest.mark.parametrize("key, value, allowed", [
@@ -42,7 +34,7 @@ def _write(tmp_path, mutate):
                                    "calibration.inclining_mass_kg"),
 ])
 def test_calibration_keys_are_validated_with_one_line_naming_key_value_and_range(tmp_path, key, value, allowed):
-    p = _write(tmp_path, lambda prm: prm["calibration"].update({key: value}))
+    p = vehicle_file(tmp_path / "v.yaml", {f"calibration.{key}": value})
     with pytest.raises(ConfigError) as exc:
         load_config(p)
     lines = exc.value.lines()
@@ -144,8 +136,7 @@ def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(tmp_
     """`hindrax run --calibrate ballast` through the whole graph (recorder, bag): the virtual operator answers both
     prompts from the feedback (known weight in the simulator, identification/continue); the measured scale reaches
     identification.yaml. Without the weight applied the step would abort (holding force did not rise)."""
-    holds = {"hold_settle_s": 3.0, "hold_window_s": 9.0}
-    vehicle = _write(tmp_path, lambda prm: prm["calibration"].update(holds))
+    vehicle = vehicle_file(tmp_path / "v.yaml", SHORT_HOLDS)
     out = tmp_path / "run"
     rc = cli.main(["run", "--config", str(vehicle), "--calibrate", "ballast", "--dofs", "heave",
                    "--levels", "1", "--seed", "2", "--out", str(out)])

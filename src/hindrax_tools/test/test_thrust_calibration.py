@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 import yaml
+from hindrax_test_support.vehicle_files import vehicle_file
 
 from hindrax_common.config import default_config_path, load_config
 from hindrax_tools import cli
@@ -143,10 +144,8 @@ def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys
     all suspect.) The horizontal pulls: test_line_pull_measures_... below and
     test_campaign_steps.py; the whole `--calibrate thrust` over five seeds: the scenario suite
     (docs/identification.md §6.2)."""
-    doc = yaml.safe_load(default_config_path().read_text())
-    doc["/**"]["ros__parameters"]["calibration"].update(hold_settle_s=8.0, hold_window_s=18.0)
-    vehicle = tmp_path / "hindrax.yaml"
-    vehicle.write_text(yaml.safe_dump(doc))
+    vehicle = vehicle_file(tmp_path / "hindrax.yaml", {"calibration.hold_settle_s": 8.0,
+                                                        "calibration.hold_window_s": 18.0})
     out = tmp_path / "run"
     rc = cli.main(["ident", "campaign", "--config", str(vehicle), "--dofs", "heave",
                    "--levels", "3", "--seed", "1", "--truth", str(ASYMMETRIC),
