@@ -388,7 +388,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
             words = line.split()
             assert words[:4] == ["ros2", "launch", "hindrax_onboard", "pool_test.launch.xml"], line
             args = dict(w.split(":=", 1) for w in words[4:])
-            d = Day(install, pool, "hindrax_onboard/pool_test.launch.xml", {"config": str(vehicle), **args},
+            d = Day(install, pool, "hindrax_onboard/pool_test.launch.xml",
+                    {"config": str(vehicle), **args},
                     env={**install.env, **keys}, prefix=tuple(rig.prefix) if rig else ())
             d.__enter__()
             d.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
@@ -585,7 +586,8 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     neutral = cfg.thrusters.pulse_width_neutral_us
     timeout_s = cfg.esc.guard_heartbeat_timeout_s
     with EmulatedDevices(cfg, tmp_path / "devices") as dev, \
-            Day(install, dev, "hindrax_bringup/vehicle.launch.xml", {"config": str(vehicle)}) as day:
+            Day(install, dev, "hindrax_bringup/vehicle.launch.xml",
+                {"config": str(vehicle)}) as day:
         pwm: list[tuple[float, bool, float]] = []
         beats: list[float] = []
         guard: list[tuple[float, int, str]] = []

@@ -195,8 +195,8 @@ def test_installed_allocation_answers_a_wrench_and_static_tf_is_latched(install)
                 w.wrench.force.x = 10.0
                 pub.publish(w)
                 spin()
-            # a wrench delivered late on a loaded machine is stale and answered with neutral (fail closed): send
-            # fresh ones until one is answered with thrust
+            # a wrench delivered late on a loaded machine is stale and answered with neutral
+            # (fail closed): send fresh ones until one is answered with thrust
             wait_until(lambda: any(max(m.pulse_width_us) > 1500.0 for m in pwm), 20, send,
                        "thrust from the installed allocation_node")
             assert {len(m.pulse_width_us) for m in pwm} == {8}

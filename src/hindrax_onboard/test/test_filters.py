@@ -178,9 +178,9 @@ def test_linear_kalman_steps_as_filterpy_does():
 
 @pytest.mark.parametrize("rows", [[0], [2], [0, 2], [1, 2]])
 def test_linear_kalman_update_of_one_or_two_rows_is_the_textbook_one(rows):
-    """One or two measurement rows (the closed-form inverse of estimation/kalman.py) give the gain of
-    K = P H^T (H P H^T + R)^-1 with ``numpy.linalg.inv`` ([Bar-Shalom2001] §5.2), and a singular innovation
-    covariance raises ``LinAlgError`` as ``numpy.linalg.inv`` does."""
+    """One or two measurement rows (the closed-form inverse of estimation/kalman.py) give the
+    gain of K = P H^T (H P H^T + R)^-1 with ``numpy.linalg.inv`` ([Bar-Shalom2001] §5.2), and a
+    singular innovation covariance raises ``LinAlgError`` as ``numpy.linalg.inv`` does."""
     from hindrax_onboard.estimation.kalman import LinearKalman
 
     rng = np.random.default_rng(len(rows) * 10 + rows[0])

@@ -1,5 +1,6 @@
-"""Vehicle files a test writes: the shipped (or installed) ``hindrax.yaml`` with a few keys changed, the way a user
-edits theirs and passes it with ``--config`` or ``config:=``; one writer for every test that needs one."""
+"""Vehicle files a test writes: the shipped (or installed) ``hindrax.yaml`` with a few keys
+changed, the way a user edits theirs and passes it with ``--config`` or ``config:=``; one writer
+for every test that needs one."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,15 +10,17 @@ import yaml
 
 from hindrax_common.config import default_config_path, load_config, ros_parameters_from_yaml
 
-#: the ballast step's holds shortened for tests (the vehicle file's keys; defaults 15 s of settling, 30 s averaged), s
+#: the ballast step's holds shortened for tests (the vehicle file's keys; defaults: 15 s of
+#: settling, 30 s averaged), s
 SHORT_HOLDS = {"calibration.hold_settle_s": 3.0, "calibration.hold_window_s": 9.0}
 
 
 def vehicle_file(path: Path, overrides: Mapping[str, Any], source: Path | None = None) -> Path:
-    """Write ``source`` (default: the shipped vehicle file) to ``path`` with ``overrides`` (dotted keys as in the
-    file, ``{"calibration.hold_settle_s": 6.0}``) set, sections made where the file leaves a key at its default;
-    returns ``path``. The values are not checked (a test of a refusal writes a bad one). Raises KeyError for a key the
-    loader does not know (a misspelt key would otherwise be a test of the defaults)."""
+    """Write ``source`` (default: the shipped vehicle file) to ``path`` with ``overrides`` (dotted
+    keys as in the file, ``{"calibration.hold_settle_s": 6.0}``) set, sections made where the file
+    leaves a key at its default; returns ``path``. The values are not checked (a test of a refusal
+    writes a bad one). Raises KeyError for a key the loader does not know (a misspelt key would
+    otherwise be a test of the defaults)."""
     source = Path(source or default_config_path())
     config = load_config(source)
     params = ros_parameters_from_yaml(yaml.safe_load(source.read_text()))
@@ -34,7 +37,8 @@ def vehicle_file(path: Path, overrides: Mapping[str, Any], source: Path | None =
 
 
 def _known(config: Any, key: str) -> bool:
-    """Whether the loader knows ``key``: set in the file, or a field of its section left at its default."""
+    """Whether the loader knows ``key``: set in the file, or a field of its section left at its
+    default."""
     if key in config.flat:
         return True
     node = config

@@ -73,11 +73,12 @@ class SerialTransport:
         on_disconnect: called with the error text when the port is lost (from the reader thread, or
             from the writing thread when a write fails).
         reconnect_initial_s, reconnect_max_s: backoff bounds between open attempts, s.
-        read_timeout_s: pyserial read timeout: the longest a read waits for a first byte, s (writes: 1 s).
-            :meth:`close` and :meth:`pump` cancel a read in progress (``cancel_read``), so it bounds neither; it sets
-            how often an idle reader wakes. 0.5 s: at a device's 10 Hz the reader wakes once a message, 11.2-11.8
-            wake-ups/s and 0.1-0.2 % of a core, against 20.8-21.2 and 0.4-0.5 % at 0.05 s (a pty, 10 s of a
-            45-byte message every 0.1 s, 2026-11-29).
+        read_timeout_s: pyserial read timeout: the longest a read waits for a first byte, s
+            (writes: 1 s). :meth:`close` and :meth:`pump` cancel a read in progress
+            (``cancel_read``), so it bounds neither; it sets how often an idle reader wakes. 0.5 s:
+            at a device's 10 Hz the reader wakes once a message, 11.2-11.8 wake-ups/s and 0.1-0.2 %
+            of a core, against 20.8-21.2 and 0.4-0.5 % at 0.05 s (a pty, 10 s of a 45-byte message
+            every 0.1 s, 2026-11-29).
         clock: monotonic clock for tap timestamps (default ``time.monotonic``).
         start: start the reader thread immediately (it opens the port itself).
     Raises ``ValueError``: non-positive timing parameters."""
@@ -85,7 +86,8 @@ class SerialTransport:
     def __init__(self, port: str, baudrate: int = 115200, *, on_data: Optional[Callable[[bytes], None]] = None,
                  on_raw: Optional[Callable[[str, bytes, float], None]] = None,
                  on_connect: Optional[Callable[[], None]] = None, on_disconnect: Optional[Callable[[str], None]] = None,
-                 reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0, read_timeout_s: float = 0.5,
+                 reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0,
+                 read_timeout_s: float = 0.5,
                  clock: Callable[[], float] = time.monotonic, start: bool = True) -> None:
         if reconnect_initial_s <= 0 or reconnect_max_s < reconnect_initial_s:
             raise ValueError("need 0 < reconnect_initial_s <= reconnect_max_s")

@@ -50,9 +50,10 @@ class LinearKalman:
 
 
 def _inverse(s: np.ndarray) -> np.ndarray:
-    """The inverse of the innovation covariance ``s`` (m, m). One or two measurements (every online filter's) by the
-    adjugate over the determinant: ``numpy.linalg.inv``'s dispatch costs about 45 us a call, most of a sample's
-    update in the node processes; more by ``numpy.linalg.inv``. Raises numpy.linalg.LinAlgError when singular."""
+    """The inverse of the innovation covariance ``s`` (m, m). One or two measurements (every online
+    filter's) by the adjugate over the determinant, 1.8-3.2 us a call here against 9.5 us for
+    ``numpy.linalg.inv``'s dispatch; more by ``numpy.linalg.inv``. Raises
+    numpy.linalg.LinAlgError when singular."""
     m = s.shape[0]
     if m == 1:
         det = float(s[0, 0])
