@@ -310,7 +310,15 @@ def test_lost_magnetometer_is_retried_periodically_until_it_answers_again(rig):
     reconnected_ns = r.node.get_clock().now().nanoseconds
     r.emu.aux_connected = True
     r.wait(lambda: len(r.mag) >= n_mag + 5, 10, "imu/mag published again")
-    assert r.node.mag_available and r.node.diag.counts().get("mag_lost") == 1
+    assert r.node.mag_available
+    # lost once, when it was pulled; another loss only where this process stalled past the stale
+    # timeout (an IMU gap as long: no fresh AK09916 sample either, a loss by design). A fresh clone
+    # under load counted 3 losses once (2026-11-29).
+    timeout_ns = r.node.mag.stale_timeout_s * 1e9
+    stamps = [stamp_ns(m) for m in r.imu]
+    stalls = sum(b - a > timeout_ns for a, b in zip(stamps, stamps[1:]))
+    lost = r.node.diag.counts().get("mag_lost")
+    assert lost == 1 or 1 < lost <= 1 + stalls, (lost, stalls, np.diff(stamps).max() / 1e9)
     assert all(stamp_ns(m) > reconnected_ns for m in r.mag[n_mag:])
     assert all(np.allclose(vec(m.magnetic_field), MAG, atol=5e-6 + 2e-6) for m in r.mag[n_mag:])
     r.wait(lambda: r.node.diag.status().level == DiagnosticStatus.OK, 5, "magnetometer ERROR cleared")
