@@ -22,12 +22,13 @@ import signal
 import subprocess
 import threading
 import time
+from typing import Callable
 
 import pytest
 import yaml
 from hindrax_test_support.helpers import fresh_domain
 
-from hindrax_common.testing import wait_until
+from hindrax_common.testing import ConditionTimeout, wait_until
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(2400)]
 
@@ -70,6 +71,23 @@ class _Lines:
                 return line
 
 
+def until_done(call: Callable[[], subprocess.CompletedProcess],
+               what: str) -> subprocess.CompletedProcess:
+    """Run ``call`` (a ``hindrax`` command) again until it exits 0, within :data:`WAIT_S`: the ESC
+    refuses to arm until its neutral period and the heartbeats are in, so the operator asks again
+    (each try is a command, not a sleep). Returns the answer; raises AssertionError naming the
+    number of tries and the last answer (a fresh clone's suite once timed out here on the second
+    day's arm, 180 s, without saying why: 2026-11-29)."""
+    tries: list[subprocess.CompletedProcess] = []
+    try:
+        wait_until(lambda: tries.append(call()) or tries[-1].returncode == 0, WAIT_S, None, what)
+    except ConditionTimeout as exc:
+        last = tries[-1] if tries else None
+        said = f"exit {last.returncode}: {last.stdout}{last.stderr}" if last else "nothing"
+        raise AssertionError(f"{exc}: {len(tries)} tries, the last answered {said}") from exc
+    return tries[-1]
+
+
 def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_path, pool_day_model):
     install = colcon_install
     with fresh_domain() as topside:
@@ -89,14 +107,13 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
                                      f"output_dir:={tmp_path / 'runs'}", "--timeout", str(WAIT_S)], env=vehicle_env,
                                     capture_output=True, text=True, timeout=WAIT_S + 60)
             assert health.returncode == 0 and "READY to dive" in health.stdout, health.stdout + health.stderr
-            # the ESC refuses until its neutral period and the heartbeats are in: the operator asks again (each try
-            # is a command, not a sleep), as test_pool_day's README walk does
-            tries: list[subprocess.CompletedProcess] = []
+            # as test_pool_day's README walk does
             for command in ("arm", "disarm"):
-                wait_until(lambda: tries.append(subprocess.run(["hindrax", command], env=topside_env,
-                                                               capture_output=True, text=True, timeout=120))
-                           or tries[-1].returncode == 0, WAIT_S, None, f"hindrax {command} on the topside")
-                assert tries[-1].stdout.strip() == f"{shells['topside']['HINDRAX_VEHICLE']}: {command}ed", tries[-1]
+                answer = until_done(lambda: subprocess.run(
+                    ["hindrax", command], env=topside_env, capture_output=True, text=True, timeout=120),
+                    f"hindrax {command} on the topside")
+                vehicle = shells["topside"]["HINDRAX_VEHICLE"]
+                assert answer.stdout.strip() == f"{vehicle}: {command}ed", answer
             # issue 74.4: ident continue with nothing awaited (the ESC disarmed) answers with the reason
             t0 = time.monotonic()
             cont = subprocess.run(["hindrax", "ident", "continue"], env=topside_env, capture_output=True, text=True,
@@ -109,7 +126,7 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             name = shells["topside"]["HINDRAX_VEHICLE"]
             hindrax = lambda *a: subprocess.run(["hindrax", *a], env=topside_env, capture_output=True,  # noqa: E731
                                                 text=True, timeout=WAIT_S)
-            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm before the campaign")
+            until_done(lambda: hindrax("arm"), "hindrax arm before the campaign")
             campaign = subprocess.Popen(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"],
                                         env=topside_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                         bufsize=1)
@@ -132,13 +149,13 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
                     campaign.wait(60)
             reset = hindrax("reset")
             assert reset.returncode == 0 and reset.stdout.startswith(f"{name}: "), reset
-            wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm after the reset")
+            until_done(lambda: hindrax("arm"), "hindrax arm after the reset")
             # the README's hold and its printed result: on the second day's launch, with the model
             assert hindrax("disarm").stdout.strip() == f"{name}: disarmed"
             # a whole heave campaign for the README's offline steps below, unless the session's README walk has
             # identified one already (test/conftest.py pool_day_model: the same launch, campaign, bag and fit)
             if "model" not in pool_day_model:
-                wait_until(lambda: hindrax("arm").returncode == 0, WAIT_S, None, "hindrax arm for the campaign")
+                until_done(lambda: hindrax("arm"), "hindrax arm for the campaign")
                 t0 = time.monotonic()
                 full = subprocess.run(["hindrax", "ident", "start", "--dofs", "heave", "--levels", "2"],
                                       env=topside_env, capture_output=True, text=True, timeout=CAMPAIGN_S)
@@ -196,9 +213,7 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
         try:
             out2.until("rehearsal: ", 120)
             topside_env = {**install.env, **_exports(str(tmp_path / "day2" / "topside.env"))}  # its own key
-            tries.clear()
-            wait_until(lambda: tries.append(hindrax("arm")) or tries[-1].returncode == 0, WAIT_S, None,
-                       "hindrax arm with the model")
+            until_done(lambda: hindrax("arm"), "hindrax arm with the model")
             hold = hindrax("control", "hold", "--altitude-m", "0.9", "--watch-s", "5")
             print(hold.stdout.strip())
             assert hold.returncode == 0 and f"{name}: over the last 5 s (" in hold.stdout and \
