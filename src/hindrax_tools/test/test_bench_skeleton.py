@@ -41,7 +41,9 @@ def launch_topology(tmp_path_factory):
             stderr=subprocess.STDOUT))
             for lp in layout}
         # signalled only once both are on the graph (SIGUSR1 ends a process without the handler),
-        # then read until two reads agree (the nodes made every endpoint)
+        # then read until every node is in an executor (its constructor made every endpoint: a
+        # fresh clone's suite read the supervisor while it declared its parameters, before its
+        # subscriptions, 2026-11-29) and two reads agree
         with ros_context() as ctx:
             probe = rclpy.create_node("skeleton_test_probe", context=ctx)
             wait_until(lambda: {"supervisor", "gateway"} <= set(probe.get_node_names()), 120, None,
@@ -53,7 +55,7 @@ def launch_topology(tmp_path_factory):
             assert all(p.poll() is None for p in procs.values()), "a launch process exited"
             seen.append(stack.read_topologies(procs, tmp))
             return (len(seen) > 1 and seen[-1] == seen[-2]
-                    and all(t["nodes"] for t in seen[-1].values()))
+                    and all(t["nodes"] and t["spinning"] for t in seen[-1].values()))
 
         wait_until(stable, 120, None, "the launch processes' topology")
         envs = {lp.label: ([], dict(lp.process.env)) for lp in layout}

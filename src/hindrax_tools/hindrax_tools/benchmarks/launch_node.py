@@ -88,7 +88,9 @@ def topology(nodes: Any) -> dict:
 
 
 def _dump_topology_on_sigusr1(directory: str) -> None:
-    """On SIGUSR1, :func:`topology` of this process's nodes (not ``_exit_``) to ``<pid>.json``."""
+    """On SIGUSR1, :func:`topology` of this process's nodes (not ``_exit_``) to ``<pid>.json``, with
+    ``"spinning"``: every node is in an executor (its constructor, which makes its endpoints, has
+    returned; a node is on the graph from its first line)."""
     nodes: weakref.WeakSet = weakref.WeakSet()
     init = Node.__init__
 
@@ -99,7 +101,8 @@ def _dump_topology_on_sigusr1(directory: str) -> None:
     def dump(*_: Any) -> None:
         alive = [n for n in list(nodes) if not n.get_name().startswith("_exit_")]
         path = Path(directory) / f"{os.getpid()}.json"
-        path.with_suffix(".tmp").write_text(json.dumps(topology(alive)))
+        spinning = bool(alive) and all(n.executor is not None for n in alive)
+        path.with_suffix(".tmp").write_text(json.dumps({**topology(alive), "spinning": spinning}))
         os.replace(path.with_suffix(".tmp"), path)
 
     Node.__init__ = tracked_init
