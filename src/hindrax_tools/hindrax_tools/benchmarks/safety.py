@@ -83,7 +83,7 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from hindrax_common.node_support.liveness import heartbeat_qos
+from hindrax_common.node_support.liveness import HEARTBEAT_NAMES, heartbeat_qos
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_bringup.recording.reader import BagReader
@@ -563,6 +563,17 @@ class _Layout:
         lines = [ln for ln in path.read_text().splitlines() if containing in ln] if path.exists() else []
         return lines[-1] if lines else ""
 
+    def process_states(self) -> str:
+        """Each node process's state (running, exited N, not started), its heartbeat's publishers in the probe's
+        graph and its last log line, for a failure message."""
+        states = []
+        for name in PROCESSES:
+            p = self.procs.get(name)
+            state = "not started" if p is None else "running" if p.poll() is None else f"exited {p.returncode}"
+            states.append(f"{name} {state}, {self.probe.count_publishers(HEARTBEAT_NAMES[name])} heartbeat "
+                          f"publisher(s), last log line {self._last_log_line(name, '')!r}")
+        return "; ".join(states)
+
     # -- vehicle
     def call(self, client, request, timeout: float = 3.0, attempts: int = 10):
         """A service call, asked again when no answer comes (a killed server's endpoint is still discovered for a
@@ -574,11 +585,8 @@ class _Layout:
                 return fut.result()
             except ConditionTimeout:
                 client.remove_pending_request(fut)
-        name = client.srv_name.strip("/").split("/")[0]  # the serving process (esc/set_armed, supervisor/reset)
-        p = self.procs.get(name)
-        state = "not started" if p is None else "running" if p.poll() is None else f"exited {p.returncode}"
-        raise ConditionTimeout(f"no answer from {client.srv_name} after {attempts} attempts of {timeout:g} s; its "
-                               f"process {state}, its last log line {self._last_log_line(name, '')!r}")
+        raise ConditionTimeout(f"no answer from {client.srv_name} after {attempts} attempts of {timeout:g} s; "
+                               f"{self.process_states()}")
 
     def armed_at_1700(self) -> None:
         """(Re)start what is not running, arm (retrying while the ESC still refuses), command 1700 us until it is
@@ -586,8 +594,10 @@ class _Layout:
         self.hw.watch = False
         self.commanding = self.arming = False
         self.ensure()
-        wait_until(lambda: self.arm_client.service_is_ready() and self.reset_client.service_is_ready(), 60, None,
-                   "processes up")
+        # up: the two services, and each safety heartbeat in the graph (the ESC refuses to arm while the guard's is
+        # not: a guard still starting on a loaded machine is not a refusal to report)
+        wait_until(lambda: self.arm_client.service_is_ready() and self.reset_client.service_is_ready() and all(
+            self.probe.count_publishers(t) for t in HEARTBEAT_NAMES.values()), 60, None, "processes up")
         if self.last_msg is not None and self.last_msg.armed:
             # still armed from the caller's previous step, its commands stopped above: disarm first, or the 1700 us
             # found on the wire below may be the old arm's, with the ESC watchdog's neutral still to come
@@ -608,7 +618,7 @@ class _Layout:
             try:
                 wait_until(arm, 30, None, "armed")
             except Exception as exc:
-                raise RuntimeError(f"{exc}: last answer {answer[0]!r}") from exc
+                raise RuntimeError(f"{exc}: last answer {answer[0]!r}; {self.process_states()}") from exc
             self.commanding = True
             try:
                 wait_until(lambda: self.disarmed_after_arm or (
