@@ -40,7 +40,7 @@ from hindrax_common.config import DOFS, VehicleConfig
 from hindrax_common.base.frames import wrap_angle
 
 from ..estimation.kalman import LinearKalman
-from ..vehicle.state import rotation_ned_from_body
+from ..vehicle.state import all_finite, finite_or_zero, finite_or_zeros, rotation_ned_from_body
 from .model import AxisModel, ControlModel
 
 __all__ = ["ControlSettings", "AxisGains", "design_gains", "ReferenceModel", "PositionAxis", "VelocityAxis",
@@ -511,12 +511,12 @@ class Controller:
         """Measured horizontal velocity (north, east; m/s): the DVL's body velocity turned by the heading (0 when
         unknown)."""
         u, v = (float(x) if math.isfinite(x) else 0.0 for x in np.asarray(inp.velocity_frd_m_s, dtype=float)[:2])
-        psi = float(np.nan_to_num(inp.rpy_rad[2]))
+        psi = finite_or_zero(inp.rpy_rad[2])
         return np.array([math.cos(psi) * u - math.sin(psi) * v, math.sin(psi) * u + math.cos(psi) * v])
 
     def _floor_samples(self, inp: ControlInput) -> None:
         """Fuse the new Ping1D range and DVL beam ranges of ``inp`` as floor points (:class:`FloorEstimator`)."""
-        if not math.isfinite(inp.depth_m) or not np.all(np.isfinite(inp.rpy_rad)):
+        if not math.isfinite(inp.depth_m) or not all_finite(inp.rpy_rad):
             return
         rot = rotation_ned_from_body(*inp.rpy_rad)
         v_ne = self._velocity_ne(inp)
@@ -546,7 +546,7 @@ class Controller:
         su, sw = self.axes["surge"], self.axes["sway"]
         if not (su.engaged and sw.engaged):
             return self._velocity_ne(inp), np.zeros(2)
-        psi = float(np.nan_to_num(inp.rpy_rad[2]))
+        psi = finite_or_zero(inp.rpy_rad[2])
         c, s_ = math.cos(psi), math.sin(psi)
         rot = np.array([[c, -s_], [s_, c]])
         return rot @ np.array([su.ud, sw.ud]), rot @ np.array([su.ud_rate, sw.ud_rate])
@@ -556,8 +556,8 @@ class Controller:
         """Body FRD wrench (6,) (N, N m) of the holds for one tick of ``dt`` s; DOFs in ``free`` get 0 and are
         released (module docstring)."""
         w = np.zeros(6)
-        rpy = np.nan_to_num(np.asarray(inp.rpy_rad, dtype=float))
-        rates = np.nan_to_num(np.asarray(inp.rates_frd_rad_s, dtype=float))
+        rpy = finite_or_zeros(inp.rpy_rad)
+        rates = finite_or_zeros(inp.rates_frd_rad_s)
         vel = np.asarray(inp.velocity_frd_m_s, dtype=float)
         self._floor_samples(inp)
         for k, dof in enumerate(("surge", "sway")):
@@ -572,7 +572,7 @@ class Controller:
                                      (4, "pitch", self.attitude_rad[1], inp.rpy_rad[:2]),
                                      (5, "yaw", self.heading_rad, inp.rpy_rad[2:])):
             ax = self.axes[dof]
-            if dof in free or not math.isfinite(sp) or not np.all(np.isfinite(measured)):
+            if dof in free or not math.isfinite(sp) or not all_finite(measured):
                 ax.release()
                 continue
             w[k] = ax.update(float(sp), float(rpy[k - 3]), float(rates[k - 3]), dt)

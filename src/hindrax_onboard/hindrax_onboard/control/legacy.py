@@ -15,6 +15,7 @@ import numpy as np
 from hindrax_common.config import DOFS, VehicleConfig
 from hindrax_common.base.frames import wrap_angle
 
+from ..vehicle.state import finite_or_zeros
 from .model import prior_inertia
 
 __all__ = ["LegacyPDHold"]
@@ -54,8 +55,8 @@ class LegacyPDHold:
         w = np.zeros(6)
         wn, zeta = self.wn, 1.0
         lim = self.hold_fraction * self.authority
-        rates = np.nan_to_num(st.rates_frd_rad_s)
-        rpy = np.nan_to_num(st.rpy_now())
+        rates = finite_or_zeros(st.rates_frd_rad_s)
+        rpy = finite_or_zeros(st.rpy_now())
         for k, dof in enumerate(("surge", "sway")):
             if dof not in free:
                 v = st.velocity_frd_m_s[k]

@@ -55,6 +55,7 @@ from .maneuvers import HoldController, dof_authority
 from ..vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from .law import ControlSettings
 from .loop import HoldLoop
+from ..vehicle.state import finite_or_zero
 from .model import ModelFileError, load_model, model_from_config
 from .odometry import odometry_estimate
 
@@ -290,7 +291,7 @@ class ControllerNode(VehicleNode):
         else:
             msg.vertical_mode = ControlSetpoint.VERTICAL_DEPTH
             msg.depth_m = float(depth if math.isfinite(depth) else st.depth_m)
-        msg.hold_heading, msg.heading_rad = True, float(np.nan_to_num(st.rpy_now()[2]))
+        msg.hold_heading, msg.heading_rad = True, finite_or_zero(st.rpy_now()[2])
         msg.hold_velocity, msg.surge_m_s, msg.sway_m_s = True, 0.0, 0.0
         self._setpoint = msg
         self._apply_setpoint(msg)

@@ -25,7 +25,8 @@ from hindrax_common.base.frames import wrap_angle
 
 from .fusion import AccelAidedFilter
 
-__all__ = ["SensorState", "DepthEstimator", "euler_rates", "rotation_ned_from_body"]
+__all__ = ["SensorState", "DepthEstimator", "all_finite", "euler_rates", "finite_or_zero", "finite_or_zeros",
+           "rotation_ned_from_body"]
 
 
 def euler_rates(rpy_rad, rates_frd_rad_s) -> np.ndarray:
@@ -52,15 +53,31 @@ def rotation_ned_from_body(roll_rad: float, pitch_rad: float, yaw_rad: float) ->
                      [-sp, cp * sr, cp * cr]])
 
 
-def _finite_or_zero(x: float) -> float:
+def finite_or_zero(x: float) -> float:
+    """``x`` as a float, 0.0 when it is NaN or infinite (an unknown angle, rate or velocity taken as 0)."""
+    x = float(x)
     return x if math.isfinite(x) else 0.0
+
+
+def finite_or_zeros(values) -> np.ndarray:
+    """``values`` as a float array of the same shape, its NaN and infinite entries 0.0. ``np.nan_to_num`` does the
+    same for NaN (and maps an infinity to the largest float) at 3-4 times the cost on a 3-vector (17 against 5 us
+    here, 30 us for a scalar): the control tick calls this several times per tick."""
+    a = np.asarray(values, dtype=float)
+    return np.where(np.isfinite(a), a, 0.0)
+
+
+def all_finite(values) -> bool:
+    """True when every entry of a short sequence (an attitude, a rate vector) is finite: ``np.all(np.isfinite(.))``
+    at a third of its cost on a 3-vector."""
+    return all(map(math.isfinite, values))
 
 
 def _cross3(a, b) -> np.ndarray:
     """a x b of two 3-vectors with NaN components taken as 0 (``np.cross`` of ``np.nan_to_num``, at a tenth of the
     time: SensorState calls it for every IMU and DVL sample)."""
-    a1, a2, a3 = (_finite_or_zero(float(x)) for x in a)
-    b1, b2, b3 = (_finite_or_zero(float(x)) for x in b)
+    a1, a2, a3 = (finite_or_zero(x) for x in a)
+    b1, b2, b3 = (finite_or_zero(x) for x in b)
     return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
 
 
@@ -139,7 +156,7 @@ class SensorState:
 
     def _rotation(self, rpy=None) -> np.ndarray:
         """Body -> NED at ``rpy`` (default the latest attitude); a NaN angle counts as 0."""
-        roll, pitch, yaw = (_finite_or_zero(float(a)) for a in (self.rpy_rad if rpy is None else rpy))
+        roll, pitch, yaw = (finite_or_zero(a) for a in (self.rpy_rad if rpy is None else rpy))
         return rotation_ned_from_body(roll, pitch, yaw)
 
     def rates_at(self, t_s: float) -> np.ndarray:

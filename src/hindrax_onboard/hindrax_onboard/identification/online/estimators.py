@@ -20,6 +20,7 @@ from hindrax_common.config import DOFS, VehicleConfig
 from ...estimation.filters import KinematicKalmanFilter
 from ...estimation.rls import RecursiveLeastSquares
 from ...vehicle.fusion import AccelAidedFilter
+from ...vehicle.state import finite_or_zeros
 from ...vehicle.uncertainty import measurement_settings
 from ..model.dof_model import (parameter_names, regressor_matrix, restoring_regressor,
                              rigid_inertia, rls_published_std, truth_parameters)
@@ -156,9 +157,9 @@ class OnlineDofEstimator:
             return
         rr = None
         if self.dof in ("roll", "pitch"):
-            rpy = np.nan_to_num(state.rpy_rad)
+            rpy = finite_or_zeros(state.rpy_rad)
             if state.log["attitude"]:  # the 10 Hz attitude carried forward with the gyro rate to t_s
-                rpy = rpy + np.nan_to_num(state.rates_frd_rad_s) * max(0.0, t_s - state.log["attitude"][-1][0])
+                rpy = rpy + finite_or_zeros(state.rates_frd_rad_s) * max(0.0, t_s - state.log["attitude"][-1][0])
             rr = restoring_regressor(self.dof, rpy[0], rpy[1])
         phi = regressor_matrix(self.dof, np.array([a]), np.array([v]), None if rr is None else np.array([rr]))[0]
         if not (np.all(np.isfinite(phi)) and math.isfinite(force)):

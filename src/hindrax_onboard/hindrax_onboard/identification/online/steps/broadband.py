@@ -14,6 +14,7 @@ from ..excitation import BROADBAND, BoxShaping, design_band, design_signal
 from hindrax_common.base.frames import wrap_angle
 
 from ....control.maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
+from ....vehicle.state import finite_or_zero, finite_or_zeros
 from .base import DofStep
 from .context import StepContext, Wrenches
 
@@ -91,15 +92,15 @@ class BroadbandRun(DofStep):
         st = ctx.state
         while ctx.t_s - t0 < self.duration_s - 1e-9:
             if k < 2:
-                e = float(np.nan_to_num(st.position_ned_m[:2] - c[:2]) @ axis[k])
+                e = float(finite_or_zeros(st.position_ned_m[:2] - c[:2]) @ axis[k])
             elif k == 2:
                 d = ctrl.depth_estimate_m if math.isfinite(ctrl.depth_estimate_m) else st.depth_m
-                e = float(np.nan_to_num(d - c[2]))
+                e = finite_or_zero(d - c[2])
             elif k == 5:
-                e = wrap_angle(float(np.nan_to_num(st.rpy_rad[2])) - psi0)
+                e = wrap_angle(finite_or_zero(st.rpy_rad[2]) - psi0)
             else:
                 # the 10 Hz attitude extrapolated to now with the gyro rate (as in the rotation ladder)
-                e = float(np.nan_to_num(st.rpy_rad[k - 3])) + ctx.axis_velocity(k) * ctx.attitude_age_s()
+                e = finite_or_zero(st.rpy_rad[k - 3]) + ctx.axis_velocity(k) * ctx.attitude_age_s()
             f = shaping.force(float(sig.value(ctx.t_s - t0)), e, ctx.axis_velocity(k))
             if k == 2:
                 f += ctrl.net_buoyancy_n
@@ -112,7 +113,7 @@ class BroadbandRun(DofStep):
             ctrl.depth_setpoint_m = float(np.clip(st.depth_m, ctx.box.z_min, ctx.box.z_max))
             ctrl.reset_integral()
         elif k == 5:
-            ctrl.heading_setpoint_rad = float(np.nan_to_num(st.rpy_rad[2]))
+            ctrl.heading_setpoint_rad = finite_or_zero(st.rpy_rad[2])
         yield from ctx.wait_still(k, 0.05, 8.0)
         yield from ctx.hold(0.5)
         if k == 2:

@@ -28,7 +28,7 @@ import numpy as np
 from hindrax_bringup.allocation.core import AllocationCore
 from hindrax_common.config import DOFS, VehicleConfig
 
-from ....vehicle.state import SensorState
+from ....vehicle.state import SensorState, finite_or_zero, finite_or_zeros
 from ....control.maneuvers import DOF_INDEX, HoldController, PoolBox, dof_authority
 
 __all__ = ["CampaignAbort", "StepContext", "Wrenches", "CALIBRATION_BLOCK_S"]
@@ -163,7 +163,7 @@ class StepContext:
             return float(v) if math.isfinite(v) else 0.0
         if k == 2:
             return float(self.ctrl.depth_rate_m_s)
-        return float(np.nan_to_num(st.rates_frd_rad_s[k - 3]))
+        return finite_or_zero(st.rates_frd_rad_s[k - 3])
 
     def attitude_age_s(self) -> float:
         """Time since the time of validity of the newest attitude sample, s (0 before the first one)."""
@@ -185,7 +185,7 @@ class StepContext:
             yield self.ctrl.wrench(self.state, free, self.tick_s)
             settled = abs(self.axis_velocity(k)) < tol
             if k in (3, 4):
-                settled = settled and abs(float(np.nan_to_num(self.state.rpy_rad[k - 3]))) < 0.05
+                settled = settled and abs(finite_or_zero(self.state.rpy_rad[k - 3])) < 0.05
             if settled:
                 still += self.tick_s
                 if still >= 0.5:
@@ -196,9 +196,9 @@ class StepContext:
     def _velocity_to(self, centre) -> None:
         p = self.state.position_ned_m
         err_ned = np.array([centre[0] - p[0], centre[1] - p[1]])
-        psi = float(np.nan_to_num(self.state.rpy_rad[2]))
+        psi = finite_or_zero(self.state.rpy_rad[2])
         rot = np.array([[math.cos(psi), math.sin(psi)], [-math.sin(psi), math.cos(psi)]])  # NED -> body
-        self.ctrl.velocity_setpoint_m_s = np.clip(0.6 * (rot @ np.nan_to_num(err_ned)), -0.25, 0.25)
+        self.ctrl.velocity_setpoint_m_s = np.clip(0.6 * (rot @ finite_or_zeros(err_ned)), -0.25, 0.25)
         return err_ned
 
     def move_to_centre(self) -> Wrenches:
@@ -210,7 +210,7 @@ class StepContext:
         while self.t_s - t0 < 40.0:
             err_ned = self._velocity_to(c)
             yield self.ctrl.wrench(self.state, (), self.tick_s)
-            speed = float(np.linalg.norm(np.nan_to_num(self.state.velocity_frd_m_s[:2])))
+            speed = float(np.linalg.norm(finite_or_zeros(self.state.velocity_frd_m_s[:2])))
             if np.linalg.norm(err_ned) < 0.15 and speed < 0.05:
                 break
         self.ctrl.velocity_setpoint_m_s = np.zeros(2)

@@ -17,6 +17,7 @@ import numpy as np
 from hindrax_common.base.frames import wrap_angle
 
 from ....control.maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
+from ....vehicle.state import finite_or_zero
 from .base import DofStep
 from .context import StepContext, Wrenches
 
@@ -100,11 +101,11 @@ class RotationLadder(DofStep):
                 ctx.start_run(dof, s * lvl)
                 t0 = ctx.t_s
                 turned = 0.0
-                prev = float(np.nan_to_num(ctx.state.rpy_rad[k - 3]))
+                prev = finite_or_zero(ctx.state.rpy_rad[k - 3])
                 while ctx.t_s - t0 < self.max_level_s:
                     rate = max(0.0, s * ctx.axis_velocity(k))
                     stop = rate * rate / (2.0 * alpha) + 0.1 * rate
-                    ang = float(np.nan_to_num(ctx.state.rpy_rad[k - 3]))
+                    ang = finite_or_zero(ctx.state.rpy_rad[k - 3])
                     if dof == "yaw":
                         turned += abs(wrap_angle(ang - prev))
                         prev = ang
@@ -120,7 +121,7 @@ class RotationLadder(DofStep):
                 ctx.end_run()
                 if dof == "yaw":
                     r = ctx.axis_velocity(5)
-                    ctx.ctrl.heading_setpoint_rad = wrap_angle(float(np.nan_to_num(ctx.state.rpy_rad[2]))
+                    ctx.ctrl.heading_setpoint_rad = wrap_angle(finite_or_zero(ctx.state.rpy_rad[2])
                                                                + r * abs(r) / (2.0 * alpha))
                 yield from ctx.wait_still(k, 0.05, 8.0)
                 yield from ctx.hold(0.5)
