@@ -221,7 +221,7 @@ def test_schema_docs_and_units_in_names():
                 "thrust_uncertainty_rel", "thrust_fit_uncertainty_rel", "rls_directional_forgetting",
                 "rls_min_excitation", "rls_change_threshold", "rls_prior_std_rel", "prior_std_rel",
                 "oscillator_calibrated", "oscillator_measured_on", "frozen_check_samples", "prom_reject_blank_words",
-                "require_data_ready",
+                "require_data_ready", "heave_repeats",
                 "not_ready_error_polls", "excitation", "damping_ratio", "hold_fraction", "max_wrench_excess_ratio",
                 "chip", "line", "dvl", "altimeter", "pressure", "imu"}  # /OE gpio; rate_check_disabled reasons
     units = ("_kg", "_m", "_m3", "_n", "_kg_m2", "_s", "_hz", "_us", "_pa", "_rad", "_m_s", "_m_s2", "_g", "_dps",

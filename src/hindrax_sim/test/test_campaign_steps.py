@@ -67,19 +67,20 @@ def test_the_plan_runs_the_reference_steps_in_a_fixed_order_and_thrust_expands(c
     # a known force the step needs must be given (the float's comes from the vehicle file)
     with pytest.raises(ValueError, match="line_pull_n"):
         Executive(cfg, ["heave"], tick_s=0.02, calibrate=["line_pull_negative"])
+    no_float = _without(tmp_path, "calibration", ("float_mass_kg", "float_volume_m3"))
     with pytest.raises(ValueError, match="float_buoyancy_n"):
-        Executive(_without_float(cfg, tmp_path), ["heave"], tick_s=0.02, calibrate=["float"])
+        Executive(no_float, ["heave"], tick_s=0.02, calibrate=["float"])
 
 
-def _without_float(cfg, tmp_path):
-    """The shipped vehicle file without the optional calibration.float_* keys."""
+def _without(tmp_path, section: str, keys):
+    """The shipped vehicle file without the optional keys ``keys`` of ``section``."""
     import yaml
 
     from hindrax_common.config import ros_parameters_from_yaml
 
     params = ros_parameters_from_yaml(yaml.safe_load(default_config_path().read_text()))
-    for k in ("float_mass_kg", "float_volume_m3"):
-        params["calibration"].pop(k)
+    for k in keys:
+        params[section].pop(k)
     p = tmp_path / "v.yaml"
     p.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     return load_config(p)
@@ -150,6 +151,23 @@ def test_translation_ladder_runs_both_directions_inside_the_box_and_records_its_
     box = PoolBox.from_config(cfg)
     p = rec.truth_position_ned_m
     assert np.all(p[:, 0] >= box.x_min - 0.1) and np.all(p[:, 0] <= box.x_max + 0.1)
+
+
+def test_heave_ladder_runs_the_vehicle_files_down_up_pairs_per_level(cfg, tmp_path):
+    # identification.heave_repeats: down/up pairs at each heave level (3 when the key is absent)
+    absent = _without(tmp_path, "identification", ("heave_repeats",))
+    assert Executive(absent, ["heave"], tick_s=0.04).steps[-1].heave_repeats == 3
+    with pytest.raises(ConfigError, match=r"heave_repeats = 0: allowed integer in \[1, 10\]"):
+        cfg.with_overrides({"identification.heave_repeats": 0})
+    two = Executive(cfg.with_overrides({"identification.heave_repeats": 2}), ["heave"], levels=1,
+                    tick_s=0.04)
+    ladder = two.steps[-1]
+    assert isinstance(ladder, TranslationLadder) and ladder.heave_repeats == 2
+    _, rec = _run(cfg, [Dive(), ladder], seed=3)
+    assert not rec.aborted, rec.abort_reason
+    runs = sorted(set(rec.run_id[rec.run_id >= 0]))
+    signs = [float(np.sign(rec.level[rec.run_id == r][0])) for r in runs]
+    assert signs == [1.0, -1.0, 1.0, -1.0]                 # down (+z, NED), up, down, up
 
 
 def test_rotation_ladder_turns_yaw_once_per_run(cfg):

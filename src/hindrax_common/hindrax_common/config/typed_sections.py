@@ -241,6 +241,7 @@ class IdentificationSection(Section, prefix="identification"):
     roll_test_angle_rad: float
     pitch_test_angle_rad: float
     max_level_duration_s: float
+    heave_repeats: int | None
     converged_relative_std: float
     prior_std_rel: float | None
     rls_directional_forgetting: bool | None

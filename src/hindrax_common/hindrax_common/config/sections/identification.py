@@ -19,6 +19,8 @@ SCHEMA, OPTIONAL = section("identification", {
     "roll_test_angle_rad": real("roll test turns back at this angle, rad ([Hindrax-Drag] §4.2: 30 deg)", 0.01, 1.5),
     "pitch_test_angle_rad": real("pitch test turns back at this angle, rad ([Hindrax-Drag] §4.2: 40 deg)", 0.01, 1.5),
     "max_level_duration_s": real("longest time one level is held, s", 1.0, 600.0),
+    "heave_repeats": integer("down/up pairs of runs at each heave level of the ladder, default 3",
+                             1, 10),
     "converged_relative_std": real("converged when every std/|value| is below this", 0.001, 1.0),
     "prior_std_rel": real("1-sigma of the empirical priors in the batch fit, as a fraction of the prior "
                           "value (0 = no prior; docs/identification.md §6.3)", 0.0, 100.0),
@@ -37,7 +39,7 @@ SCHEMA, OPTIONAL = section("identification", {
                        "stay in the pool box (hindrax_onboard identification/online/excitation.py)",
                        ("ladder", "multisine", "prbs", "chirp")),
     "excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s", 5.0, 1800.0),
-}, optional=("excitation", "prior_std_rel", "rls_", "command_rate_hz"))
+}, optional=("excitation", "prior_std_rel", "rls_", "command_rate_hz", "heave_repeats"))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:

@@ -191,8 +191,9 @@ class Executive:
     cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF (default
     ``identification.levels_per_dof``). tick_s: control period (s). fractions: optional explicit level fractions
     of the DOF's smaller authority (each in (0, 1]), instead of the configured ladder. max_level_duration_s: cap
-    of one run (default ``identification.max_level_duration_s``). heave_repeats: down/up pairs per heave level.
-    dvl_lock_timeout_s: longest time without a valid DVL velocity during surge or sway. progress: optional
+    of one run (default ``identification.max_level_duration_s``). heave_repeats: down/up pairs
+    per heave level (default ``identification.heave_repeats``, 3 when absent). dvl_lock_timeout_s:
+    longest time without a valid DVL velocity during surge or sway. progress: optional
     callable receiving one-line messages as the campaign moves on. calibrate: reference steps to run after the
     dive, before the manoeuvres (:data:`CALIBRATION_STEPS`); ``ballast`` needs ``ballast_weight_in_water_n`` (> 0,
     N: (m - rho V) g of the ballast), ``line_pull`` and ``line_pull_negative`` need ``line_pull_n`` (> 0, N: the
@@ -213,7 +214,7 @@ class Executive:
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None, *,
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,
-                 heave_repeats: int = 3, dvl_lock_timeout_s: float = 3.0,
+                 heave_repeats: int | None = None, dvl_lock_timeout_s: float = 3.0,
                  progress: Callable[[str], None] | None = None, calibrate: Sequence[str] = (),
                  ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0,
                  inclining_load_n_m: Sequence[float] = (0.0, 0.0), excitation: str | None = None,
@@ -271,7 +272,8 @@ class Executive:
         self._command: np.ndarray | None = None
         self.levels_per_dof = levels
         self.fractions = [float(x) for x in fractions] if fractions else None
-        self.heave_repeats = max(1, int(heave_repeats))
+        repeats = or_default(ident.heave_repeats, 3) if heave_repeats is None else heave_repeats
+        self.heave_repeats = max(1, int(repeats))
         self.max_level_s = float(ident.max_level_duration_s if max_level_duration_s is None else max_level_duration_s)
         self.dvl_lock_timeout_s = float(dvl_lock_timeout_s)
         #: the state every step shares (sensors, holds, pool box, tick log, results, operator hand-shake)
