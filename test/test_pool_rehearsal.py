@@ -22,13 +22,10 @@ import signal
 import subprocess
 import threading
 import time
-from typing import Callable
 
 import pytest
 import yaml
-from hindrax_test_support.helpers import fresh_domain
-
-from hindrax_common.testing import ConditionTimeout, wait_until
+from hindrax_test_support.helpers import fresh_domain, until_done
 
 pytestmark = [pytest.mark.vehicle_launch, pytest.mark.ros, pytest.mark.timeout(2400)]
 
@@ -69,23 +66,6 @@ class _Lines:
             self.lines.append(line.rstrip("\n"))
             if line.startswith(prefix):
                 return line
-
-
-def until_done(call: Callable[[], subprocess.CompletedProcess],
-               what: str) -> subprocess.CompletedProcess:
-    """Run ``call`` (a ``hindrax`` command) again until it exits 0, within :data:`WAIT_S`: the ESC
-    refuses to arm until its neutral period and the heartbeats are in, so the operator asks again
-    (each try is a command, not a sleep). Returns the answer; raises AssertionError naming the
-    number of tries and the last answer (a fresh clone's suite once timed out here on the second
-    day's arm, 180 s, without saying why: 2026-11-29)."""
-    tries: list[subprocess.CompletedProcess] = []
-    try:
-        wait_until(lambda: tries.append(call()) or tries[-1].returncode == 0, WAIT_S, None, what)
-    except ConditionTimeout as exc:
-        last = tries[-1] if tries else None
-        said = f"exit {last.returncode}: {last.stdout}{last.stderr}" if last else "nothing"
-        raise AssertionError(f"{exc}: {len(tries)} tries, the last answered {said}") from exc
-    return tries[-1]
 
 
 def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_path, pool_day_model):

@@ -1,12 +1,13 @@
 """Small helpers of a few tests: real-time priority, a counted burst's QoS, single raw
-transactions, fresh ROS domains."""
+transactions, fresh ROS domains, a command asked again until it succeeds."""
 from __future__ import annotations
 
 import contextlib
 import itertools
 import os
 import resource
-from typing import Any, Iterator
+import subprocess
+from typing import Any, Callable, Iterator
 
 from domain_coordinator import domain_id
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -14,6 +15,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from hindrax_msgs.msg import RawDeviceData
 
 from hindrax_common.node_support.node_common import RAW_BATCH_REGISTER, raw_transactions
+from hindrax_common.testing import ConditionTimeout, wait_until
 
 
 def may_set_fifo(priority: int) -> bool:
@@ -61,3 +63,27 @@ def fresh_domain() -> Iterator[int]:
     (2026-11-29). Raises RuntimeError when every ID of :data:`FRESH_DOMAINS` is taken."""
     with domain_id(lambda: FRESH_DOMAINS[next(_next_domain) % len(FRESH_DOMAINS)]) as did:
         yield did
+
+
+def until_done(call: Callable[[], subprocess.CompletedProcess], what: str,
+               wait: Callable[[Callable[[], bool], str], None] | None = None,
+               timeout_s: float = 180.0) -> subprocess.CompletedProcess:
+    """Run ``call`` (a ``hindrax`` command) again until it exits 0, as an operator asks again: the
+    ESC refuses to arm until its neutral period and the heartbeats are in (each try is a command,
+    not a sleep). ``wait(condition, what)`` is the caller's waiter (one that spins its node and
+    attaches the launch's logs on a timeout); default ``wait_until`` within ``timeout_s``. Returns
+    the answer; raises AssertionError naming the number of tries and the last answer (a fresh
+    clone's suite once timed out on the rehearsal's second arm, 180 s, without saying why:
+    2026-11-29)."""
+    tries: list[subprocess.CompletedProcess] = []
+
+    def done() -> bool:
+        tries.append(call())
+        return tries[-1].returncode == 0
+    try:
+        (wait or (lambda condition, w: wait_until(condition, timeout_s, None, w)))(done, what)
+    except (ConditionTimeout, AssertionError) as exc:
+        last = tries[-1] if tries else None
+        said = f"exit {last.returncode}: {last.stdout}{last.stderr}" if last else "nothing"
+        raise AssertionError(f"{exc}\n{what}: {len(tries)} tries, the last answered {said}") from exc
+    return tries[-1]
