@@ -457,7 +457,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path, pool_day_mod
                     assert r.returncode == 0 and "READY" in r.stdout, r.stdout + r.stderr
                 elif line == "hindrax arm":
                     day.wait(lambda: day.count("/dvl/data") >= 3, "the vehicle up")
-                    # the ESC refuses until its neutral period (esc.arming_time_s) and the heartbeats are in
+                    # the ESC refuses until its neutral period (esc.arming_time_s) and the
+                    # heartbeats are in
                     answer = until_done(lambda: hindrax(env, line), "hindrax arm", wait=day.wait)
                     assert answer.stdout.strip() == f"{name}: armed", answer.stdout + answer.stderr
                     t_arm = time.monotonic()

@@ -1,6 +1,7 @@
-"""The control tick's NaN helpers (hindrax_onboard/vehicle/state.py) against numpy's own: ``finite_or_zeros`` and
-``finite_or_zero`` give what ``np.nan_to_num`` gives for finite and NaN entries and 0 for an infinity (an unknown
-value, not the largest float); ``all_finite`` what ``np.all(np.isfinite(.))`` gives."""
+"""The control tick's NaN helpers (hindrax_onboard/vehicle/state.py) against numpy's own:
+``finite_or_zeros`` and ``finite_or_zero`` give what ``np.nan_to_num`` gives for finite and NaN
+entries and 0 for an infinity (an unknown value, not the largest float); ``all_finite`` what
+``np.all(np.isfinite(.))`` gives."""
 from __future__ import annotations
 
 import math
@@ -22,14 +23,16 @@ def test_finite_or_zeros_is_nan_to_num_with_infinities_at_zero(a):
     want[np.isinf(a)] = 0.0
     assert got.shape == a.shape and got.dtype == np.float64
     np.testing.assert_array_equal(got, want)
-    np.testing.assert_array_equal(a[np.isfinite(a)], got[np.isfinite(a)])  # the input is not changed in place
+    finite = np.isfinite(a)
+    np.testing.assert_array_equal(a[finite], got[finite])  # the input is not changed in place
 
 
 @given(st.lists(ANY_FLOAT, max_size=6))
 def test_finite_or_zeros_takes_sequences_and_all_finite_agrees_with_numpy(values):
-    np.testing.assert_array_equal(finite_or_zeros(values), finite_or_zeros(np.array(values, dtype=float)))
-    assert all_finite(values) == bool(np.all(np.isfinite(np.array(values, dtype=float))))
-    assert all_finite(np.array(values, dtype=float)) == all_finite(values)
+    as_array = np.array(values, dtype=float)
+    np.testing.assert_array_equal(finite_or_zeros(values), finite_or_zeros(as_array))
+    assert all_finite(values) == bool(np.all(np.isfinite(as_array)))
+    assert all_finite(as_array) == all_finite(values)
 
 
 @given(ANY_FLOAT)

@@ -85,5 +85,6 @@ def until_done(call: Callable[[], subprocess.CompletedProcess], what: str,
     except (ConditionTimeout, AssertionError) as exc:
         last = tries[-1] if tries else None
         said = f"exit {last.returncode}: {last.stdout}{last.stderr}" if last else "nothing"
-        raise AssertionError(f"{exc}\n{what}: {len(tries)} tries, the last answered {said}") from exc
+        raise AssertionError(f"{exc}\n{what}: {len(tries)} tries, the last answered {said}") \
+            from exc
     return tries[-1]

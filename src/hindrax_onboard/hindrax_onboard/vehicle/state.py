@@ -25,8 +25,8 @@ from hindrax_common.base.frames import wrap_angle
 
 from .fusion import AccelAidedFilter
 
-__all__ = ["SensorState", "DepthEstimator", "all_finite", "euler_rates", "finite_or_zero", "finite_or_zeros",
-           "rotation_ned_from_body"]
+__all__ = ["SensorState", "DepthEstimator", "all_finite", "euler_rates", "finite_or_zero",
+           "finite_or_zeros", "rotation_ned_from_body"]
 
 
 def euler_rates(rpy_rad, rates_frd_rad_s) -> np.ndarray:
@@ -54,22 +54,24 @@ def rotation_ned_from_body(roll_rad: float, pitch_rad: float, yaw_rad: float) ->
 
 
 def finite_or_zero(x: float) -> float:
-    """``x`` as a float, 0.0 when it is NaN or infinite (an unknown angle, rate or velocity taken as 0)."""
+    """``x`` as a float, 0.0 when it is NaN or infinite (an unknown angle, rate or velocity
+    taken as 0)."""
     x = float(x)
     return x if math.isfinite(x) else 0.0
 
 
 def finite_or_zeros(values) -> np.ndarray:
-    """``values`` as a float array of the same shape, its NaN and infinite entries 0.0. ``np.nan_to_num`` does the
-    same for NaN (and maps an infinity to the largest float) at 3-4 times the cost on a 3-vector (17 against 5 us
-    here, 30 us for a scalar): the control tick calls this several times per tick."""
+    """``values`` as a float array of the same shape, its NaN and infinite entries 0.0.
+    ``np.nan_to_num`` does the same for NaN (and maps an infinity to the largest float) at 3-4
+    times the cost on a 3-vector (17 against 5 us here, 30 us for a scalar): the control tick
+    calls this several times per tick."""
     a = np.asarray(values, dtype=float)
     return np.where(np.isfinite(a), a, 0.0)
 
 
 def all_finite(values) -> bool:
-    """True when every entry of a short sequence (an attitude, a rate vector) is finite: ``np.all(np.isfinite(.))``
-    at a third of its cost on a 3-vector."""
+    """True when every entry of a short sequence (an attitude, a rate vector) is finite:
+    ``np.all(np.isfinite(.))`` at a third of its cost on a 3-vector."""
     return all(map(math.isfinite, values))
 
 

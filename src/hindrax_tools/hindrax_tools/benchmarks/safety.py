@@ -564,14 +564,16 @@ class _Layout:
         return lines[-1] if lines else ""
 
     def process_states(self) -> str:
-        """Each node process's state (running, exited N, not started), its heartbeat's publishers in the probe's
-        graph and its last log line, for a failure message."""
+        """Each node process's state (running, exited N, not started), its heartbeat's
+        publishers in the probe's graph and its last log line, for a failure message."""
         states = []
         for name in PROCESSES:
             p = self.procs.get(name)
-            state = "not started" if p is None else "running" if p.poll() is None else f"exited {p.returncode}"
-            states.append(f"{name} {state}, {self.probe.count_publishers(HEARTBEAT_NAMES[name])} heartbeat "
-                          f"publisher(s), last log line {self._last_log_line(name, '')!r}")
+            state = ("not started" if p is None else "running" if p.poll() is None
+                     else f"exited {p.returncode}")
+            beats = self.probe.count_publishers(HEARTBEAT_NAMES[name])
+            states.append(f"{name} {state}, {beats} heartbeat publisher(s), last log line "
+                          f"{self._last_log_line(name, '')!r}")
         return "; ".join(states)
 
     # -- vehicle
@@ -585,8 +587,8 @@ class _Layout:
                 return fut.result()
             except ConditionTimeout:
                 client.remove_pending_request(fut)
-        raise ConditionTimeout(f"no answer from {client.srv_name} after {attempts} attempts of {timeout:g} s; "
-                               f"{self.process_states()}")
+        raise ConditionTimeout(f"no answer from {client.srv_name} after {attempts} attempts of "
+                               f"{timeout:g} s; {self.process_states()}")
 
     def armed_at_1700(self) -> None:
         """(Re)start what is not running, arm (retrying while the ESC still refuses), command 1700 us until it is
@@ -594,10 +596,12 @@ class _Layout:
         self.hw.watch = False
         self.commanding = self.arming = False
         self.ensure()
-        # up: the two services, and each safety heartbeat in the graph (the ESC refuses to arm while the guard's is
-        # not: a guard still starting on a loaded machine is not a refusal to report)
-        wait_until(lambda: self.arm_client.service_is_ready() and self.reset_client.service_is_ready() and all(
-            self.probe.count_publishers(t) for t in HEARTBEAT_NAMES.values()), 60, None, "processes up")
+        # up: the two services, and each safety heartbeat in the graph (the ESC refuses to arm
+        # while the guard's is not: a guard still starting on a loaded machine is no refusal)
+        def up() -> bool:
+            return (self.arm_client.service_is_ready() and self.reset_client.service_is_ready()
+                    and all(self.probe.count_publishers(t) for t in HEARTBEAT_NAMES.values()))
+        wait_until(up, 60, None, "processes up")
         if self.last_msg is not None and self.last_msg.armed:
             # still armed from the caller's previous step, its commands stopped above: disarm first, or the 1700 us
             # found on the wire below may be the old arm's, with the ESC watchdog's neutral still to come
@@ -618,7 +622,8 @@ class _Layout:
             try:
                 wait_until(arm, 30, None, "armed")
             except Exception as exc:
-                raise RuntimeError(f"{exc}: last answer {answer[0]!r}; {self.process_states()}") from exc
+                raise RuntimeError(f"{exc}: last answer {answer[0]!r}; "
+                                   f"{self.process_states()}") from exc
             self.commanding = True
             try:
                 wait_until(lambda: self.disarmed_after_arm or (

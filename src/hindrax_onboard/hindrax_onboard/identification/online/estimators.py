@@ -159,7 +159,8 @@ class OnlineDofEstimator:
         if self.dof in ("roll", "pitch"):
             rpy = finite_or_zeros(state.rpy_rad)
             if state.log["attitude"]:  # the 10 Hz attitude carried forward with the gyro rate to t_s
-                rpy = rpy + finite_or_zeros(state.rates_frd_rad_s) * max(0.0, t_s - state.log["attitude"][-1][0])
+                age_s = max(0.0, t_s - state.log["attitude"][-1][0])
+                rpy = rpy + finite_or_zeros(state.rates_frd_rad_s) * age_s
             rr = restoring_regressor(self.dof, rpy[0], rpy[1])
         phi = regressor_matrix(self.dof, np.array([a]), np.array([v]), None if rr is None else np.array([rr]))[0]
         if not (np.all(np.isfinite(phi)) and math.isfinite(force)):

@@ -198,7 +198,8 @@ class StepContext:
         err_ned = np.array([centre[0] - p[0], centre[1] - p[1]])
         psi = finite_or_zero(self.state.rpy_rad[2])
         rot = np.array([[math.cos(psi), math.sin(psi)], [-math.sin(psi), math.cos(psi)]])  # NED -> body
-        self.ctrl.velocity_setpoint_m_s = np.clip(0.6 * (rot @ finite_or_zeros(err_ned)), -0.25, 0.25)
+        self.ctrl.velocity_setpoint_m_s = np.clip(0.6 * (rot @ finite_or_zeros(err_ned)),
+                                                  -0.25, 0.25)
         return err_ned
 
     def move_to_centre(self) -> Wrenches:

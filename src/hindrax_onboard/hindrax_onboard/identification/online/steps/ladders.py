@@ -3,8 +3,9 @@
 * :class:`TranslationLadder` (surge, sway, heave): surge and sway alternate +level / -level runs along the body axis
   (heading held at the start heading); a run ends when the dead-reckoned stopping point reaches the
   :class:`~....control.maneuvers.PoolBox` boundary or after ``max_level_s``; the larger room is used first, so both
-  directions are tested. Heave: down then up within the box depth range, ``heave_repeats`` pairs per level
-  (``identification.heave_repeats``, default 3; no steady state needed: identified through the transient).
+  directions are tested. Heave: down then up within the box depth range,
+  ``identification.heave_repeats`` pairs per level (default 3; no steady state needed:
+  identified through the transient).
 * :class:`RotationLadder` (roll, pitch, yaw): roll and pitch rotate until the predicted stopping angle reaches
   ``identification.roll_test_angle_rad`` / ``pitch_test_angle_rad`` and return to level ([Hindrax-Drag] §4.2);
   yaw turns once (2 pi) per run ([Hindrax-Drag] §4.2: 360 deg rotations); both directions."""
