@@ -186,7 +186,7 @@ class ReferenceModel:
     def reset(self, x: float, v: float = 0.0) -> None:
         """Start at the state (x, v); NaN rate counts as 0."""
         self.x = wrap_angle(x) if self.angle else float(x)
-        self.v = float(v) if math.isfinite(v) else 0.0
+        self.v = finite_or_zero(v)
         self.v = max(-self.max_rate, min(self.max_rate, self.v))
         self.a = 0.0
 
@@ -272,7 +272,7 @@ class PositionAxis(_Axis):
         self.engaged = True
         m = self.model
         e = wrap_angle(xd - x) if self.angle else xd - x
-        de = vd - (v if math.isfinite(v) else 0.0)
+        de = vd - finite_or_zero(v)
         ff = m.inertia * ad + m.damping(vd) + m.bias + m.restoring * math.sin(xd)
         fb = m.inertia * (self.gains.kp * e + self.gains.kd * de)
         return self._close(ff, fb, e, dt, proj)
@@ -340,7 +340,7 @@ class FloorEstimator:
         if self.t_s is None or t_s <= self.t_s:
             return
         dt = t_s - self.t_s
-        vn, ve = (float(x) if math.isfinite(x) else 0.0 for x in velocity_ne_m_s)
+        vn, ve = (finite_or_zero(x) for x in velocity_ne_m_s)
         self.kf.predict(F=np.array([[1.0, vn * dt, ve * dt], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
                         Q=self.q * dt + self.q_per_m * (math.hypot(vn, ve) * dt))
         self.t_s = float(t_s)
@@ -367,7 +367,7 @@ class FloorEstimator:
             return math.nan, math.nan, math.nan
         z, gn, ge = (float(v) for v in self.kf.x[:, 0])
         if not self.stale(t_s):
-            vn, ve = (float(x) if math.isfinite(x) else 0.0 for x in velocity_ne_m_s)
+            vn, ve = (finite_or_zero(x) for x in velocity_ne_m_s)
             z += (gn * vn + ge * ve) * max(0.0, t_s - self.t_s)
         return z, gn, ge
 
@@ -510,7 +510,7 @@ class Controller:
     def _velocity_ne(inp: ControlInput) -> np.ndarray:
         """Measured horizontal velocity (north, east; m/s): the DVL's body velocity turned by the heading (0 when
         unknown)."""
-        u, v = (float(x) if math.isfinite(x) else 0.0 for x in np.asarray(inp.velocity_frd_m_s, dtype=float)[:2])
+        u, v = (finite_or_zero(x) for x in inp.velocity_frd_m_s[:2])
         psi = finite_or_zero(inp.rpy_rad[2])
         return np.array([math.cos(psi) * u - math.sin(psi) * v, math.sin(psi) * u + math.cos(psi) * v])
 
@@ -592,7 +592,7 @@ class Controller:
             self.altitude_ref = self.altitude_ref.copy_empty()
             self.mode = "none"
             return 0.0
-        zr = float(zr) if math.isfinite(zr) else 0.0
+        zr = finite_or_zero(zr)
         proj = 1.0 / max(0.5, math.cos(rpy[0]) * math.cos(rpy[1]))
         if math.isfinite(self.altitude_m) and self.floor.ready:
             v_ne, a_ne = self._horizontal_reference(inp)

@@ -159,8 +159,7 @@ class StepContext:
         """Velocity on axis k (0-5): DVL body velocity (surge, sway), depth rate (heave), gyro rate; 0 when unknown."""
         st = self.state
         if k < 2:
-            v = st.velocity_frd_m_s[k]
-            return float(v) if math.isfinite(v) else 0.0
+            return finite_or_zero(st.velocity_frd_m_s[k])
         if k == 2:
             return float(self.ctrl.depth_rate_m_s)
         return finite_or_zero(st.rates_frd_rad_s[k - 3])
