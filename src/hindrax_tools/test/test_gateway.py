@@ -53,9 +53,10 @@ node = rclpy.create_node("intruder")
 status = []
 node.create_subscription(DiagnosticStatus, "/alpha/supervisor/status", status.append, 10)
 deadline = time.monotonic() + float(sys.argv[1])
+expected = set(json.loads(sys.argv[2]))  # every service the gateways offer: discovery is complete when all are seen
 def names():
     return {n for n, _ in node.get_service_names_and_types()}
-while not {"/alpha/estop", "/bravo/estop"} <= names() and time.monotonic() < deadline:
+while not expected <= names() and time.monotonic() < deadline:
     rclpy.spin_once(node, timeout_sec=0.1)
 rclpy.spin_once(node, timeout_sec=0.5)
 # the graph before this script adds clients and publishers of its own (a client's name is listed too)
@@ -243,8 +244,13 @@ def hindrax_spinning(pool, topside, *args: str) -> subprocess.CompletedProcess:
 
 def test_a_process_on_the_topside_reaches_only_the_interface(pool):
     alpha = pool["vehicles"]["alpha"]
-    r = subprocess.run([sys.executable, "-c", INTRUDER, str(WAIT_S)], capture_output=True, text=True,
-                       env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=180)
+    action = [f"/alpha/run_identification/_action/{x}" for x in ("send_goal", "cancel_goal", "get_result")]
+    offered = {f"/alpha/{r.topside}" for r in relays("service")} | set(action)
+    # the intruder snapshots the graph once it has discovered every offered service of both vehicles (the action's
+    # services arrive last; a snapshot at the first e-stop missed them on a loaded CI machine)
+    everything = sorted(offered | {n.replace("/alpha/", "/bravo/", 1) for n in offered})
+    r = subprocess.run([sys.executable, "-c", INTRUDER, str(WAIT_S), json.dumps(everything)], capture_output=True,
+                       text=True, env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=180)
     assert r.returncode == 0, r.stderr[-2000:]
     seen = json.loads(r.stdout.strip().splitlines()[-1])
     assert "/alpha/estop" in seen["services"] and "/bravo/estop" in seen["services"]  # it did see both vehicles
@@ -253,9 +259,8 @@ def test_a_process_on_the_topside_reaches_only_the_interface(pool):
     for forbidden in ("set_armed", "heartbeat", "pulse_width", "zero_depth", "supervisor/reset", "supervisor/abort"):
         assert not [n for n in graph if forbidden in n], forbidden  # no vehicle offers them on the topside
     # exactly the interface, nothing more (the operator's relays exist: SROS2 decides who calls them, on the Pi)
-    action = [f"/alpha/run_identification/_action/{x}" for x in ("send_goal", "cancel_goal", "get_result")]
     assert {n for n in seen["services"] if n.startswith("/alpha/") and not n.endswith("/get_type_description")} == \
-        {f"/alpha/{r.topside}" for r in relays("service")} | set(action)
+        offered
     assert {n for n in seen["topics"] if n.startswith("/alpha/")} == \
         {f"/alpha/{r.topside}" for r in relays("topic_in") + relays("topic_out")} | \
         {"/alpha/run_identification/_action/feedback", "/alpha/run_identification/_action/status"}
