@@ -34,6 +34,7 @@ import collections
 import functools
 import json
 import os
+import platform
 import re
 import signal
 import statistics
@@ -58,6 +59,7 @@ from hindrax_common.cdr.lean_cdr import cdr_decoder, type_name_of
 from hindrax_common.node_support.liveness import heartbeat_qos
 from hindrax_bringup.recording.reader import BagReader
 from hindrax_bringup.recording.selection import TopicSelection
+from hindrax_tools import results_doc
 from hindrax_tools.benchmarks.rig import PI4_CORE_HERE, PI4_FACTOR, Rig
 from hindrax_common.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
                                      wait_until)
@@ -1051,6 +1053,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rig-cores", type=float, default=None,
                         help="only the launch layout in a Pi-sized rig of this many cores here (rig_rows; root)")
     parser.add_argument("--rig-busy-loops", type=int, default=0, help="busy loops beside the rig's launch")
+    results_doc.add_argument(parser)
     args = parser.parse_args(argv)
     if args.rig_cores:
         rows = rig_rows(args.rig_cores, args.rig_busy_loops, args.window_s or 10.0, args.windows or 1)
@@ -1060,6 +1063,16 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps(rows, indent=2))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
+    if args.rig_cores:  # one section per rig (make rig: the cores and busy loops), beside the stack bench's
+        table = results_doc.markdown_table(
+            ["measure", "value", "unit", "target", "note"],
+            [[r["name"], f"{r['value']:.4g}", r.get("unit", ""), r.get("target", ""), r.get("note", "")]
+             for r in rows])
+        tag = f"{args.rig_cores:g}" + (f"-busy{args.rig_busy_loops}" if args.rig_busy_loops else "")
+        results_doc.write_if_asked(
+            args, f"bench-rig-{tag}", f"The Pi rig: {args.rig_cores:g} cores here, {args.rig_busy_loops} busy loops",
+            f"{platform.platform()}, {os.cpu_count()} cores; 1-minute load {os.getloadavg()[0]:.1f} at the end; "
+            f"one running and one idle window of {args.window_s or 10.0:g} s (`make rig`, issue 73).\n\n{table}")
     return 0
 
 
