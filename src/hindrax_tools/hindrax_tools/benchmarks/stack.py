@@ -1068,7 +1068,7 @@ def main(argv: list[str] | None = None) -> int:
             ["measure", "value", "unit", "target", "note"],
             [[r["name"], f"{r['value']:.4g}", r.get("unit", ""), r.get("target", ""), r.get("note", "")]
              for r in rows])
-        tag = f"{args.rig_cores:g}" + (f"-busy{args.rig_busy_loops}" if args.rig_busy_loops else "")
+        tag = f"{args.rig_cores:g}".replace(".", "_") + (f"-busy{args.rig_busy_loops}" if args.rig_busy_loops else "")
         results_doc.write_if_asked(
             args, f"bench-rig-{tag}", f"The Pi rig: {args.rig_cores:g} cores here, {args.rig_busy_loops} busy loops",
             f"{platform.platform()}, {os.cpu_count()} cores; 1-minute load {os.getloadavg()[0]:.1f} at the end; "
