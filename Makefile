@@ -43,8 +43,8 @@ bench: setup
 RIG_CORES ?= 0.4
 RIG_BUSY_LOOPS ?= 0
 rig: setup
-	$(PY) -m hindrax_tools.benchmarks.stack --rig-cores $(RIG_CORES) --rig-busy-loops $(RIG_BUSY_LOOPS) \
-	  --results-doc docs/results.md
+	$(PY) -m hindrax_tools.benchmarks.stack --rig-cores $(RIG_CORES) \
+	  --rig-busy-loops $(RIG_BUSY_LOOPS) --results-doc docs/results.md
 
 rig-pool-day: setup
 	HINDRAX_RIG_CORES=$(RIG_CORES) HINDRAX_RIG_BUSY_LOOPS=$(RIG_BUSY_LOOPS) \

@@ -247,16 +247,18 @@ def hindrax_spinning(pool, topside, *args: str) -> subprocess.CompletedProcess:
 
 def test_a_process_on_the_topside_reaches_only_the_interface(pool):
     alpha = pool["vehicles"]["alpha"]
-    action = [f"/alpha/run_identification/_action/{x}" for x in ("send_goal", "cancel_goal", "get_result")]
-    offered = {f"/alpha/{r.topside}" for r in relays("service")} | set(action)
+    action = "/alpha/run_identification/_action/"
+    offered = {f"/alpha/{r.topside}" for r in relays("service")} | \
+        {action + x for x in ("send_goal", "cancel_goal", "get_result")}
     offered_topics = {f"/alpha/{r.topside}" for r in relays("topic_in") + relays("topic_out")} | \
-        {"/alpha/run_identification/_action/feedback", "/alpha/run_identification/_action/status"}
-    # the intruder snapshots the graph once it has discovered everything both vehicles offer (the action's services
-    # arrived last: a snapshot 0.5 s after the first e-stops missed them on a loaded CI machine)
+        {action + "feedback", action + "status"}
+    # the intruder snapshots the graph once it has discovered everything both vehicles offer (the
+    # action's services came last: a snapshot 0.5 s after the e-stops missed them on a loaded CI)
     both = {kind: sorted(names | {n.replace("/alpha/", "/bravo/", 1) for n in names})
             for kind, names in (("services", offered), ("topics", offered_topics))}
-    r = subprocess.run([sys.executable, "-c", INTRUDER, str(WAIT_S), json.dumps(both)], capture_output=True,
-                       text=True, env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=180)
+    r = subprocess.run([sys.executable, "-c", INTRUDER, str(WAIT_S), json.dumps(both)],
+                       capture_output=True, text=True,
+                       env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=180)
     assert r.returncode == 0, r.stderr[-2000:]
     seen = json.loads(r.stdout.strip().splitlines()[-1])
     assert "/alpha/estop" in seen["services"] and "/bravo/estop" in seen["services"]  # it did see both vehicles

@@ -103,3 +103,24 @@ def test_the_first_pi_days_factor_is_the_pi_over_here_per_row_and_one_constant_p
                           str(tmp_path / "here.json")], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and "launch_running_cpu_total: 5.00x" in out.stdout, out.stderr
     assert stack.PI4_FACTOR is rig.PI4_FACTOR and rig.PI4_CORE_HERE == pytest.approx(1 / rig.PI4_FACTOR)
+
+
+def test_make_rig_writes_one_section_per_rig_with_a_fractional_core_count(tmp_path):
+    from argparse import Namespace
+
+    from hindrax_tools.benchmarks.stack import write_rig_section
+
+    doc = tmp_path / "results.md"
+    doc.write_text("# Results\n")
+    rows = [{"name": "rig_disarms", "value": 3, "unit": "", "target": "0", "note": "starved"}]
+    for cores, loops in ((0.4, 0), (0.8, 2)):
+        write_rig_section(Namespace(rig_cores=cores, rig_busy_loops=loops, window_s=None,
+                                    results_doc=str(doc)), rows)
+    text = doc.read_text()
+    # '.' is not allowed in a section name (results_doc): the point is written as '_'
+    for name, title in (("bench-rig-0_4", "0.4 cores here, 0 busy loops"),
+                        ("bench-rig-0_8-busy2", "0.8 cores here, 2 busy loops")):
+        begin, end = f"<!-- results:{name}:begin -->", f"<!-- results:{name}:end -->"
+        assert begin in text and end in text, text
+        section = text[text.index(begin):text.index(end)]
+        assert title in section and "| rig_disarms | 3 |  | 0 | starved |" in section, section

@@ -1034,6 +1034,23 @@ def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
     return out
 
 
+def write_rig_section(args, rows: list[dict]) -> None:
+    """The rig's rows (:func:`rig_rows`) into section ``bench-rig-F[-busyN]`` of
+    ``args.results_doc`` (F with ``_`` for its point: one section per rig, beside the stack
+    bench's), when that option was given."""
+    table = results_doc.markdown_table(
+        ["measure", "value", "unit", "target", "note"],
+        [[r["name"], f"{r['value']:.4g}", r.get("unit", ""), r.get("target", ""), r.get("note", "")]
+         for r in rows])
+    cores, loops = args.rig_cores, args.rig_busy_loops
+    tag = f"{cores:g}".replace(".", "_") + (f"-busy{loops}" if loops else "")
+    results_doc.write_if_asked(
+        args, f"bench-rig-{tag}", f"The Pi rig: {cores:g} cores here, {loops} busy loops",
+        f"{platform.platform()}, {os.cpu_count()} cores; 1-minute load {os.getloadavg()[0]:.1f} at "
+        f"the end; one running and one idle window of {args.window_s or 10.0:g} s (`make rig`, "
+        f"issue 73).\n\n{table}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m hindrax_tools.benchmarks.stack``: the stack benchmark alone, with the
     options ``make bench`` does not take (``--help``); prints the rows as JSON (to a file too:
@@ -1063,16 +1080,8 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps(rows, indent=2))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
-    if args.rig_cores:  # one section per rig (make rig: the cores and busy loops), beside the stack bench's
-        table = results_doc.markdown_table(
-            ["measure", "value", "unit", "target", "note"],
-            [[r["name"], f"{r['value']:.4g}", r.get("unit", ""), r.get("target", ""), r.get("note", "")]
-             for r in rows])
-        tag = f"{args.rig_cores:g}".replace(".", "_") + (f"-busy{args.rig_busy_loops}" if args.rig_busy_loops else "")
-        results_doc.write_if_asked(
-            args, f"bench-rig-{tag}", f"The Pi rig: {args.rig_cores:g} cores here, {args.rig_busy_loops} busy loops",
-            f"{platform.platform()}, {os.cpu_count()} cores; 1-minute load {os.getloadavg()[0]:.1f} at the end; "
-            f"one running and one idle window of {args.window_s or 10.0:g} s (`make rig`, issue 73).\n\n{table}")
+    if args.rig_cores:
+        write_rig_section(args, rows)
     return 0
 
 
