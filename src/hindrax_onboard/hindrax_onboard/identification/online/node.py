@@ -114,6 +114,7 @@ from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 from ..model import calibration_topic
 from ..model.campaign_record import CampaignRecord
 from ...vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
+from ...vehicle.state import finite_or_zero, finite_or_zeros
 from ..model.dof_model import parameter_units
 from .core import IDLE_STATUS_PERIOD_S, Event, GoalRun, IdentificationCore, goal_problem
 from .executive import ExecutiveStatus, command_ticks
@@ -136,10 +137,9 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     msg.values = [float(v) for v in rls.theta]
     msg.std = [float(s) if math.isfinite(s) else -1.0 for s in estimator.published_std()]
     cov = np.asarray(rls.covariance, dtype=float)
-    msg.covariance = [float(c) if math.isfinite(c) else 0.0 for c in cov.ravel()]
+    msg.covariance = finite_or_zeros(cov).ravel().tolist()
     msg.sample_count = int(rls.n_samples)
-    ex = float(rls.excitation_normalised)
-    msg.excitation = ex if math.isfinite(ex) else 0.0
+    msg.excitation = finite_or_zero(rls.excitation_normalised)
     msg.converged = estimator.converged_at_s is not None
     return msg
 

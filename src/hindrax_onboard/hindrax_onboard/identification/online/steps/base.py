@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from ....control.maneuvers import DOF_INDEX
+from ....vehicle.state import finite_or_zero
 from .context import StepContext, Wrenches
 
 __all__ = ["Step", "Confirm", "Dive", "DofStep", "undo_line"]
@@ -72,7 +73,7 @@ class Dive(Step):
         target = ctx.box.z_min
         t0 = ctx.t_s
         st = ctx.state
-        ctx.ctrl.depth_setpoint_m = max(st.depth_m, 0.0) if math.isfinite(st.depth_m) else 0.0
+        ctx.ctrl.depth_setpoint_m = max(finite_or_zero(st.depth_m), 0.0)
         while ctx.t_s - t0 < 25.0:
             if math.isfinite(st.altitude_m) and math.isfinite(st.depth_m):
                 target = float(np.clip(st.depth_m + st.altitude_m - alt_sp, ctx.box.z_min, ctx.box.z_max))
